@@ -1,0 +1,3 @@
+//! One module per subcommand: options (clap) and a `run` that calls the libraries.
+
+pub mod inspect;

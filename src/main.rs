@@ -1,0 +1,27 @@
+//! `nelf`: bake, view and ship relightable portrait light-transport fields.
+//! Thin: every subcommand parses its options and calls a library.
+
+mod cmd;
+
+use clap::{Parser, Subcommand};
+
+/// Relightable portrait assets from neural light-transport fields (NeLF, Sun et al. 2021).
+#[derive(Debug, Parser)]
+#[command(name = "nelf", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+enum Command {
+    /// Print a .nelf file's header, sections, sizes and metadata.
+    Inspect(cmd::inspect::InspectArgs),
+}
+
+fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    match cli.command {
+        Command::Inspect(args) => cmd::inspect::run(&args),
+    }
+}
