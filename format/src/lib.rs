@@ -3,4 +3,6 @@
 //! (environment-map texels and their exact solid angles, light-frame rotations,
 //! OpenCV pinhole cameras). No GPU, no network, no UI.
 
+pub mod capture;
+pub mod colmap;
 pub mod conventions;
