@@ -335,7 +335,9 @@ fn parse_units(path: &Path, units: &Value) -> Result<Units, CaptureError> {
             "m" => Ok(Units::PerMetre(1.0)),
             "cm" => Ok(Units::PerMetre(100.0)),
             "mm" => Ok(Units::PerMetre(1000.0)),
-            _ => Err(bad("expected \"m\", \"cm\", \"mm\" or {\"metres_per_unit\": number}")),
+            _ => Err(bad(
+                "expected \"m\", \"cm\", \"mm\" or {\"metres_per_unit\": number}",
+            )),
         },
         Value::Object(map) => {
             if map.len() != 1 {
@@ -344,10 +346,14 @@ fn parse_units(path: &Path, units: &Value) -> Result<Units, CaptureError> {
             match map.get("metres_per_unit").and_then(Value::as_f64) {
                 Some(s) if s.is_finite() && s > 0.0 => Ok(Units::MetresPerUnit(s)),
                 Some(_) => Err(bad("metres_per_unit must be a positive finite number")),
-                None => Err(bad("an object must hold exactly the key \"metres_per_unit\" (a number)")),
+                None => Err(bad(
+                    "an object must hold exactly the key \"metres_per_unit\" (a number)",
+                )),
             }
         }
-        _ => Err(bad("expected \"m\", \"cm\", \"mm\" or {\"metres_per_unit\": number}")),
+        _ => Err(bad(
+            "expected \"m\", \"cm\", \"mm\" or {\"metres_per_unit\": number}",
+        )),
     }
 }
 
@@ -367,7 +373,10 @@ fn nearest_rotation(r: DMat3) -> DMat3 {
     let mut x = r;
     for _ in 0..32 {
         let next = 0.5 * (x + x.inverse().transpose());
-        let change = (next - x).to_cols_array().iter().fold(0.0f64, |m, v| m.max(v.abs()));
+        let change = (next - x)
+            .to_cols_array()
+            .iter()
+            .fold(0.0f64, |m, v| m.max(v.abs()));
         x = next;
         if change < 1e-16 {
             break;
@@ -389,7 +398,12 @@ fn checked_camera(path: &Path, what: &str, mut camera: PinholeCamera) -> Result<
         what: what.to_string(),
         reason,
     };
-    for (field, v) in [("fx", camera.fx), ("fy", camera.fy), ("cx", camera.cx), ("cy", camera.cy)] {
+    for (field, v) in [
+        ("fx", camera.fx),
+        ("fy", camera.fy),
+        ("cx", camera.cx),
+        ("cy", camera.cy),
+    ] {
         if !v.is_finite() {
             return Err(non_finite(field.to_string(), v));
         }
@@ -435,7 +449,12 @@ fn checked_camera(path: &Path, what: &str, mut camera: PinholeCamera) -> Result<
 
 /// Checks that `value` is a relative path that stays inside the folder and has one of
 /// `extensions` (case-insensitive).
-fn check_relative_path(path: &Path, what: &str, value: &str, extensions: &[&str]) -> Result<(), CaptureError> {
+fn check_relative_path(
+    path: &Path,
+    what: &str,
+    value: &str,
+    extensions: &[&str],
+) -> Result<(), CaptureError> {
     let bad = |reason: String| CaptureError::BadPath {
         path: path.to_path_buf(),
         what: what.to_string(),
@@ -469,7 +488,9 @@ fn check_relative_path(path: &Path, what: &str, value: &str, extensions: &[&str]
         .map(str::to_ascii_lowercase);
     match extension {
         Some(e) if extensions.contains(&e.as_str()) => Ok(()),
-        _ => Err(bad(format!("has an unsupported extension (expected one of {extensions:?})"))),
+        _ => Err(bad(format!(
+            "has an unsupported extension (expected one of {extensions:?})"
+        ))),
     }
 }
 
@@ -622,7 +643,11 @@ impl Capture {
     fn file_fields(&self) -> Vec<(String, &str, &'static [&'static str])> {
         let mut out = Vec::new();
         for v in &self.views {
-            out.push((format!("view {:?} image", v.name), v.image.as_str(), IMAGE_EXTENSIONS));
+            out.push((
+                format!("view {:?} image", v.name),
+                v.image.as_str(),
+                IMAGE_EXTENSIONS,
+            ));
             if let Some(m) = &v.mask {
                 out.push((format!("view {:?} mask", v.name), m.as_str(), MASK_EXTENSIONS));
             }
@@ -631,11 +656,19 @@ impl Capture {
             out.push(("envmap".to_string(), e.as_str(), ENVMAP_EXTENSIONS));
         }
         for t in &self.targets {
-            out.push((format!("target {:?} image", t.name), t.image.as_str(), IMAGE_EXTENSIONS));
+            out.push((
+                format!("target {:?} image", t.name),
+                t.image.as_str(),
+                IMAGE_EXTENSIONS,
+            ));
             if let Some(m) = &t.mask {
                 out.push((format!("target {:?} mask", t.name), m.as_str(), MASK_EXTENSIONS));
             }
-            out.push((format!("target {:?} envmap", t.name), t.envmap.as_str(), ENVMAP_EXTENSIONS));
+            out.push((
+                format!("target {:?} envmap", t.name),
+                t.envmap.as_str(),
+                ENVMAP_EXTENSIONS,
+            ));
         }
         out
     }
@@ -818,7 +851,10 @@ mod tests {
             serde_json::json!({"metres_per_unit": 1.0, "x": 1}),
             serde_json::json!(3),
         ] {
-            assert!(matches!(parse_units(p, &bad), Err(CaptureError::BadUnits { .. })), "{bad}");
+            assert!(
+                matches!(parse_units(p, &bad), Err(CaptureError::BadUnits { .. })),
+                "{bad}"
+            );
         }
     }
 
@@ -828,8 +864,19 @@ mod tests {
         for ok in ["images/a.png", "./a.EXR", "a b/c.jpg"] {
             check_relative_path(p, "x", ok, IMAGE_EXTENSIONS).unwrap();
         }
-        for bad in ["", "/abs/a.png", "../a.png", "images/../../a.png", "C:/a.png", "a\\b.png", "a.tiff"] {
-            assert!(check_relative_path(p, "x", bad, IMAGE_EXTENSIONS).is_err(), "{bad}");
+        for bad in [
+            "",
+            "/abs/a.png",
+            "../a.png",
+            "images/../../a.png",
+            "C:/a.png",
+            "a\\b.png",
+            "a.tiff",
+        ] {
+            assert!(
+                check_relative_path(p, "x", bad, IMAGE_EXTENSIONS).is_err(),
+                "{bad}"
+            );
         }
     }
 }

@@ -99,7 +99,9 @@ pub enum ColmapError {
         camera_id: u32,
     },
     /// A quaternion that is (nearly) zero.
-    #[error("{path}:{line}: quaternion (QW QX QY QZ) = {quaternion:?} has norm {norm:e}; it cannot be normalised")]
+    #[error(
+        "{path}:{line}: quaternion (QW QX QY QZ) = {quaternion:?} has norm {norm:e}; it cannot be normalised"
+    )]
     BadQuaternion {
         /// The `images.txt` file.
         path: PathBuf,
@@ -389,7 +391,10 @@ pub fn read_colmap_text(
 
         // The next line, whatever it holds, is this image's 2D points (it may be empty or absent at EOF).
         if index < lines.len() {
-            let points = Fields { path, line: index + 1 };
+            let points = Fields {
+                path,
+                line: index + 1,
+            };
             check_points_line(&points, lines[index].trim(), image_id)?;
             index += 1;
         }
@@ -450,7 +455,10 @@ pub fn read_colmap_text(
         images.push((image_id, name.to_string(), camera));
     }
     images.sort_by_key(|(id, _, _)| *id);
-    Ok(images.into_iter().map(|(_, name, camera)| (name, camera)).collect())
+    Ok(images
+        .into_iter()
+        .map(|(_, name, camera)| (name, camera))
+        .collect())
 }
 
 /// Writes `text` to `path` through a temporary file in the same folder and a rename.
@@ -474,7 +482,10 @@ fn write_atomically(path: &Path, text: &str) -> Result<(), ColmapError> {
 /// (COLMAP splits on it). Numbers are written in Rust's shortest round-trip form, so
 /// intrinsics and translations read back exactly; rotations go through a quaternion
 /// (scalar written non-negative) and read back within ~1e-15.
-pub fn write_colmap_text(dir: impl AsRef<Path>, views: &[(String, PinholeCamera)]) -> Result<(), ColmapError> {
+pub fn write_colmap_text(
+    dir: impl AsRef<Path>,
+    views: &[(String, PinholeCamera)],
+) -> Result<(), ColmapError> {
     let dir = dir.as_ref();
     let mut names = std::collections::HashSet::new();
     for (name, camera) in views {
@@ -483,7 +494,9 @@ pub fn write_colmap_text(dir: impl AsRef<Path>, views: &[(String, PinholeCamera)
             reason,
         };
         if name.is_empty() || name.chars().any(char::is_whitespace) {
-            return Err(invalid("names must be non-empty and contain no whitespace".into()));
+            return Err(invalid(
+                "names must be non-empty and contain no whitespace".into(),
+            ));
         }
         if !names.insert(name.as_str()) {
             return Err(invalid("the name is used twice".into()));
@@ -499,7 +512,10 @@ pub fn write_colmap_text(dir: impl AsRef<Path>, views: &[(String, PinholeCamera)
     let _ = writeln!(cameras, "#   CAMERA_ID, MODEL, WIDTH, HEIGHT, PARAMS[]");
     let _ = writeln!(cameras, "# Number of cameras: {n}");
     let _ = writeln!(images, "# Image list with two lines of data per image:");
-    let _ = writeln!(images, "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME");
+    let _ = writeln!(
+        images,
+        "#   IMAGE_ID, QW, QX, QY, QZ, TX, TY, TZ, CAMERA_ID, NAME"
+    );
     let _ = writeln!(images, "#   POINTS2D[] as (X, Y, POINT3D_ID)");
     let _ = writeln!(images, "# Number of images: {n}, mean observations per image: 0");
     for (i, (name, camera)) in views.iter().enumerate() {
