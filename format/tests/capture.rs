@@ -360,3 +360,52 @@ fn rejects_duplicate_names_and_bad_saves() {
     let err = Capture::load(dir.path()).unwrap_err();
     assert!(matches!(err, CaptureError::MissingFile { .. }) && err.to_string().contains("view_000"));
 }
+
+#[test]
+fn the_example_in_capture_md_loads() {
+    let doc = include_str!("../CAPTURE.md");
+    let start = doc.find("```json\n").unwrap() + "```json\n".len();
+    let json = &doc[start..start + doc[start..].find("```").unwrap()];
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(dir.path().join(CAPTURE_FILE_NAME), json).unwrap();
+    // Files do not exist yet: the loader names the first one missing.
+    let err = Capture::load(dir.path()).unwrap_err();
+    assert!(err.to_string().contains("images/view_000.exr"), "{err}");
+    for rel in [
+        "images/view_000.exr",
+        "masks/view_000.png",
+        "images/view_001.png",
+        "lighting/studio.exr",
+        "targets/target_000.exr",
+        "lighting/sunset.hdr",
+    ] {
+        touch(dir.path(), rel);
+    }
+    let capture = Capture::load(dir.path()).unwrap();
+    let root3 = 3f64.sqrt();
+    let want = [
+        DVec3::new(0.0, 0.0, 2.0),
+        DVec3::new(1.0, 0.0, root3),
+        DVec3::new(2.0, 0.0, 0.0),
+    ];
+    let cameras: Vec<PinholeCamera> = capture
+        .cameras()
+        .into_iter()
+        .chain([capture.targets[0].camera])
+        .collect();
+    for (camera, centre) in cameras.iter().zip(want) {
+        assert!(
+            camera.centre().abs_diff_eq(centre, 1e-12),
+            "{:?} vs {centre:?}",
+            camera.centre()
+        );
+        // Looks at the origin, world +y up in the image.
+        assert!(camera.forward().abs_diff_eq(-centre / 2.0, 1e-12));
+        let p = camera.project(DVec3::ZERO).unwrap();
+        assert!((p.x - camera.cx).abs() < 1e-9 && (p.y - camera.cy).abs() < 1e-9);
+        assert!(camera.project(DVec3::new(0.0, 0.1, 0.0)).unwrap().y < camera.cy);
+    }
+    assert_eq!(capture.views[0].mask.as_deref(), Some("masks/view_000.png"));
+    assert_eq!(capture.targets[0].envmap, "lighting/sunset.hdr");
+    assert_eq!(capture.metadata["subject"], "procedural head");
+}
