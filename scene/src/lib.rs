@@ -3,3 +3,4 @@
 //! synthetic captures.
 
 pub mod mesh;
+pub mod metrics;
