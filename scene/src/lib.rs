@@ -2,5 +2,9 @@
 //! procedural heads, environment maps, a CPU light-transport path tracer and
 //! synthetic captures.
 
+pub mod bvh;
 pub mod mesh;
 pub mod metrics;
+pub mod render;
+pub mod shapes;
+pub mod tracer;
