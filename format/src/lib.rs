@@ -3,6 +3,20 @@
 //! (environment-map texels and their exact solid angles, light-frame rotations,
 //! OpenCV pinhole cameras). No GPU, no network, no UI.
 
+pub mod asset;
 pub mod capture;
 pub mod colmap;
 pub mod conventions;
+pub mod error;
+pub mod inspect;
+pub mod read;
+pub mod spec;
+pub mod synthetic;
+pub mod write;
+
+pub use asset::{
+    Asset, BrickData, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, encode_density,
+};
+pub use error::FormatError;
+pub use read::{AssetReader, read_asset, read_asset_bytes};
+pub use write::{WriteOptions, WriteReport, encode_asset, write_asset};

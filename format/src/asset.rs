@@ -1,0 +1,726 @@
+//! The in-memory `.nelf` asset: a sparse grid of 8³ cell-centred bricks, each voxel
+//! holding a density σ (1/m) and the PCA coefficients of its light-transport vector.
+//!
+//! Reconstruction (SPEC.md, "Reconstruction"): for voxel `v` with coefficients
+//! `c_v[k]`, the light-transport vector is `T = mean + Σ_k c_v[k] · B_k` (384 numbers,
+//! channel-major `c·128 + row·16 + col`, texel solid angle folded in), and the
+//! radiance it sends under an 8 × 16 environment map `L` in the asset's light frame
+//! is `radiance_c = Σ_k T[c·128 + k] · L[k][c]` ([`crate::conventions::shade`]).
+//!
+//! The asset holds exactly what the file holds (density as `f16`, coefficients
+//! quantized), so writing and reading it back gives an equal asset.
+
+use glam::{DMat3, DVec3};
+use half::f16;
+
+use crate::conventions::{LT_DIM, is_rotation};
+use crate::error::{FormatError, Result};
+use crate::spec::{BRICK_SIZE, BRICK_VOXELS, MAX_GRID_BRICKS};
+
+/// Placement of the brick grid in the world (metres).
+///
+/// The grid box is `[bbox_min_m, bbox_min_m + 8 · grid_bricks · voxel_size_m]`.
+/// Voxel `(i, j, k)` (each `0..8`) of the brick at brick coordinates `b` has its
+/// centre at `bbox_min_m + (8·b + (i, j, k) + 0.5) · voxel_size_m`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct GridGeometry {
+    /// Minimum corner of the grid box, metres.
+    pub bbox_min_m: [f64; 3],
+    /// Edge length of one voxel, metres.
+    pub voxel_size_m: f64,
+    /// Grid extent in bricks along x, y, z (each `1..=65536`).
+    pub grid_bricks: [u32; 3],
+}
+
+impl GridGeometry {
+    /// Maximum corner of the grid box: `bbox_min + 8 · grid_bricks · voxel_size`.
+    pub fn bbox_max_m(&self) -> [f64; 3] {
+        std::array::from_fn(|a| {
+            self.bbox_min_m[a] + f64::from(self.grid_bricks[a]) * BRICK_SIZE as f64 * self.voxel_size_m
+        })
+    }
+
+    /// Grid extent in voxels along x, y, z.
+    pub fn grid_voxels(&self) -> [u64; 3] {
+        self.grid_bricks.map(|n| u64::from(n) * BRICK_SIZE as u64)
+    }
+
+    /// World position (metres) of the centre of voxel `local` (each `0..8`) in brick `brick`.
+    pub fn voxel_center_m(&self, brick: [u16; 3], local: [usize; 3]) -> DVec3 {
+        let mut p = [0.0; 3];
+        for a in 0..3 {
+            let index = f64::from(brick[a]) * BRICK_SIZE as f64 + local[a] as f64 + 0.5;
+            p[a] = self.bbox_min_m[a] + index * self.voxel_size_m;
+        }
+        DVec3::from_array(p)
+    }
+
+    /// Checks ranges: finite origin, positive finite voxel size, extents in `1..=65536`.
+    pub fn validate(&self) -> Result<(), String> {
+        if !self.bbox_min_m.iter().all(|v| v.is_finite()) {
+            return Err(format!("bbox_min {:?} is not finite", self.bbox_min_m));
+        }
+        if !(self.voxel_size_m.is_finite() && self.voxel_size_m > 0.0) {
+            return Err(format!(
+                "voxel size {} must be positive and finite",
+                self.voxel_size_m
+            ));
+        }
+        if self.grid_bricks.iter().any(|&n| n == 0 || n > MAX_GRID_BRICKS) {
+            return Err(format!(
+                "grid extent {:?} bricks must be in 1..={MAX_GRID_BRICKS} per axis",
+                self.grid_bricks
+            ));
+        }
+        if !self.bbox_max_m().iter().all(|v| v.is_finite()) {
+            return Err("grid box maximum overflows".into());
+        }
+        Ok(())
+    }
+}
+
+/// Index of voxel `(i, j, k)` inside a brick: x fastest, `i + 8·(j + 8·k)`.
+pub const fn local_voxel_index(i: usize, j: usize, k: usize) -> usize {
+    i + BRICK_SIZE * (j + BRICK_SIZE * k)
+}
+
+/// `(i, j, k)` of local voxel index `index` (inverse of [`local_voxel_index`]).
+pub const fn local_voxel_coords(index: usize) -> [usize; 3] {
+    [
+        index % BRICK_SIZE,
+        (index / BRICK_SIZE) % BRICK_SIZE,
+        index / (BRICK_SIZE * BRICK_SIZE),
+    ]
+}
+
+/// Sort key of a brick: z, then y, then x (x varies fastest along the brick list).
+pub fn brick_order_key(coord: [u16; 3]) -> (u16, u16, u16) {
+    (coord[2], coord[1], coord[0])
+}
+
+/// The PCA model of light-transport vectors: `T ≈ mean + Σ_k c_k · basis[k]`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PcaModel {
+    /// Mean vector, [`LT_DIM`] numbers (channel-major, solid angle folded in).
+    pub mean: Vec<f32>,
+    /// `K` basis vectors of [`LT_DIM`] numbers each, component `k` at `k·384 .. (k+1)·384`.
+    pub basis: Vec<f32>,
+}
+
+impl PcaModel {
+    /// Rank `K` (number of basis vectors).
+    pub fn rank(&self) -> usize {
+        self.basis.len() / LT_DIM
+    }
+
+    /// Basis vector `k`.
+    pub fn component(&self, k: usize) -> &[f32] {
+        &self.basis[k * LT_DIM..(k + 1) * LT_DIM]
+    }
+
+    /// `out = mean + Σ_k coefficients[k] · basis[k]`, summed in `f32` in order `k = 0..K`.
+    pub fn reconstruct_into(&self, coefficients: &[f32], out: &mut [f32]) {
+        out[..LT_DIM].copy_from_slice(&self.mean);
+        for (k, &c) in coefficients.iter().enumerate().take(self.rank()) {
+            for (o, b) in out[..LT_DIM].iter_mut().zip(self.component(k)) {
+                *o += c * b;
+            }
+        }
+    }
+
+    /// The model keeping only the first `rank` components.
+    #[must_use]
+    pub fn truncated(&self, rank: usize) -> Self {
+        Self {
+            mean: self.mean.clone(),
+            basis: self.basis[..rank.min(self.rank()) * LT_DIM].to_vec(),
+        }
+    }
+
+    /// Checks lengths (`mean` 384, `basis` a positive multiple of 384 up to 384²) and finiteness.
+    pub fn validate(&self) -> Result<()> {
+        if self.mean.len() != LT_DIM {
+            return Err(FormatError::InvalidAsset(format!(
+                "PCA mean has {} values, must have {LT_DIM}",
+                self.mean.len()
+            )));
+        }
+        if self.basis.len() % LT_DIM != 0 {
+            return Err(FormatError::InvalidAsset(format!(
+                "PCA basis has {} values, not a multiple of {LT_DIM}",
+                self.basis.len()
+            )));
+        }
+        let rank = self.rank();
+        if rank == 0 || rank > LT_DIM {
+            return Err(FormatError::BadRank {
+                rank: rank as u64,
+                max: LT_DIM,
+            });
+        }
+        if let Some(i) = self.mean.iter().position(|v| !v.is_finite()) {
+            return Err(FormatError::NonFinite {
+                what: format!("PCA mean element {i}"),
+            });
+        }
+        if let Some(i) = self.basis.iter().position(|v| !v.is_finite()) {
+            return Err(FormatError::NonFinite {
+                what: format!("PCA basis component {} element {}", i / LT_DIM, i % LT_DIM),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// How PCA coefficients are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+pub enum CoefficientEncoding {
+    /// One byte per coefficient, affine per component: `c = offset_k + scale_k · code`.
+    U8Affine,
+    /// IEEE 754 binary16 per coefficient.
+    F16,
+}
+
+impl CoefficientEncoding {
+    /// Bytes per stored coefficient.
+    pub const fn bytes_per_value(self) -> usize {
+        match self {
+            Self::U8Affine => 1,
+            Self::F16 => 2,
+        }
+    }
+
+    /// Number in the header's `coefficient_encoding` field.
+    pub const fn to_u32(self) -> u32 {
+        match self {
+            Self::U8Affine => 1,
+            Self::F16 => 2,
+        }
+    }
+
+    /// Encoding with header number `v`.
+    pub const fn from_u32(v: u32) -> Option<Self> {
+        match v {
+            1 => Some(Self::U8Affine),
+            2 => Some(Self::F16),
+            _ => None,
+        }
+    }
+
+    /// Short name (`u8-affine`, `f16`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Self::U8Affine => "u8-affine",
+            Self::F16 => "f16",
+        }
+    }
+}
+
+/// Quantized PCA coefficients of every voxel, voxel-major: voxel `v`, component `k`
+/// at `v·K + k`; voxels in brick order, 512 per brick, x fastest inside a brick.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Coefficients {
+    /// 8-bit affine per component: `c[v·K + k] = offset[k] + scale[k] · codes[v·K + k]` (in `f32`).
+    U8Affine {
+        /// Rank `K`.
+        rank: usize,
+        /// Per-component step, `(max_k − min_k) / 255`, ≥ 0.
+        scale: Vec<f32>,
+        /// Per-component value of code 0 (`min_k`).
+        offset: Vec<f32>,
+        /// Codes, voxel-major.
+        codes: Vec<u8>,
+    },
+    /// binary16 values, voxel-major.
+    F16 {
+        /// Rank `K`.
+        rank: usize,
+        /// Values, voxel-major.
+        values: Vec<f16>,
+    },
+}
+
+impl Coefficients {
+    /// Quantizes `values` (voxel-major, `rank` per voxel) with `encoding`.
+    ///
+    /// `U8Affine` maps each component's `[min, max]` onto codes `0..=255`
+    /// (`code = round((c − min) / scale)`), so the error per coefficient is at most
+    /// `scale_k / 2` (plus `f32` rounding). `F16` rounds to nearest binary16: relative
+    /// error ≤ 2⁻¹¹ for |c| ≥ 2⁻¹⁴, absolute ≤ 2⁻²⁵ below; |c| > 65504 is an error.
+    pub fn quantize(values: &[f32], rank: usize, encoding: CoefficientEncoding) -> Result<Self> {
+        if rank == 0 || rank > LT_DIM {
+            return Err(FormatError::BadRank {
+                rank: rank as u64,
+                max: LT_DIM,
+            });
+        }
+        if values.len() % rank != 0 {
+            return Err(FormatError::InvalidAsset(format!(
+                "{} coefficient values are not a multiple of rank {rank}",
+                values.len()
+            )));
+        }
+        if let Some(i) = values.iter().position(|v| !v.is_finite()) {
+            return Err(FormatError::NonFinite {
+                what: format!("coefficient of voxel {} component {}", i / rank, i % rank),
+            });
+        }
+        match encoding {
+            CoefficientEncoding::U8Affine => {
+                let mut min = vec![f32::INFINITY; rank];
+                let mut max = vec![f32::NEG_INFINITY; rank];
+                for voxel in values.chunks_exact(rank) {
+                    for k in 0..rank {
+                        min[k] = min[k].min(voxel[k]);
+                        max[k] = max[k].max(voxel[k]);
+                    }
+                }
+                let offset: Vec<f32> = min.iter().map(|&m| if m.is_finite() { m } else { 0.0 }).collect();
+                let scale: Vec<f32> = (0..rank)
+                    .map(|k| {
+                        let range = f64::from(max[k]) - f64::from(offset[k]);
+                        if range.is_finite() && range > 0.0 {
+                            (range / 255.0) as f32
+                        } else {
+                            0.0
+                        }
+                    })
+                    .collect();
+                if let Some(k) = scale.iter().position(|s| !s.is_finite()) {
+                    return Err(FormatError::NonFinite {
+                        what: format!("8-bit scale of component {k}"),
+                    });
+                }
+                let codes = values
+                    .chunks_exact(rank)
+                    .flat_map(|voxel| {
+                        let (scale, offset) = (&scale, &offset);
+                        voxel.iter().enumerate().map(move |(k, &c)| {
+                            if scale[k] > 0.0 {
+                                ((f64::from(c) - f64::from(offset[k])) / f64::from(scale[k]))
+                                    .round()
+                                    .clamp(0.0, 255.0) as u8
+                            } else {
+                                0
+                            }
+                        })
+                    })
+                    .collect();
+                Ok(Self::U8Affine {
+                    rank,
+                    scale,
+                    offset,
+                    codes,
+                })
+            }
+            CoefficientEncoding::F16 => {
+                if let Some(i) = values.iter().position(|v| v.abs() > f16::MAX.to_f32()) {
+                    return Err(FormatError::InvalidValue {
+                        what: format!("coefficient of voxel {} component {}", i / rank, i % rank),
+                        reason: format!("{} exceeds the f16 range ±65504", values[i]),
+                    });
+                }
+                Ok(Self::F16 {
+                    rank,
+                    values: values.iter().map(|&v| f16::from_f32(v)).collect(),
+                })
+            }
+        }
+    }
+
+    /// Rank `K`.
+    pub fn rank(&self) -> usize {
+        match self {
+            Self::U8Affine { rank, .. } | Self::F16 { rank, .. } => *rank,
+        }
+    }
+
+    /// The encoding.
+    pub fn encoding(&self) -> CoefficientEncoding {
+        match self {
+            Self::U8Affine { .. } => CoefficientEncoding::U8Affine,
+            Self::F16 { .. } => CoefficientEncoding::F16,
+        }
+    }
+
+    /// Stored values (`voxels × K`).
+    pub fn len(&self) -> usize {
+        match self {
+            Self::U8Affine { codes, .. } => codes.len(),
+            Self::F16 { values, .. } => values.len(),
+        }
+    }
+
+    /// Whether no voxel is stored.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Voxels stored.
+    pub fn voxel_count(&self) -> usize {
+        self.len() / self.rank().max(1)
+    }
+
+    /// Dequantized coefficients of voxel `voxel` into `out[..K]`.
+    pub fn voxel_f32(&self, voxel: usize, out: &mut [f32]) {
+        let rank = self.rank();
+        let range = voxel * rank..(voxel + 1) * rank;
+        match self {
+            Self::U8Affine {
+                scale, offset, codes, ..
+            } => {
+                for (k, (o, &code)) in out.iter_mut().zip(&codes[range]).enumerate() {
+                    *o = offset[k] + scale[k] * f32::from(code);
+                }
+            }
+            Self::F16 { values, .. } => {
+                for (o, v) in out.iter_mut().zip(&values[range]) {
+                    *o = v.to_f32();
+                }
+            }
+        }
+    }
+
+    /// All dequantized coefficients, voxel-major.
+    pub fn to_f32(&self) -> Vec<f32> {
+        let rank = self.rank();
+        let mut out = vec![0.0f32; self.len()];
+        for (v, chunk) in out.chunks_exact_mut(rank.max(1)).enumerate() {
+            self.voxel_f32(v, chunk);
+        }
+        out
+    }
+
+    /// Largest error of component `k` that [`Coefficients::quantize`] guarantees for
+    /// in-range input: `scale_k / 2` (+ `f32` rounding) for `U8Affine`; `None` for `F16`,
+    /// whose bound is relative (2⁻¹¹ |c|, or 2⁻²⁵ absolute for |c| < 2⁻¹⁴).
+    pub fn abs_error_bound(&self, k: usize) -> Option<f32> {
+        match self {
+            Self::U8Affine { scale, offset, .. } => {
+                let magnitude = offset[k].abs() + 255.0 * scale[k];
+                Some(0.5 * scale[k] + 4.0 * f32::EPSILON * magnitude)
+            }
+            Self::F16 { .. } => None,
+        }
+    }
+
+    /// Stored bytes of all coefficient values (without parameters), voxel-major.
+    pub(crate) fn value_bytes(&self) -> Vec<u8> {
+        match self {
+            Self::U8Affine { codes, .. } => codes.clone(),
+            Self::F16 { values, .. } => values.iter().flat_map(|v| v.to_bits().to_le_bytes()).collect(),
+        }
+    }
+
+    fn validate(&self, voxels: usize) -> Result<()> {
+        let rank = self.rank();
+        if rank == 0 || rank > LT_DIM {
+            return Err(FormatError::BadRank {
+                rank: rank as u64,
+                max: LT_DIM,
+            });
+        }
+        if self.len() != voxels * rank {
+            return Err(FormatError::InvalidAsset(format!(
+                "{} coefficient values for {voxels} voxels of rank {rank}",
+                self.len()
+            )));
+        }
+        match self {
+            Self::U8Affine { scale, offset, .. } => {
+                if scale.len() != rank || offset.len() != rank {
+                    return Err(FormatError::InvalidAsset(format!(
+                        "8-bit parameters have {} scales and {} offsets for rank {rank}",
+                        scale.len(),
+                        offset.len()
+                    )));
+                }
+                validate_quant_params(scale, offset)
+            }
+            Self::F16 { values, .. } => match values.iter().position(|v| !v.is_finite()) {
+                Some(i) => Err(FormatError::NonFinite {
+                    what: format!("section COEF voxel {} component {}", i / rank, i % rank),
+                }),
+                None => Ok(()),
+            },
+        }
+    }
+}
+
+/// Checks 8-bit dequantisation parameters: finite offsets, finite non-negative scales,
+/// and a finite largest value `offset + 255·scale`.
+pub(crate) fn validate_quant_params(scale: &[f32], offset: &[f32]) -> Result<()> {
+    for (k, (&s, &o)) in scale.iter().zip(offset).enumerate() {
+        if !(s.is_finite() && o.is_finite() && (o + 255.0 * s).is_finite()) {
+            return Err(FormatError::NonFinite {
+                what: format!("section QPRM component {k} (scale {s}, offset {o})"),
+            });
+        }
+        if s < 0.0 {
+            return Err(FormatError::InvalidValue {
+                what: format!("section QPRM component {k}"),
+                reason: format!("negative scale {s}"),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// Encodes densities σ (1/m) as binary16, round to nearest. Values above 65504 1/m
+/// are clamped to 65504 (already opaque at any voxel size ≥ 0.1 mm); negative or
+/// non-finite values are an error. Relative error ≤ 2⁻¹¹ (≈ 4.9·10⁻⁴) for
+/// σ ≥ 6.1·10⁻⁵ 1/m, absolute ≤ 3·10⁻⁸ 1/m below.
+pub fn encode_density(sigma_per_m: &[f32]) -> Result<Vec<f16>> {
+    sigma_per_m
+        .iter()
+        .enumerate()
+        .map(|(i, &s)| {
+            if s.is_nan() || s.is_infinite() || s < 0.0 {
+                Err(FormatError::InvalidValue {
+                    what: format!("density of voxel {i}"),
+                    reason: format!("{s} must be finite and non-negative"),
+                })
+            } else {
+                Ok(f16::from_f32(s.min(f16::MAX.to_f32())))
+            }
+        })
+        .collect()
+}
+
+/// A whole `.nelf` asset in memory.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Asset {
+    /// Grid placement (metres).
+    pub grid: GridGeometry,
+    /// Rotation taking light-frame directions (the texels of `T`) to world directions.
+    pub world_from_light: DMat3,
+    /// Brick coordinates (in bricks), sorted by (z, y, x), no repeats, inside the grid.
+    pub bricks: Vec<[u16; 3]>,
+    /// Density σ (1/m) per voxel, `bricks.len() × 512`, brick order then x-fastest.
+    pub density: Vec<f16>,
+    /// PCA mean and basis.
+    pub pca: PcaModel,
+    /// Quantized coefficients, `bricks.len() × 512 × K`.
+    pub coefficients: Coefficients,
+    /// Metadata, a JSON object (provenance, bake settings, measured error).
+    pub metadata: serde_json::Value,
+}
+
+/// One brick read by random access (see [`crate::read::AssetReader::read_brick`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BrickData {
+    /// Brick coordinates.
+    pub coord: [u16; 3],
+    /// Density σ (1/m) of its 512 voxels, x fastest.
+    pub density: Vec<f32>,
+    /// Dequantized coefficients, `512 × K`, voxel-major.
+    pub coefficients: Vec<f32>,
+}
+
+impl Asset {
+    /// Voxels stored (`bricks × 512`).
+    pub fn voxel_count(&self) -> usize {
+        self.bricks.len() * BRICK_VOXELS
+    }
+
+    /// PCA rank `K`.
+    pub fn rank(&self) -> usize {
+        self.pca.rank()
+    }
+
+    /// Brick coordinates and local `(i, j, k)` of global voxel `voxel`.
+    pub fn voxel_location(&self, voxel: usize) -> ([u16; 3], [usize; 3]) {
+        (
+            self.bricks[voxel / BRICK_VOXELS],
+            local_voxel_coords(voxel % BRICK_VOXELS),
+        )
+    }
+
+    /// World position (metres) of the centre of global voxel `voxel` (`brick·512 + local`).
+    pub fn voxel_position_m(&self, voxel: usize) -> DVec3 {
+        let (brick, local) = self.voxel_location(voxel);
+        self.grid.voxel_center_m(brick, local)
+    }
+
+    /// Density σ (1/m) of voxel `voxel`.
+    pub fn density_at(&self, voxel: usize) -> f32 {
+        self.density[voxel].to_f32()
+    }
+
+    /// Dequantized coefficients of voxel `voxel` into `out[..K]`.
+    pub fn coefficients_f32(&self, voxel: usize, out: &mut [f32]) {
+        self.coefficients.voxel_f32(voxel, out);
+    }
+
+    /// Light-transport vector of voxel `voxel`: `mean + Σ_k c_k · B_k`.
+    pub fn reconstruct_lt(&self, voxel: usize) -> [f32; LT_DIM] {
+        let mut coefficients = vec![0.0f32; self.rank()];
+        self.coefficients_f32(voxel, &mut coefficients);
+        let mut out = [0.0f32; LT_DIM];
+        self.pca.reconstruct_into(&coefficients, &mut out);
+        out
+    }
+
+    /// Index of the brick at `coord`, by binary search on the (z, y, x) order.
+    pub fn find_brick(&self, coord: [u16; 3]) -> Option<usize> {
+        self.bricks
+            .binary_search_by_key(&brick_order_key(coord), |&c| brick_order_key(c))
+            .ok()
+    }
+
+    /// Checks everything the file format requires: grid ranges, rotation, sorted
+    /// in-grid bricks, array lengths, ranks, finite and non-negative values, and
+    /// that the metadata is a JSON object.
+    pub fn validate(&self) -> Result<()> {
+        self.grid.validate().map_err(FormatError::InvalidAsset)?;
+        if !is_rotation(self.world_from_light, 1e-5) {
+            return Err(FormatError::InvalidAsset(format!(
+                "world_from_light {:?} is not a rotation",
+                self.world_from_light.to_cols_array()
+            )));
+        }
+        validate_bricks(&self.bricks, self.grid.grid_bricks)?;
+        if self.bricks.len() > u32::MAX as usize {
+            return Err(FormatError::CountTooLarge {
+                what: "brick count".into(),
+                count: self.bricks.len() as u64,
+                limit: u64::from(u32::MAX),
+            });
+        }
+        let voxels = self.voxel_count();
+        if self.density.len() != voxels {
+            return Err(FormatError::InvalidAsset(format!(
+                "{} density values for {voxels} voxels",
+                self.density.len()
+            )));
+        }
+        validate_density(&self.density, 0)?;
+        self.pca.validate()?;
+        if self.coefficients.rank() != self.pca.rank() {
+            return Err(FormatError::InvalidAsset(format!(
+                "coefficients have rank {} but the PCA basis has {}",
+                self.coefficients.rank(),
+                self.pca.rank()
+            )));
+        }
+        self.coefficients.validate(voxels)?;
+        if !self.metadata.is_object() {
+            return Err(FormatError::MetadataNotObject {
+                found: json_type_name(&self.metadata),
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Checks brick coordinates: inside the grid, strictly increasing in (z, y, x) order.
+pub(crate) fn validate_bricks(bricks: &[[u16; 3]], grid_bricks: [u32; 3]) -> Result<()> {
+    for (i, b) in bricks.iter().enumerate() {
+        if (0..3).any(|a| u32::from(b[a]) >= grid_bricks[a]) {
+            return Err(FormatError::InvalidBricks(format!(
+                "brick {i} at {b:?} is outside the grid of {grid_bricks:?} bricks"
+            )));
+        }
+        if i > 0 && brick_order_key(bricks[i - 1]) >= brick_order_key(*b) {
+            return Err(FormatError::InvalidBricks(format!(
+                "brick {i} at {b:?} does not follow {:?} in (z, y, x) order (unsorted or repeated)",
+                bricks[i - 1]
+            )));
+        }
+    }
+    Ok(())
+}
+
+/// Checks densities are finite and non-negative; `first_voxel` numbers them in messages.
+pub(crate) fn validate_density(density: &[f16], first_voxel: usize) -> Result<()> {
+    for (i, d) in density.iter().enumerate() {
+        if !d.is_finite() {
+            return Err(FormatError::NonFinite {
+                what: format!("section DENS voxel {}", first_voxel + i),
+            });
+        }
+        if d.to_f32() < 0.0 {
+            return Err(FormatError::InvalidValue {
+                what: format!("section DENS voxel {}", first_voxel + i),
+                reason: format!("negative density {d}"),
+            });
+        }
+    }
+    Ok(())
+}
+
+/// JSON type of a value, for messages.
+pub(crate) fn json_type_name(v: &serde_json::Value) -> &'static str {
+    match v {
+        serde_json::Value::Null => "null",
+        serde_json::Value::Bool(_) => "a boolean",
+        serde_json::Value::Number(_) => "a number",
+        serde_json::Value::String(_) => "a string",
+        serde_json::Value::Array(_) => "an array",
+        serde_json::Value::Object(_) => "an object",
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn u8_quantization_error_within_half_step() {
+        let values: Vec<f32> = (0..600)
+            .map(|i| ((i as f32) * 0.37).sin() * (1.0 + (i % 3) as f32))
+            .collect();
+        let q = Coefficients::quantize(&values, 3, CoefficientEncoding::U8Affine).unwrap();
+        let back = q.to_f32();
+        for (i, (a, b)) in values.iter().zip(&back).enumerate() {
+            let bound = q.abs_error_bound(i % 3).unwrap();
+            assert!((a - b).abs() <= bound, "{i}: {a} vs {b}, bound {bound}");
+        }
+        // Extremes are exact up to rounding.
+        let Coefficients::U8Affine { codes, .. } = &q else {
+            panic!()
+        };
+        assert!(codes.contains(&0) && codes.contains(&255));
+    }
+
+    #[test]
+    fn f16_quantization_is_relative() {
+        let values = [1.0f32, -3.25, 1e-3, 60000.0];
+        let q = Coefficients::quantize(&values, 2, CoefficientEncoding::F16).unwrap();
+        for (a, b) in values.iter().zip(q.to_f32()) {
+            assert!((a - b).abs() <= a.abs() * 2f32.powi(-11));
+        }
+        assert!(Coefficients::quantize(&[7e4, 0.0], 2, CoefficientEncoding::F16).is_err());
+        assert!(Coefficients::quantize(&[f32::NAN, 0.0], 2, CoefficientEncoding::U8Affine).is_err());
+        assert!(Coefficients::quantize(&[0.0; 3], 2, CoefficientEncoding::F16).is_err());
+        assert!(Coefficients::quantize(&[0.0; 385], 385, CoefficientEncoding::F16).is_err());
+    }
+
+    #[test]
+    fn constant_component_quantizes_exactly() {
+        let q = Coefficients::quantize(&[2.5, 2.5, 2.5], 1, CoefficientEncoding::U8Affine).unwrap();
+        assert_eq!(q.to_f32(), vec![2.5; 3]);
+    }
+
+    #[test]
+    fn density_encoding_clamps_and_rejects() {
+        let d = encode_density(&[0.0, 1.0, 1e6]).unwrap();
+        assert_eq!(d[2], f16::MAX);
+        assert!(encode_density(&[-1.0]).is_err());
+        assert!(encode_density(&[f32::NAN]).is_err());
+    }
+
+    #[test]
+    fn voxel_indexing_conventions() {
+        assert_eq!(local_voxel_index(1, 2, 3), 1 + 16 + 192);
+        assert_eq!(local_voxel_coords(local_voxel_index(7, 0, 5)), [7, 0, 5]);
+        let g = GridGeometry {
+            bbox_min_m: [-1.0, 0.0, 2.0],
+            voxel_size_m: 0.5,
+            grid_bricks: [2, 3, 4],
+        };
+        assert_eq!(g.bbox_max_m(), [7.0, 12.0, 18.0]);
+        let p = g.voxel_center_m([1, 0, 2], [3, 0, 7]);
+        assert_eq!(p, DVec3::new(-1.0 + 11.5 * 0.5, 0.25, 2.0 + 23.5 * 0.5));
+    }
+}

@@ -1,0 +1,267 @@
+//! A summary of a `.nelf` file for people and scripts (`nelf inspect`): header,
+//! sections with stored and decoded sizes, counts, bounding box, metadata, and the
+//! result of checking every checksum and value ([`crate::read::AssetReader::verify`]).
+
+use std::fmt::Write as _;
+use std::path::Path;
+
+use serde::Serialize;
+
+use crate::error::Result;
+use crate::read::AssetReader;
+use crate::spec::{BRICK_SIZE, SectionEntry};
+
+/// One section as `nelf inspect` reports it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct SectionSummary {
+    /// Four-letter kind.
+    pub kind: String,
+    /// Whether a reader that does not know the kind must reject the file.
+    pub required: bool,
+    /// Whether this reader knows the kind.
+    pub known: bool,
+    /// Codec name (`raw`, `zstd`, `chunked-zstd`).
+    pub codec: String,
+    /// Byte-shuffle record width (0 = none).
+    pub shuffle: u32,
+    /// Offset in the file.
+    pub offset: u64,
+    /// Stored bytes.
+    pub stored_bytes: u64,
+    /// Decoded bytes.
+    pub raw_bytes: u64,
+    /// `raw_bytes / stored_bytes` (1 for empty sections).
+    pub ratio: f64,
+    /// xxh3-64 of the stored bytes, hex.
+    pub checksum: String,
+}
+
+impl SectionSummary {
+    fn new(s: &SectionEntry) -> Self {
+        Self {
+            kind: s.name(),
+            required: s.required,
+            known: is_known_kind(s),
+            codec: s.codec.name(),
+            shuffle: s.shuffle,
+            offset: s.offset,
+            stored_bytes: s.stored_length,
+            raw_bytes: s.raw_length,
+            ratio: ratio(s.raw_length, s.stored_length),
+            checksum: format!("{:016x}", s.checksum),
+        }
+    }
+}
+
+fn is_known_kind(s: &SectionEntry) -> bool {
+    use crate::spec::{
+        KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS,
+    };
+    [
+        KIND_BRICKS,
+        KIND_DENSITY,
+        KIND_PCA,
+        KIND_QUANT_PARAMS,
+        KIND_COEFFICIENTS,
+        KIND_METADATA,
+    ]
+    .contains(&s.kind)
+}
+
+fn ratio(raw: u64, stored: u64) -> f64 {
+    if stored == 0 {
+        1.0
+    } else {
+        raw as f64 / stored as f64
+    }
+}
+
+/// Everything `nelf inspect` prints.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Inspection {
+    /// The file inspected.
+    pub file: String,
+    /// Its size in bytes.
+    pub file_size: u64,
+    /// `major.minor`.
+    pub version: String,
+    /// Header flags.
+    pub flags: u64,
+    /// Grid box minimum corner, metres.
+    pub bbox_min_m: [f64; 3],
+    /// Grid box maximum corner, metres.
+    pub bbox_max_m: [f64; 3],
+    /// Voxel edge, metres.
+    pub voxel_size_m: f64,
+    /// Grid extent in bricks.
+    pub grid_bricks: [u32; 3],
+    /// Voxels along a brick edge (8).
+    pub brick_size: usize,
+    /// Bricks stored.
+    pub brick_count: u32,
+    /// Voxels stored.
+    pub voxel_count: u64,
+    /// Bricks per chunk.
+    pub chunk_bricks: u32,
+    /// Chunks per chunked section.
+    pub chunk_count: u64,
+    /// `world_from_light`, rows.
+    pub world_from_light: [[f64; 3]; 3],
+    /// Environment-map size of the basis, `[height, width]`.
+    pub env_size: [u16; 2],
+    /// PCA rank `K`.
+    pub pca_rank: u32,
+    /// Coefficient encoding name.
+    pub coefficient_encoding: String,
+    /// Sections in table order.
+    pub sections: Vec<SectionSummary>,
+    /// Decoded bytes over all sections.
+    pub raw_payload_bytes: u64,
+    /// Stored bytes over all sections.
+    pub stored_payload_bytes: u64,
+    /// `raw_payload_bytes / stored_payload_bytes`.
+    pub compression_ratio: f64,
+    /// File bytes per stored voxel.
+    pub bytes_per_voxel: f64,
+    /// Whether every checksum and value was checked (always true when returned).
+    pub verified: bool,
+    /// The metadata object.
+    pub metadata: serde_json::Value,
+}
+
+/// Opens, fully verifies and summarises the `.nelf` file at `path`.
+pub fn inspect(path: &Path) -> Result<Inspection> {
+    let mut reader = AssetReader::open(path)?;
+    reader.verify()?;
+    let h = reader.header().clone();
+    let sections: Vec<SectionSummary> = reader.sections().iter().map(SectionSummary::new).collect();
+    let raw: u64 = sections.iter().map(|s| s.raw_bytes).sum();
+    let stored: u64 = sections.iter().map(|s| s.stored_bytes).sum();
+    let rows = h.world_from_light.transpose().to_cols_array_2d();
+    let voxel_count = h.voxel_count();
+    Ok(Inspection {
+        file: path.display().to_string(),
+        file_size: h.file_size,
+        version: format!("{}.{}", h.version_major, h.version_minor),
+        flags: h.flags,
+        bbox_min_m: h.grid.bbox_min_m,
+        bbox_max_m: h.grid.bbox_max_m(),
+        voxel_size_m: h.grid.voxel_size_m,
+        grid_bricks: h.grid.grid_bricks,
+        brick_size: BRICK_SIZE,
+        brick_count: h.brick_count,
+        voxel_count,
+        chunk_bricks: h.chunk_bricks,
+        chunk_count: h.chunk_count(),
+        world_from_light: rows,
+        env_size: [h.env_height, h.env_width],
+        pca_rank: h.pca_rank,
+        coefficient_encoding: h.coefficient_encoding.name().to_string(),
+        sections,
+        raw_payload_bytes: raw,
+        stored_payload_bytes: stored,
+        compression_ratio: ratio(raw, stored),
+        bytes_per_voxel: if voxel_count == 0 {
+            0.0
+        } else {
+            h.file_size as f64 / voxel_count as f64
+        },
+        verified: true,
+        metadata: reader.metadata().clone(),
+    })
+}
+
+impl Inspection {
+    /// The human-readable report.
+    pub fn to_text(&self) -> String {
+        let mut s = String::new();
+        let v3 = |v: [f64; 3]| format!("({:.6}, {:.6}, {:.6})", v[0], v[1], v[2]);
+        // Writing to a String cannot fail.
+        let _ = writeln!(s, "file:              {}", self.file);
+        let _ = writeln!(
+            s,
+            "format:            .nelf v{}, {} bytes, flags {:#x}",
+            self.version, self.file_size, self.flags
+        );
+        let _ = writeln!(s, "checksums:         all verified");
+        let _ = writeln!(
+            s,
+            "bounding box (m):  min {} max {}",
+            v3(self.bbox_min_m),
+            v3(self.bbox_max_m)
+        );
+        let _ = writeln!(
+            s,
+            "voxel size:        {:.6} m ({:.3} mm)",
+            self.voxel_size_m,
+            1e3 * self.voxel_size_m
+        );
+        let g = self.grid_bricks;
+        let _ = writeln!(
+            s,
+            "grid:              {}×{}×{} bricks of {}³ = {}×{}×{} voxels",
+            g[0],
+            g[1],
+            g[2],
+            self.brick_size,
+            u64::from(g[0]) * self.brick_size as u64,
+            u64::from(g[1]) * self.brick_size as u64,
+            u64::from(g[2]) * self.brick_size as u64
+        );
+        let _ = writeln!(s, "bricks:            {}", self.brick_count);
+        let _ = writeln!(s, "voxels:            {}", self.voxel_count);
+        let _ = writeln!(
+            s,
+            "chunks:            {} of {} bricks",
+            self.chunk_count, self.chunk_bricks
+        );
+        let _ = writeln!(
+            s,
+            "environment basis: {}×{} texels",
+            self.env_size[0], self.env_size[1]
+        );
+        let _ = writeln!(s, "PCA rank:          {}", self.pca_rank);
+        let _ = writeln!(s, "coefficients:      {}", self.coefficient_encoding);
+        for (i, r) in self.world_from_light.iter().enumerate() {
+            let label = if i == 0 { "world_from_light:" } else { "" };
+            let _ = writeln!(s, "{label:<19}[{:>9.6} {:>9.6} {:>9.6}]", r[0], r[1], r[2]);
+        }
+        let _ = writeln!(
+            s,
+            "payload:           {} bytes stored, {} decoded (ratio {:.2}), {:.2} bytes/voxel",
+            self.stored_payload_bytes, self.raw_payload_bytes, self.compression_ratio, self.bytes_per_voxel
+        );
+        let _ = writeln!(s, "sections:");
+        let _ = writeln!(
+            s,
+            "  {:<4} {:<4} {:<12} {:>7} {:>10} {:>12} {:>12} {:>7}  {:<16}",
+            "kind", "req", "codec", "shuffle", "offset", "stored", "decoded", "ratio", "xxh3"
+        );
+        for sec in &self.sections {
+            let kind = if sec.known {
+                sec.kind.clone()
+            } else {
+                format!("{}?", sec.kind)
+            };
+            let _ = writeln!(
+                s,
+                "  {:<4} {:<4} {:<12} {:>7} {:>10} {:>12} {:>12} {:>7.2}  {}",
+                kind,
+                if sec.required { "yes" } else { "no" },
+                sec.codec,
+                sec.shuffle,
+                sec.offset,
+                sec.stored_bytes,
+                sec.raw_bytes,
+                sec.ratio,
+                sec.checksum
+            );
+        }
+        let metadata = serde_json::to_string_pretty(&self.metadata).unwrap_or_else(|e| format!("<{e}>"));
+        let _ = writeln!(s, "metadata:");
+        for line in metadata.lines() {
+            let _ = writeln!(s, "  {line}");
+        }
+        s
+    }
+}

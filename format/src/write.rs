@@ -1,0 +1,312 @@
+//! `.nelf` writer: packs an [`Asset`] into the v1 layout of `SPEC.md` (header,
+//! section table, 8-byte aligned sections, chunked zstd for density and
+//! coefficients) and writes it atomically (temporary file in the same folder,
+//! then rename). Output depends only on the asset and the options, so writing
+//! the same asset twice gives byte-identical files.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+use crate::asset::{Asset, Coefficients};
+use crate::error::{FormatError, Result};
+use crate::spec::{
+    BRICK_VOXELS, CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header, KIND_BRICKS,
+    KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, MAX_CHUNK_RAW_BYTES,
+    MAX_METADATA_BYTES, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind, VERSION_MAJOR,
+    VERSION_MINOR, checksum, header_checksum, kind_name, shuffle,
+};
+
+/// Choices the writer makes; none of them changes what a reader gets back.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct WriteOptions {
+    /// zstd compression level (1 = fastest … 19 = smallest; negative = faster still).
+    pub zstd_level: i32,
+    /// Bricks per independently compressed chunk of the density and coefficient
+    /// sections (clamped so one chunk decodes to at most 4 MiB).
+    pub chunk_bricks: u32,
+    /// Byte-shuffle records (one voxel's coefficients, one `f16` density, …) before zstd.
+    pub shuffle: bool,
+}
+
+impl Default for WriteOptions {
+    /// The defaults chosen from `cargo bench -p nelf-format --bench codec` (see SPEC.md,
+    /// "Choosing the defaults"): zstd level 3, 64-brick chunks, shuffle on.
+    fn default() -> Self {
+        Self {
+            zstd_level: 3,
+            chunk_bricks: 64,
+            shuffle: true,
+        }
+    }
+}
+
+/// What [`write_asset`] wrote.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct WriteReport {
+    /// The file written.
+    pub path: PathBuf,
+    /// Its size in bytes.
+    pub file_size: u64,
+    /// Its section table.
+    pub sections: Vec<SectionEntry>,
+}
+
+impl WriteReport {
+    /// Decoded payload bytes over all sections.
+    pub fn raw_payload_bytes(&self) -> u64 {
+        self.sections.iter().map(|s| s.raw_length).sum()
+    }
+}
+
+/// Writes `asset` to `path` atomically: the bytes go to a temporary file in the same
+/// folder, which is flushed to disk and then renamed over `path`. On any error
+/// nothing is left under `path` (a previous file there is untouched).
+pub fn write_asset(path: &Path, asset: &Asset, options: &WriteOptions) -> Result<WriteReport> {
+    let (bytes, sections) = encode_asset(asset, options)?;
+    let io_err = |source| FormatError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let mut tmp = tempfile::Builder::new()
+        .prefix(".nelf-")
+        .suffix(".tmp")
+        .tempfile_in(&dir)
+        .map_err(io_err)?;
+    tmp.write_all(&bytes).map_err(io_err)?;
+    tmp.as_file().sync_all().map_err(io_err)?;
+    tmp.persist(path).map_err(|e| io_err(e.error))?;
+    Ok(WriteReport {
+        path: path.to_path_buf(),
+        file_size: bytes.len() as u64,
+        sections,
+    })
+}
+
+/// Encodes `asset` into the bytes of a `.nelf` file, returning them with the section table.
+pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, Vec<SectionEntry>)> {
+    asset.validate()?;
+    let rank = asset.rank();
+    let encoding = asset.coefficients.encoding();
+    let coef_brick_bytes = (BRICK_VOXELS * rank * encoding.bytes_per_value()) as u64;
+    let max_chunk_bricks = (MAX_CHUNK_RAW_BYTES / coef_brick_bytes.max(2 * BRICK_VOXELS as u64)).max(1);
+    let chunk_bricks = u64::from(options.chunk_bricks).clamp(1, max_chunk_bricks) as u32;
+    let mut zstd = Zstd::new(options.zstd_level)?;
+    let shuffle_width = |w: u32| if options.shuffle { w } else { 0 };
+
+    let mut payloads: Vec<Payload> = Vec::new();
+
+    let brick_bytes: Vec<u8> = asset
+        .bricks
+        .iter()
+        .flat_map(|c| c.iter().flat_map(|v| v.to_le_bytes()))
+        .collect();
+    // Brick coordinates are always stored raw: 6 bytes a brick, so a reader can bound
+    // every count by the file size before decoding anything.
+    payloads.push(Payload::raw(KIND_BRICKS, brick_bytes));
+
+    let density_bytes: Vec<u8> = asset
+        .density
+        .iter()
+        .flat_map(|v| v.to_bits().to_le_bytes())
+        .collect();
+    payloads.push(zstd.chunked(
+        KIND_DENSITY,
+        &density_bytes,
+        2 * BRICK_VOXELS,
+        chunk_bricks as usize,
+        shuffle_width(2),
+    )?);
+
+    let pca_bytes: Vec<u8> = asset
+        .pca
+        .mean
+        .iter()
+        .chain(&asset.pca.basis)
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    payloads.push(zstd.whole(KIND_PCA, &pca_bytes, shuffle_width(4))?);
+
+    if let Coefficients::U8Affine { scale, offset, .. } = &asset.coefficients {
+        let params: Vec<u8> = scale
+            .iter()
+            .zip(offset)
+            .flat_map(|(s, o)| s.to_le_bytes().into_iter().chain(o.to_le_bytes()))
+            .collect();
+        payloads.push(zstd.whole(KIND_QUANT_PARAMS, &params, 0)?);
+    }
+
+    let coefficient_bytes = asset.coefficients.value_bytes();
+    let record = (rank * encoding.bytes_per_value()) as u32;
+    payloads.push(zstd.chunked(
+        KIND_COEFFICIENTS,
+        &coefficient_bytes,
+        coef_brick_bytes as usize,
+        chunk_bricks as usize,
+        shuffle_width(record),
+    )?);
+
+    let metadata = serde_json::to_vec(&asset.metadata)?;
+    if metadata.len() as u64 > MAX_METADATA_BYTES {
+        return Err(FormatError::CountTooLarge {
+            what: "metadata bytes".into(),
+            count: metadata.len() as u64,
+            limit: MAX_METADATA_BYTES,
+        });
+    }
+    let mut meta = zstd.whole(KIND_METADATA, &metadata, 0)?;
+    meta.entry.required = false;
+    payloads.push(meta);
+
+    // Lay out: header, table, then each section at the next multiple of 8.
+    let section_count = payloads.len();
+    let mut offset = (HEADER_SIZE + section_count * SECTION_ENTRY_SIZE) as u64;
+    for p in &mut payloads {
+        offset = offset.next_multiple_of(8);
+        p.entry.offset = offset;
+        offset += p.entry.stored_length;
+    }
+    let file_size = offset;
+    let header = Header {
+        version_major: VERSION_MAJOR,
+        version_minor: VERSION_MINOR,
+        section_count: section_count as u32,
+        flags: 0,
+        grid: asset.grid,
+        brick_count: asset.bricks.len() as u32,
+        chunk_bricks,
+        world_from_light: asset.world_from_light,
+        env_height: crate::conventions::ENV_H as u16,
+        env_width: crate::conventions::ENV_W as u16,
+        pca_rank: rank as u32,
+        coefficient_encoding: encoding,
+        file_size,
+    };
+    let mut header_bytes = header.to_bytes();
+    let table: Vec<u8> = payloads.iter().flat_map(|p| p.entry.to_bytes()).collect();
+    let sum = header_checksum(&header_bytes, &table);
+    header_bytes[HEADER_CHECKSUM_OFFSET..HEADER_SIZE].copy_from_slice(&sum.to_le_bytes());
+
+    let mut out = Vec::with_capacity(file_size as usize);
+    out.extend_from_slice(&header_bytes);
+    out.extend_from_slice(&table);
+    for p in &payloads {
+        out.resize(p.entry.offset as usize, 0);
+        out.extend_from_slice(&p.stored);
+    }
+    debug_assert_eq!(out.len() as u64, file_size);
+    Ok((out, payloads.into_iter().map(|p| p.entry).collect()))
+}
+
+/// A section's stored bytes and its table entry (offset filled in at layout).
+struct Payload {
+    entry: SectionEntry,
+    stored: Vec<u8>,
+}
+
+impl Payload {
+    /// A section stored as is.
+    fn raw(kind: SectionKind, raw: Vec<u8>) -> Self {
+        Self {
+            entry: SectionEntry {
+                kind,
+                required: true,
+                codec: SectionCodec::Raw,
+                shuffle: 0,
+                offset: 0,
+                stored_length: raw.len() as u64,
+                raw_length: raw.len() as u64,
+                checksum: checksum(&raw),
+            },
+            stored: raw,
+        }
+    }
+}
+
+/// A reusable zstd compressor that names the section in its errors.
+struct Zstd {
+    compressor: zstd::bulk::Compressor<'static>,
+}
+
+impl Zstd {
+    fn new(level: i32) -> Result<Self> {
+        let compressor = zstd::bulk::Compressor::new(level).map_err(|e| FormatError::Zstd {
+            what: format!("compressor at level {level}"),
+            message: e.to_string(),
+        })?;
+        Ok(Self { compressor })
+    }
+
+    fn compress(&mut self, what: impl Fn() -> String, data: &[u8]) -> Result<Vec<u8>> {
+        self.compressor.compress(data).map_err(|e| FormatError::Zstd {
+            what: what(),
+            message: e.to_string(),
+        })
+    }
+
+    /// A whole section: zstd of the shuffled bytes, or raw if that is not smaller.
+    fn whole(&mut self, kind: SectionKind, raw: &[u8], shuffle_width: u32) -> Result<Payload> {
+        let shuffled = shuffle(raw, shuffle_width as usize);
+        let compressed = self.compress(|| format!("section {}", kind_name(kind)), &shuffled)?;
+        let (codec, shuffle_width, stored) = if compressed.len() < raw.len() {
+            (SectionCodec::Zstd, shuffle_width, compressed)
+        } else {
+            (SectionCodec::Raw, 0, raw.to_vec())
+        };
+        Ok(Payload {
+            entry: SectionEntry {
+                kind,
+                required: true,
+                codec,
+                shuffle: shuffle_width,
+                offset: 0,
+                stored_length: stored.len() as u64,
+                raw_length: raw.len() as u64,
+                checksum: checksum(&stored),
+            },
+            stored,
+        })
+    }
+
+    /// A chunked section: chunk table, then one zstd frame per `chunk_bricks` bricks.
+    fn chunked(
+        &mut self,
+        kind: SectionKind,
+        raw: &[u8],
+        bytes_per_brick: usize,
+        chunk_bricks: usize,
+        shuffle_width: u32,
+    ) -> Result<Payload> {
+        let chunk_bytes = bytes_per_brick * chunk_bricks;
+        let chunks: Vec<&[u8]> = raw.chunks(chunk_bytes.max(1)).collect();
+        let mut table = Vec::with_capacity(chunks.len() * CHUNK_ENTRY_SIZE);
+        let mut data = Vec::new();
+        let mut offset = (chunks.len() * CHUNK_ENTRY_SIZE) as u64;
+        for (i, chunk) in chunks.iter().enumerate() {
+            let shuffled = shuffle(chunk, shuffle_width as usize);
+            let stored = self.compress(|| format!("section {} chunk {i}", kind_name(kind)), &shuffled)?;
+            table.extend_from_slice(&offset.to_le_bytes());
+            table.extend_from_slice(&(stored.len() as u64).to_le_bytes());
+            table.extend_from_slice(&checksum(&stored).to_le_bytes());
+            offset += stored.len() as u64;
+            data.extend_from_slice(&stored);
+        }
+        table.extend_from_slice(&data);
+        Ok(Payload {
+            entry: SectionEntry {
+                kind,
+                required: true,
+                codec: SectionCodec::ChunkedZstd,
+                shuffle: shuffle_width,
+                offset: 0,
+                stored_length: table.len() as u64,
+                raw_length: raw.len() as u64,
+                checksum: checksum(&table),
+            },
+            stored: table,
+        })
+    }
+}
