@@ -3,6 +3,7 @@
 //! synthetic captures.
 
 pub mod bvh;
+pub mod field;
 pub mod mesh;
 pub mod metrics;
 pub mod render;

@@ -1,0 +1,405 @@
+//! Fields of density and light transport over 3D space, and the exact one made from
+//! a mesh.
+//!
+//! [`FieldSource`] is what the baker consumes: at any batch of points a volume
+//! density `σ` (1/m) and a light-transport vector `T` (384 floats, channel-major,
+//! solid angle folded in, DESIGN.md) for an outgoing direction given by a
+//! [`ViewPolicy`]. The NeLF network implements it in another crate; [`MeshField`]
+//! implements it exactly from a mesh, so a volume renderer and the baker have ground
+//! truth to consume:
+//!
+//! * signed distance `d(x)`: distance to the closest surface point (BVH
+//!   branch-and-bound), negative inside, the side decided by the generalised winding
+//!   number (`w ≥ ½` is inside; Jacobson et al. 2013, evaluated fast as in Barill et
+//!   al. 2018), which stays correct for meshes open at the neck where ray parity
+//!   fails;
+//! * density, a sharp, finite profile of `d` ([`DensityProfile`]): `σ(d) =
+//!   σ_max · clamp(½ − d/w, 0, 1)`, i.e. `σ_max` deeper than `w/2` inside, a linear
+//!   ramp across the shell `|d| < w/2`, and exactly 0 beyond `w/2` outside;
+//! * light transport, `T(x) = T(p, n_p, ρ_p, ω_o)` at the closest surface point `p`
+//!   with that point's interpolated normal and albedo ([`LtTracer`]). Each point's
+//!   random stream is seeded from `p` (its coordinates' bits and triangle), so the
+//!   field is a deterministic function of the closest point: constant along the
+//!   normal, independent of batching and threads.
+
+use glam::{DMat3, Vec3};
+use indicatif::ProgressBar;
+use nelf_format::conventions::LT_DIM;
+use rayon::prelude::*;
+
+use crate::bvh::ClosestPoint;
+use crate::mesh::Mesh;
+use crate::tracer::{LtTracer, MAX_AVERAGED_DIRECTIONS, SurfacePoint, TraceError, TraceSettings, mix64};
+
+/// Errors evaluating a field.
+#[derive(Debug, thiserror::Error)]
+pub enum FieldError {
+    /// Output buffers do not match the number of points.
+    #[error(
+        "{points} points need {points} densities and {lt_needed} light-transport floats, got {density} and {lt}"
+    )]
+    LengthMismatch {
+        /// Points given.
+        points: usize,
+        /// Density slots given.
+        density: usize,
+        /// Light-transport floats given.
+        lt: usize,
+        /// Light-transport floats needed (`points × 384`).
+        lt_needed: usize,
+    },
+    /// A query point is NaN or infinite.
+    #[error("query point {index} is not finite")]
+    NotFinite {
+        /// Index of the point.
+        index: usize,
+    },
+    /// The view policy cannot be used.
+    #[error("invalid view policy: {0}")]
+    View(String),
+    /// The ground-truth tracer could not be set up.
+    #[error(transparent)]
+    Trace(#[from] TraceError),
+    /// A settings value is out of range.
+    #[error("invalid field settings: {0}")]
+    Settings(String),
+    /// Any other failure of a field implementation (e.g. a network backend).
+    #[error("field backend: {0}")]
+    Backend(String),
+}
+
+/// Which outgoing direction `ω_o` (unit, from the point toward the viewer) the light
+/// transport is evaluated for.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ViewPolicy {
+    /// One fixed direction for every point (normalised when used).
+    Direction(Vec3),
+    /// Toward a viewer at this position: `ω_o = normalize(eye − x)` at query point `x`.
+    TowardPoint(Vec3),
+    /// The mean of `T` over these directions (at most [`MAX_AVERAGED_DIRECTIONS`]).
+    AverageDirections(Vec<Vec3>),
+    /// The mean of `T` over the directions toward these positions (e.g. the
+    /// capture's camera centres; at most [`MAX_AVERAGED_DIRECTIONS`]).
+    AverageTowardPoints(Vec<Vec3>),
+}
+
+impl ViewPolicy {
+    /// Checks that the policy names at least one usable direction.
+    pub fn validate(&self) -> Result<(), FieldError> {
+        let list = match self {
+            Self::Direction(d) => {
+                return if d.is_finite() && d.length_squared() > 0.0 {
+                    Ok(())
+                } else {
+                    Err(FieldError::View(format!("direction {d} is zero or not finite")))
+                };
+            }
+            Self::TowardPoint(p) => {
+                return if p.is_finite() {
+                    Ok(())
+                } else {
+                    Err(FieldError::View(format!("eye {p} is not finite")))
+                };
+            }
+            Self::AverageDirections(list) | Self::AverageTowardPoints(list) => list,
+        };
+        if list.is_empty() || list.len() > MAX_AVERAGED_DIRECTIONS {
+            return Err(FieldError::View(format!(
+                "an average needs 1 to {MAX_AVERAGED_DIRECTIONS} entries, got {}",
+                list.len()
+            )));
+        }
+        if let Some(bad) = list.iter().find(|v| !v.is_finite()) {
+            return Err(FieldError::View(format!("entry {bad} is not finite")));
+        }
+        if matches!(self, Self::AverageDirections(_)) && list.iter().any(|v| v.length_squared() == 0.0) {
+            return Err(FieldError::View("a direction is zero".into()));
+        }
+        Ok(())
+    }
+
+    /// The unit outgoing directions at query point `x`, written into `out`; returns
+    /// how many. `fallback` is used where a direction is undefined (eye at `x`).
+    pub fn directions_at(&self, x: Vec3, fallback: Vec3, out: &mut [Vec3; MAX_AVERAGED_DIRECTIONS]) -> usize {
+        let toward = |eye: Vec3| (eye - x).normalize_or(fallback);
+        match self {
+            Self::Direction(d) => {
+                out[0] = d.normalize_or(fallback);
+                1
+            }
+            Self::TowardPoint(eye) => {
+                out[0] = toward(*eye);
+                1
+            }
+            Self::AverageDirections(list) => {
+                let n = list.len().min(MAX_AVERAGED_DIRECTIONS);
+                for (o, d) in out.iter_mut().zip(&list[..n]) {
+                    *o = d.normalize_or(fallback);
+                }
+                n
+            }
+            Self::AverageTowardPoints(list) => {
+                let n = list.len().min(MAX_AVERAGED_DIRECTIONS);
+                for (o, eye) in out.iter_mut().zip(&list[..n]) {
+                    *o = toward(*eye);
+                }
+                n
+            }
+        }
+    }
+}
+
+/// A source of density and light transport at any 3D point: the ground-truth mesh
+/// field here, the NeLF network elsewhere. Implementations must be deterministic
+/// for a given point (independent of batch composition and threads).
+pub trait FieldSource: Sync {
+    /// Fills `density[i]` (σ, 1/m) and `lt[i·384 .. (i+1)·384]` (channel-major `T`,
+    /// in the source's light frame) for every `points[i]` (metres, world frame).
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError>;
+
+    /// Axis-aligned box `(min, max)` outside which the density is zero.
+    fn bounds(&self) -> (Vec3, Vec3);
+
+    /// Rotation from the light frame of the vectors to the world. Default identity.
+    fn world_from_light(&self) -> DMat3 {
+        DMat3::IDENTITY
+    }
+
+    /// Density only. The default evaluates everything in chunks and discards the
+    /// light transport; sources that can do better override it.
+    fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
+        const CHUNK: usize = 1024;
+        if density.len() != points.len() {
+            return Err(length_error(points.len(), density.len(), points.len() * LT_DIM));
+        }
+        let mut lt = vec![0.0f32; CHUNK.min(points.len()) * LT_DIM];
+        let view = ViewPolicy::Direction(Vec3::Y);
+        for (p, d) in points.chunks(CHUNK).zip(density.chunks_mut(CHUNK)) {
+            self.evaluate(p, &view, d, &mut lt[..p.len() * LT_DIM])?;
+        }
+        Ok(())
+    }
+}
+
+fn length_error(points: usize, density: usize, lt: usize) -> FieldError {
+    FieldError::LengthMismatch {
+        points,
+        density,
+        lt,
+        lt_needed: points * LT_DIM,
+    }
+}
+
+/// Checks a batch's buffer sizes and point finiteness (for [`FieldSource`] implementers).
+pub fn check_batch(points: &[Vec3], density: &[f32], lt: &[f32]) -> Result<(), FieldError> {
+    if density.len() != points.len() || lt.len() != points.len() * LT_DIM {
+        return Err(length_error(points.len(), density.len(), lt.len()));
+    }
+    if let Some(index) = points.iter().position(|p| !p.is_finite()) {
+        return Err(FieldError::NotFinite { index });
+    }
+    Ok(())
+}
+
+/// The density profile of a signed distance: `σ(d) = σ_max · clamp(½ − d/w, 0, 1)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DensityProfile {
+    /// Density deep inside, `σ_max`, in 1/m.
+    pub sigma_max_per_m: f32,
+    /// Width `w` of the ramp, metres, centred on the surface.
+    pub shell_width_m: f32,
+}
+
+impl Default for DensityProfile {
+    /// A 1 mm shell with optical depth 50 across it (`σ_max = 10⁵ /m`): a ray
+    /// reaches optical depth 1 about 0.14 mm into the shell, so a volume render puts
+    /// the surface within about 0.4 mm of the mesh and is opaque to `e⁻⁵⁰`.
+    fn default() -> Self {
+        Self::with_shell_width(0.001)
+    }
+}
+
+impl DensityProfile {
+    /// A shell of width `shell_width_m` with optical depth 50 across it
+    /// (`σ_max = 100 / w`). Bakers sampling the field on a grid should use a shell
+    /// at least two voxels wide.
+    pub fn with_shell_width(shell_width_m: f32) -> Self {
+        Self {
+            sigma_max_per_m: 100.0 / shell_width_m,
+            shell_width_m,
+        }
+    }
+
+    /// Density at signed distance `d_m` (negative inside), 1/m.
+    pub fn density(&self, d_m: f32) -> f32 {
+        self.sigma_max_per_m * (0.5 - d_m / self.shell_width_m).clamp(0.0, 1.0)
+    }
+
+    /// Distance outside the surface beyond which the density is 0, `w/2`.
+    pub fn support_m(&self) -> f32 {
+        0.5 * self.shell_width_m
+    }
+
+    fn validate(self) -> Result<(), FieldError> {
+        let ok = |v: f32| v.is_finite() && v > 0.0;
+        if ok(self.sigma_max_per_m) && ok(self.shell_width_m) {
+            Ok(())
+        } else {
+            Err(FieldError::Settings(format!(
+                "density profile {self:?} needs positive finite values"
+            )))
+        }
+    }
+}
+
+/// The exact ground-truth field of a mesh (see the module documentation).
+#[derive(Debug, Clone)]
+pub struct MeshField {
+    tracer: LtTracer,
+    profile: DensityProfile,
+}
+
+impl MeshField {
+    /// Builds the tracer for `mesh` and the field around it.
+    pub fn new(mesh: &Mesh, trace: TraceSettings, profile: DensityProfile) -> Result<Self, FieldError> {
+        Self::from_tracer(LtTracer::new(mesh, trace)?, profile)
+    }
+
+    /// The field of an existing tracer.
+    pub fn from_tracer(tracer: LtTracer, profile: DensityProfile) -> Result<Self, FieldError> {
+        profile.validate()?;
+        Ok(Self { tracer, profile })
+    }
+
+    /// The tracer computing the light transport.
+    pub fn tracer(&self) -> &LtTracer {
+        &self.tracer
+    }
+
+    /// The density profile.
+    pub fn profile(&self) -> &DensityProfile {
+        &self.profile
+    }
+
+    /// Signed distance to the mesh (negative inside) and the closest surface point.
+    pub fn signed_distance(&self, x: Vec3) -> Option<(f32, ClosestPoint)> {
+        let bvh = self.tracer.bvh();
+        let cp = bvh.closest_point(x, f32::INFINITY)?;
+        let sign = if bvh.winding_number(x) >= 0.5 { -1.0 } else { 1.0 };
+        Some((sign * cp.distance, cp))
+    }
+
+    /// Density at `x`, 1/m.
+    pub fn density(&self, x: Vec3) -> f32 {
+        let bvh = self.tracer.bvh();
+        // Beyond the support outside the surface the density is exactly 0: no sign needed
+        // unless a surface is within reach.
+        match bvh.closest_point(x, self.profile.support_m()) {
+            Some(cp) => {
+                let sign = if bvh.winding_number(x) >= 0.5 { -1.0 } else { 1.0 };
+                self.profile.density(sign * cp.distance)
+            }
+            None if bvh.winding_number(x) >= 0.5 => self.profile.sigma_max_per_m,
+            None => 0.0,
+        }
+    }
+
+    /// The closest surface point to `x`, with its outward normals and albedo.
+    pub fn surface_point(&self, x: Vec3) -> Option<(SurfacePoint, ClosestPoint)> {
+        let cp = self.tracer.bvh().closest_point(x, f32::INFINITY)?;
+        let mut sp = self.tracer.surface_point(cp.triangle, cp.b1, cp.b2);
+        sp.position = cp.point;
+        Some((sp, cp))
+    }
+
+    /// Adds the light transport at `x` under `view` to `out` (384 floats, zeroed by the caller).
+    fn light_transport_into(&self, x: Vec3, view: &ViewPolicy, out: &mut [f32]) {
+        let Some((sp, cp)) = self.surface_point(x) else {
+            return;
+        };
+        let mut omegas = [Vec3::ZERO; MAX_AVERAGED_DIRECTIONS];
+        let count = view.directions_at(x, sp.shading_normal, &mut omegas);
+        let bits = |v: f32| u64::from(v.to_bits());
+        let stream = mix64(bits(cp.point.x) | bits(cp.point.y) << 32)
+            ^ mix64(bits(cp.point.z) | u64::from(cp.triangle) << 32);
+        let mut rng = self.tracer.rng(stream);
+        self.tracer
+            .light_transport_averaged(&sp, &omegas[..count], &mut rng, out);
+    }
+
+    /// [`FieldSource::evaluate`] with an optional progress bar (length set to the
+    /// number of points, ticked per chunk of 64).
+    pub fn evaluate_with_progress(
+        &self,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+        progress: Option<&ProgressBar>,
+    ) -> Result<(), FieldError> {
+        const CHUNK: usize = 64;
+        check_batch(points, density, lt)?;
+        view.validate()?;
+        if let Some(pb) = progress {
+            pb.set_length(points.len() as u64);
+        }
+        points
+            .par_chunks(CHUNK)
+            .zip(density.par_chunks_mut(CHUNK))
+            .zip(lt.par_chunks_mut(CHUNK * LT_DIM))
+            .for_each(|((p, d), t)| {
+                for ((x, sigma), out) in p.iter().zip(d.iter_mut()).zip(t.chunks_mut(LT_DIM)) {
+                    *sigma = self.density(*x);
+                    out.fill(0.0);
+                    self.light_transport_into(*x, view, out);
+                }
+                if let Some(pb) = progress {
+                    pb.inc(p.len() as u64);
+                }
+            });
+        Ok(())
+    }
+}
+
+impl FieldSource for MeshField {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        self.evaluate_with_progress(points, view, density, lt, None)
+    }
+
+    /// The mesh's bounds grown by the density's support outside the surface.
+    fn bounds(&self) -> (Vec3, Vec3) {
+        let (lo, hi) = self.tracer.mesh().bounds();
+        let margin = Vec3::splat(self.profile.support_m());
+        (lo - margin, hi + margin)
+    }
+
+    fn world_from_light(&self) -> DMat3 {
+        self.tracer.settings().world_from_light
+    }
+
+    fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
+        if density.len() != points.len() {
+            return Err(length_error(points.len(), density.len(), points.len() * LT_DIM));
+        }
+        if let Some(index) = points.iter().position(|p| !p.is_finite()) {
+            return Err(FieldError::NotFinite { index });
+        }
+        points
+            .par_iter()
+            .zip(density.par_iter_mut())
+            .for_each(|(x, d)| *d = self.density(*x));
+        Ok(())
+    }
+}
