@@ -1,6 +1,7 @@
 //! Round trips of `.nelf` files: lossless sections bit-exact, quantized coefficients
 //! within their stated bound, deterministic bytes, random access equal to whole
 //! reads, atomic writes, versioning and optional sections.
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
 mod common;
 
@@ -115,12 +116,12 @@ fn reconstruction_follows_the_spec_formula() {
     for v in (0..asset.voxel_count()).step_by(97) {
         let t = asset.reconstruct_lt(v);
         asset.coefficients_f32(v, &mut c);
-        for j in 0..LT_DIM {
+        for (j, &tj) in t.iter().enumerate() {
             let mut want = asset.pca.mean[j];
             for (k, ck) in c.iter().enumerate() {
                 want += ck * asset.pca.basis[k * LT_DIM + j];
             }
-            assert_eq!(t[j], want);
+            assert_eq!(tj, want);
         }
         field.lt(v, &mut exact);
         let (got, want) = (shade(&t, &light), shade(&exact, &light));

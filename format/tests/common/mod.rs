@@ -1,7 +1,7 @@
 //! Shared helpers for the `.nelf` integration tests: small synthetic assets, and
 //! surgery on encoded files (re-laying out sections, re-signing the header) so that
 //! tests can build hostile files that get past the checksums.
-#![allow(dead_code)]
+#![allow(dead_code, clippy::unwrap_used)]
 
 use nelf_format::spec::{
     CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry,
