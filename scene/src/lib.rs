@@ -3,8 +3,13 @@
 //! synthetic captures.
 
 pub mod bvh;
+pub mod envgen;
+pub mod envmap;
+pub mod error;
 pub mod field;
+pub mod head;
 pub mod mesh;
+pub mod mesh_io;
 pub mod metrics;
 pub mod render;
 pub mod shapes;

@@ -1,0 +1,97 @@
+//! Errors of the scene loaders (meshes, textures, environment maps): every
+//! variant names the file it is about, and parse errors name the line, so a
+//! user can fix the file without reading our code.
+
+use std::path::PathBuf;
+
+use crate::mesh::MeshError;
+
+/// An error loading or writing a scene file.
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    /// The operating system refused to read or write the file.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What went wrong.
+        source: std::io::Error,
+    },
+    /// A text file is malformed at a line.
+    #[error("{path}:{line}: {message}")]
+    Parse {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line number.
+        line: usize,
+        /// What is wrong there.
+        message: String,
+    },
+    /// A file is malformed or unsupported (no single line to blame).
+    #[error("{path}: {message}")]
+    Format {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        message: String,
+    },
+    /// The file's extension names no format we read.
+    #[error("{path}: unsupported file type (expected {expected})")]
+    UnsupportedExtension {
+        /// The file.
+        path: PathBuf,
+        /// The extensions we read.
+        expected: &'static str,
+    },
+    /// An image (texture, HDR map, preview) could not be decoded or encoded.
+    #[error("{path}: {source}")]
+    Image {
+        /// The file.
+        path: PathBuf,
+        /// The image crate's error.
+        source: image::ImageError,
+    },
+    /// An OpenEXR file could not be read.
+    #[error("{path}: {source}")]
+    Exr {
+        /// The file.
+        path: PathBuf,
+        /// The exr crate's error.
+        source: exr::error::Error,
+    },
+    /// The file parsed but the mesh it describes is invalid.
+    #[error("{path}: {source}")]
+    Mesh {
+        /// The file.
+        path: PathBuf,
+        /// Why the mesh is invalid.
+        source: MeshError,
+    },
+}
+
+impl SceneError {
+    /// A parse error at `line` (1-based) of `path`.
+    pub(crate) fn parse(path: &std::path::Path, line: usize, message: impl Into<String>) -> Self {
+        Self::Parse {
+            path: path.to_path_buf(),
+            line,
+            message: message.into(),
+        }
+    }
+
+    /// A whole-file format error.
+    pub(crate) fn format(path: &std::path::Path, message: impl Into<String>) -> Self {
+        Self::Format {
+            path: path.to_path_buf(),
+            message: message.into(),
+        }
+    }
+
+    /// An I/O error on `path`.
+    pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
+        Self::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
