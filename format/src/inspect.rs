@@ -234,7 +234,7 @@ impl Inspection {
         let _ = writeln!(s, "sections:");
         let _ = writeln!(
             s,
-            "  {:<4} {:<4} {:<12} {:>7} {:>10} {:>12} {:>12} {:>7}  {:<16}",
+            "  {:<4} {:<4} {:<12} {:>7} {:>10} {:>12} {:>12} {:>7}  {}",
             "kind", "req", "codec", "shuffle", "offset", "stored", "decoded", "ratio", "xxh3"
         );
         for sec in &self.sections {

@@ -461,17 +461,27 @@ pub fn checksum(bytes: &[u8]) -> u64 {
     xxhash_rust::xxh3::xxh3_64(bytes)
 }
 
+/// Records per block in [`shuffle`] and [`unshuffle`]: a block of records stays in
+/// L1 cache while its bytes are scattered to (or gathered from) the planes.
+const SHUFFLE_BLOCK: usize = 256;
+
 /// Byte shuffle with record width `width`: `out[b·n + r] = data[r·width + b]` for
-/// `n = len / width` records. Width 0 or 1 is the identity. `len` must be a multiple of `width`.
+/// `n = len / width` records (byte `b` of every record goes to plane `b`). Width 0
+/// or 1 is the identity. `len` must be a multiple of `width`.
 pub fn shuffle(data: &[u8], width: usize) -> Vec<u8> {
     if width <= 1 {
         return data.to_vec();
     }
     let n = data.len() / width;
     let mut out = vec![0u8; data.len()];
-    for (r, record) in data.chunks_exact(width).enumerate() {
-        for (b, &byte) in record.iter().enumerate() {
-            out[b * n + r] = byte;
+    for r0 in (0..n).step_by(SHUFFLE_BLOCK) {
+        let r1 = (r0 + SHUFFLE_BLOCK).min(n);
+        let block = &data[r0 * width..r1 * width];
+        for b in 0..width {
+            let plane = &mut out[b * n + r0..b * n + r1];
+            for (dst, record) in plane.iter_mut().zip(block.chunks_exact(width)) {
+                *dst = record[b];
+            }
         }
     }
     out
@@ -484,9 +494,14 @@ pub fn unshuffle(data: &[u8], width: usize) -> Vec<u8> {
     }
     let n = data.len() / width;
     let mut out = vec![0u8; data.len()];
-    for (r, record) in out.chunks_exact_mut(width).enumerate() {
-        for (b, byte) in record.iter_mut().enumerate() {
-            *byte = data[b * n + r];
+    for r0 in (0..n).step_by(SHUFFLE_BLOCK) {
+        let r1 = (r0 + SHUFFLE_BLOCK).min(n);
+        let block = &mut out[r0 * width..r1 * width];
+        for b in 0..width {
+            let plane = &data[b * n + r0..b * n + r1];
+            for (record, &src) in block.chunks_exact_mut(width).zip(plane) {
+                record[b] = src;
+            }
         }
     }
     out
@@ -531,6 +546,11 @@ mod tests {
         assert_eq!(&s[..8], &[0, 3, 6, 9, 12, 15, 18, 21]);
         assert_eq!(unshuffle(&s, 3), data);
         assert_eq!(shuffle(&data, 1), data);
+        // Across several blocks, with a partial last block.
+        let long: Vec<u8> = (0..7 * 1000).map(|i| (i * 31 % 251) as u8).collect();
+        let s = shuffle(&long, 7);
+        assert_eq!(s[1000 + 5], long[5 * 7 + 1]);
+        assert_eq!(unshuffle(&s, 7), long);
     }
 
     #[test]

@@ -1,6 +1,10 @@
-//! `nelf inspect FILE`: placeholder replaced by the format work.
+//! `nelf inspect FILE [--json]`: verifies a `.nelf` file (every checksum and value)
+//! and prints its header, sections with stored and decoded sizes, counts, bounding
+//! box and metadata. The work is `nelf_format::inspect`.
 
 use std::path::PathBuf;
+
+use anyhow::Context;
 
 /// Options of `nelf inspect`.
 #[derive(Debug, clap::Args)]
@@ -12,6 +16,14 @@ pub struct InspectArgs {
     pub json: bool,
 }
 
+/// Runs `nelf inspect`.
 pub fn run(args: &InspectArgs) -> anyhow::Result<()> {
-    anyhow::bail!("{}: reader not written yet", args.file.display())
+    let report = nelf_format::inspect::inspect(&args.file)
+        .with_context(|| format!("cannot inspect {}", args.file.display()))?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        print!("{}", report.to_text());
+    }
+    Ok(())
 }
