@@ -20,7 +20,7 @@
 //! Own implementation rather than a crate: the `bvh` crate pulls in nalgebra and
 //! has no closest-point or winding-number queries; this one is f32 glam throughout.
 
-use glam::Vec3;
+use glam::{Vec3, Vec3A};
 
 /// Most triangles in one leaf.
 pub const MAX_LEAF_TRIANGLES: usize = 4;
@@ -66,8 +66,8 @@ pub struct ClosestPoint {
 /// `first_or_child`.
 #[derive(Debug, Clone, Copy)]
 struct Node {
-    min: Vec3,
-    max: Vec3,
+    min: Vec3A,
+    max: Vec3A,
     first_or_child: u32,
     count: u32,
 }
@@ -76,9 +76,9 @@ struct Node {
 #[derive(Debug, Clone, Copy)]
 struct Dipole {
     /// `Σ ½ (b − a) × (c − a)` over the node's triangles.
-    area_normal: Vec3,
+    area_normal: Vec3A,
     /// Area-weighted centroid.
-    centre: Vec3,
+    centre: Vec3A,
     /// Radius of a ball around `centre` holding the node.
     radius: f32,
 }
@@ -86,9 +86,9 @@ struct Dipole {
 /// A triangle stored for intersection: corner `a` and edges `b − a`, `c − a`.
 #[derive(Debug, Clone, Copy)]
 struct Tri {
-    a: Vec3,
-    e1: Vec3,
-    e2: Vec3,
+    a: Vec3A,
+    e1: Vec3A,
+    e2: Vec3A,
 }
 
 /// A BVH over a triangle list. Triangles keep their mesh indices in every answer.
@@ -105,17 +105,17 @@ pub struct Bvh {
 /// Axis-aligned box helper used by the build.
 #[derive(Debug, Clone, Copy)]
 struct Aabb {
-    min: Vec3,
-    max: Vec3,
+    min: Vec3A,
+    max: Vec3A,
 }
 
 impl Aabb {
     const EMPTY: Self = Self {
-        min: Vec3::splat(f32::INFINITY),
-        max: Vec3::splat(f32::NEG_INFINITY),
+        min: Vec3A::splat(f32::INFINITY),
+        max: Vec3A::splat(f32::NEG_INFINITY),
     };
 
-    fn grow(&mut self, p: Vec3) {
+    fn grow(&mut self, p: Vec3A) {
         self.min = self.min.min(p);
         self.max = self.max.max(p);
     }
@@ -126,7 +126,7 @@ impl Aabb {
     }
 
     fn half_area(&self) -> f32 {
-        let e = (self.max - self.min).max(Vec3::ZERO);
+        let e = (self.max - self.min).max(Vec3A::ZERO);
         e.x * e.y + e.y * e.z + e.z * e.x
     }
 }
@@ -137,9 +137,9 @@ impl Bvh {
     /// that no ray hits.
     pub fn new(positions: &[Vec3], triangles: &[[u32; 3]]) -> Self {
         let n = triangles.len();
-        let corners: Vec<[Vec3; 3]> = triangles
+        let corners: Vec<[Vec3A; 3]> = triangles
             .iter()
-            .map(|t| t.map(|i| positions[i as usize]))
+            .map(|t| t.map(|i| Vec3A::from(positions[i as usize])))
             .collect();
         let mut boxes = Vec::with_capacity(n);
         let mut centroids = Vec::with_capacity(n);
@@ -154,8 +154,8 @@ impl Bvh {
         let mut order: Vec<u32> = (0..n as u32).collect();
         let mut nodes = Vec::with_capacity(2 * n.max(1));
         nodes.push(Node {
-            min: Vec3::ZERO,
-            max: Vec3::ZERO,
+            min: Vec3A::ZERO,
+            max: Vec3A::ZERO,
             first_or_child: 0,
             count: n as u32,
         });
@@ -187,8 +187,8 @@ impl Bvh {
             nodes[node].count = 0;
             for _ in 0..2 {
                 nodes.push(Node {
-                    min: Vec3::ZERO,
-                    max: Vec3::ZERO,
+                    min: Vec3A::ZERO,
+                    max: Vec3A::ZERO,
                     first_or_child: 0,
                     count: 0,
                 });
@@ -232,28 +232,28 @@ impl Bvh {
         if self.tris.is_empty() {
             return (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY));
         }
-        (self.nodes[0].min, self.nodes[0].max)
+        (self.nodes[0].min.into(), self.nodes[0].max.into())
     }
 
     /// Dipole data bottom-up (children always have larger indices than parents).
     fn compute_dipoles(&self) -> Vec<Dipole> {
         let mut out = vec![
             Dipole {
-                area_normal: Vec3::ZERO,
-                centre: Vec3::ZERO,
+                area_normal: Vec3A::ZERO,
+                centre: Vec3A::ZERO,
                 radius: 0.0,
             };
             self.nodes.len()
         ];
         // Area-weighted sums first: (area normal, Σ area · centroid, Σ area).
-        let mut sums = vec![(Vec3::ZERO, Vec3::ZERO, 0.0f32); self.nodes.len()];
+        let mut sums = vec![(Vec3A::ZERO, Vec3A::ZERO, 0.0f32); self.nodes.len()];
         for i in (0..self.nodes.len()).rev() {
             let node = self.nodes[i];
             if self.tris.is_empty() {
                 break;
             }
             if node.count > 0 {
-                let mut s = (Vec3::ZERO, Vec3::ZERO, 0.0f32);
+                let mut s = (Vec3A::ZERO, Vec3A::ZERO, 0.0f32);
                 for tri in
                     &self.tris[node.first_or_child as usize..(node.first_or_child + node.count) as usize]
                 {
@@ -278,11 +278,7 @@ impl Bvh {
                 box_centre
             };
             // Farthest box corner bounds the node's extent around `centre`.
-            let far = Vec3::new(
-                (centre.x - node.min.x).abs().max((node.max.x - centre.x).abs()),
-                (centre.y - node.min.y).abs().max((node.max.y - centre.y).abs()),
-                (centre.z - node.min.z).abs().max((node.max.z - centre.z).abs()),
-            );
+            let far = (centre - node.min).abs().max((node.max - centre).abs());
             out[i] = Dipole {
                 area_normal: sums[i].0,
                 centre,
@@ -298,13 +294,14 @@ impl Bvh {
         if self.tris.is_empty() {
             return None;
         }
+        let (origin, dir) = (Vec3A::from(origin), Vec3A::from(dir));
         let inv = dir.recip();
         let mut best_t = t_max;
         let mut best: Option<(usize, f32, f32)> = None;
-        let mut stack = [0u32; STACK_SIZE];
+        // Pending far children with their entry distances.
+        let mut stack = [(0u32, 0.0f32); STACK_SIZE];
         let mut sp = 0usize;
-        let root = &self.nodes[0];
-        slab(root, origin, inv, t_min, best_t)?;
+        slab(&self.nodes[0], origin, inv, t_min, best_t)?;
         let mut node_index = 0usize;
         loop {
             let node = &self.nodes[node_index];
@@ -322,12 +319,12 @@ impl Bvh {
                 let hr = slab(&self.nodes[left + 1], origin, inv, t_min, best_t);
                 match (hl, hr) {
                     (Some(a), Some(b)) => {
-                        let (near, far) = if a <= b {
-                            (left, left + 1)
+                        let (near, far, far_t) = if a <= b {
+                            (left, left + 1, b)
                         } else {
-                            (left + 1, left)
+                            (left + 1, left, a)
                         };
-                        stack[sp] = far as u32;
+                        stack[sp] = (far as u32, far_t);
                         sp += 1;
                         node_index = near;
                         continue;
@@ -343,7 +340,7 @@ impl Bvh {
                     (None, None) => {}
                 }
             }
-            // Pop the next node still worth visiting.
+            // Pop the next node that the ray still enters before the best hit.
             loop {
                 if sp == 0 {
                     return best.map(|(slot, b1, b2)| Hit {
@@ -354,9 +351,9 @@ impl Bvh {
                     });
                 }
                 sp -= 1;
-                let candidate = stack[sp] as usize;
-                if slab(&self.nodes[candidate], origin, inv, t_min, best_t).is_some() {
-                    node_index = candidate;
+                let (candidate, entry) = stack[sp];
+                if entry <= best_t {
+                    node_index = candidate as usize;
                     break;
                 }
             }
@@ -368,17 +365,16 @@ impl Bvh {
         if self.tris.is_empty() {
             return false;
         }
+        let (origin, dir) = (Vec3A::from(origin), Vec3A::from(dir));
         let inv = dir.recip();
         let mut stack = [0u32; STACK_SIZE];
         let mut sp = 0usize;
-        stack[sp] = 0;
-        sp += 1;
-        while sp > 0 {
-            sp -= 1;
-            let node = &self.nodes[stack[sp] as usize];
-            if slab(node, origin, inv, t_min, t_max).is_none() {
-                continue;
-            }
+        if slab(&self.nodes[0], origin, inv, t_min, t_max).is_none() {
+            return false;
+        }
+        let mut node_index = 0usize;
+        loop {
+            let node = &self.nodes[node_index];
             if node.count > 0 {
                 let first = node.first_or_child as usize;
                 for tri in &self.tris[first..first + node.count as usize] {
@@ -387,12 +383,33 @@ impl Bvh {
                     }
                 }
             } else {
-                stack[sp] = node.first_or_child;
-                stack[sp + 1] = node.first_or_child + 1;
-                sp += 2;
+                let left = node.first_or_child as usize;
+                let hl = slab(&self.nodes[left], origin, inv, t_min, t_max).is_some();
+                let hr = slab(&self.nodes[left + 1], origin, inv, t_min, t_max).is_some();
+                match (hl, hr) {
+                    (true, true) => {
+                        stack[sp] = (left + 1) as u32;
+                        sp += 1;
+                        node_index = left;
+                        continue;
+                    }
+                    (true, false) => {
+                        node_index = left;
+                        continue;
+                    }
+                    (false, true) => {
+                        node_index = left + 1;
+                        continue;
+                    }
+                    (false, false) => {}
+                }
             }
+            if sp == 0 {
+                return false;
+            }
+            sp -= 1;
+            node_index = stack[sp] as usize;
         }
-        false
     }
 
     /// Closest point of the surface to `query` among points closer than `max_distance`
@@ -406,7 +423,8 @@ impl Bvh {
         } else {
             f32::INFINITY
         };
-        let mut best: Option<(usize, Vec3, f32, f32)> = None;
+        let query = Vec3A::from(query);
+        let mut best: Option<(usize, Vec3A, f32, f32)> = None;
         let mut stack = [0u32; STACK_SIZE];
         let mut sp = 0usize;
         stack[sp] = 0;
@@ -443,7 +461,7 @@ impl Bvh {
             }
         }
         best.map(|(slot, point, b1, b2)| ClosestPoint {
-            point,
+            point: point.into(),
             triangle: self.tri_index[slot],
             b1,
             b2,
@@ -457,6 +475,7 @@ impl Bvh {
         if self.tris.is_empty() {
             return 0.0;
         }
+        let query = Vec3A::from(query);
         let mut total = 0.0f64;
         let mut stack = [0u32; STACK_SIZE];
         let mut sp = 0usize;
@@ -488,12 +507,14 @@ impl Bvh {
     /// Exact winding number by summing every triangle's solid angle (O(n); for tests
     /// and small meshes).
     pub fn winding_number_exact(&self, query: Vec3) -> f32 {
+        let query = Vec3A::from(query);
         let total: f64 = self.tris.iter().map(|t| triangle_solid_angle(t, query)).sum();
         (total / (4.0 * std::f64::consts::PI)) as f32
     }
 
     /// Closest hit by testing every triangle (O(n); the reference for tests).
     pub fn closest_hit_brute_force(&self, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<Hit> {
+        let (origin, dir) = (Vec3A::from(origin), Vec3A::from(dir));
         let mut best_t = t_max;
         let mut best = None;
         for (slot, tri) in self.tris.iter().enumerate() {
@@ -512,13 +533,14 @@ impl Bvh {
 
     /// Closest point by testing every triangle (O(n); the reference for tests).
     pub fn closest_point_brute_force(&self, query: Vec3) -> Option<ClosestPoint> {
+        let query = Vec3A::from(query);
         let mut best: Option<ClosestPoint> = None;
         for (slot, tri) in self.tris.iter().enumerate() {
             let (point, b1, b2) = closest_on_triangle(tri, query);
             let distance = (point - query).length();
             if best.is_none_or(|b| distance < b.distance) {
                 best = Some(ClosestPoint {
-                    point,
+                    point: point.into(),
                     triangle: self.tri_index[slot],
                     b1,
                     b2,
@@ -534,7 +556,7 @@ impl Bvh {
 fn sah_split(
     slots: &mut [u32],
     boxes: &[Aabb],
-    centroids: &[Vec3],
+    centroids: &[Vec3A],
     bounds: &Aabb,
     centroid_bounds: &Aabb,
 ) -> Option<usize> {
@@ -600,7 +622,7 @@ fn sah_split(
 }
 
 /// Object-median split along the widest centroid axis.
-fn median_split(slots: &mut [u32], centroids: &[Vec3], centroid_bounds: &Aabb) -> Option<usize> {
+fn median_split(slots: &mut [u32], centroids: &[Vec3A], centroid_bounds: &Aabb) -> Option<usize> {
     if slots.len() <= MAX_LEAF_TRIANGLES {
         return None;
     }
@@ -635,19 +657,17 @@ fn partition(slots: &mut [u32], left: impl Fn(u32) -> bool) -> usize {
 /// Zero direction components give infinite reciprocals; NaNs from `0 · ∞` are
 /// ignored by `min`/`max`, which keeps the test conservative.
 #[inline]
-fn slab(node: &Node, origin: Vec3, inv: Vec3, t_min: f32, t_max: f32) -> Option<f32> {
+fn slab(node: &Node, origin: Vec3A, inv: Vec3A, t_min: f32, t_max: f32) -> Option<f32> {
     let t0 = (node.min - origin) * inv;
     let t1 = (node.max - origin) * inv;
-    let near = t0.min(t1);
-    let far = t0.max(t1);
-    let enter = near.x.max(near.y).max(near.z).max(t_min);
-    let exit = far.x.min(far.y).min(far.z).min(t_max);
+    let enter = t0.min(t1).max_element().max(t_min);
+    let exit = t0.max(t1).min_element().min(t_max);
     (enter <= exit).then_some(enter)
 }
 
 /// Möller–Trumbore: `(t, b1, b2)` if the ray hits the triangle with `t ∈ [t_min, t_max]`.
 #[inline]
-fn intersect(tri: &Tri, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
+fn intersect(tri: &Tri, origin: Vec3A, dir: Vec3A, t_min: f32, t_max: f32) -> Option<(f32, f32, f32)> {
     let p = dir.cross(tri.e2);
     let det = tri.e1.dot(p);
     if det == 0.0 {
@@ -670,14 +690,14 @@ fn intersect(tri: &Tri, origin: Vec3, dir: Vec3, t_min: f32, t_max: f32) -> Opti
 
 /// Squared distance from `p` to the node's box (0 inside).
 #[inline]
-fn box_distance2(node: &Node, p: Vec3) -> f32 {
-    let d = (node.min - p).max(p - node.max).max(Vec3::ZERO);
+fn box_distance2(node: &Node, p: Vec3A) -> f32 {
+    let d = (node.min - p).max(p - node.max).max(Vec3A::ZERO);
     d.length_squared()
 }
 
 /// Closest point on a triangle to `p` and its barycentric weights `(b1, b2)` of the
 /// second and third corners, by the Voronoi region of `p`.
-fn closest_on_triangle(tri: &Tri, p: Vec3) -> (Vec3, f32, f32) {
+fn closest_on_triangle(tri: &Tri, p: Vec3A) -> (Vec3A, f32, f32) {
     let (a, ab, ac) = (tri.a, tri.e1, tri.e2);
     let ap = p - a;
     let d1 = ab.dot(ap);
@@ -725,7 +745,7 @@ fn closest_on_triangle(tri: &Tri, p: Vec3) -> (Vec3, f32, f32) {
 
 /// Signed solid angle subtended by a triangle at `q` (Van Oosterom & Strackee),
 /// positive when `q` is behind the triangle (on the side its normal points away from).
-fn triangle_solid_angle(tri: &Tri, q: Vec3) -> f64 {
+fn triangle_solid_angle(tri: &Tri, q: Vec3A) -> f64 {
     let a = (tri.a - q).as_dvec3();
     let b = (tri.a + tri.e1 - q).as_dvec3();
     let c = (tri.a + tri.e2 - q).as_dvec3();

@@ -144,8 +144,11 @@ impl TraceSettings {
         if self.bounces > 0 && self.bounce_texel_samples == 0 {
             return bad("bounce_texel_samples must be at least 1 when bounces > 0".into());
         }
-        if self.pixel_grid == 0 || self.coverage_grid == 0 {
-            return bad("pixel_grid and coverage_grid must be at least 1".into());
+        if !(1..=64).contains(&self.pixel_grid) || !(1..=64).contains(&self.coverage_grid) {
+            return bad(format!(
+                "pixel_grid = {} and coverage_grid = {} must be in 1..=64",
+                self.pixel_grid, self.coverage_grid
+            ));
         }
         if !(self.ray_epsilon_rel.is_finite() && self.ray_epsilon_rel > 0.0) {
             return bad(format!(
