@@ -44,7 +44,9 @@ pub struct LoadOptions {
     /// MTL without `Kd`.
     pub default_albedo: [f32; 3],
     /// Flip every triangle when the signed volume is negative, so triangles are
-    /// counter-clockwise seen from outside (the [`Mesh`] convention).
+    /// counter-clockwise seen from outside (the [`Mesh`] convention). Meant for
+    /// closed or nearly closed meshes (a head with an open neck is fine); turn it
+    /// off for open sheets, whose signed volume says nothing.
     pub orient_outward: bool,
 }
 
@@ -454,9 +456,10 @@ enum ModelColour {
 ///   texture that already holds the colour). Several textures, and untextured
 ///   models beside textured ones, are packed into one atlas (textures stacked
 ///   top to bottom at a common width, plus one row per flat colour), so the mesh
-///   keeps a single [`Albedo::Texture`]. A triangle's UVs are shifted by a whole
-///   number so its mean `v` lies in `[0, 1)` and `v` is then clamped into its
-///   block: textures repeating in `v` across one triangle are not supported.
+///   keeps a single [`Albedo::Texture`]. In an atlas a triangle's UVs are shifted
+///   by a whole number so its mean `v` lies in `[0, 1)` and `v` is then clamped
+///   to `[0, 1]`: textures repeating in `v` across one triangle are not supported
+///   there (`u` wraps as usual). A single texture keeps the file's UVs untouched.
 /// * otherwise, when every model has OBJ vertex colours (`v x y z r g b`), those
 ///   (sRGB) per vertex;
 /// * otherwise each model's `Kd` (linear), per vertex when models differ, else
@@ -587,9 +590,18 @@ fn flat_obj_albedo(
     Albedo::PerVertex(per_vertex)
 }
 
-/// Albedo of an OBJ with at least one texture: one atlas, per-corner UVs.
+/// The UV of corner `k` of triangle `t` of a tobj mesh (0 if it has none).
+fn corner_uv(mesh: &tobj::Mesh, t: usize, k: usize) -> Vec2 {
+    let i = mesh.texcoord_indices.get(3 * t + k).copied().unwrap_or(0) as usize;
+    match mesh.texcoords.get(2 * i..2 * i + 2) {
+        Some(uv) if uv[0].is_finite() && uv[1].is_finite() => Vec2::new(uv[0], uv[1]),
+        _ => Vec2::ZERO,
+    }
+}
+
+/// Albedo of an OBJ with at least one texture: per-corner UVs into the texture
+/// itself when it is the only colour source, else into an atlas.
 fn textured_obj_albedo(models: &[tobj::Model], colours: &[ModelColour], textures: &[Texture]) -> Albedo {
-    let width = textures.iter().map(|t| t.width).max().unwrap_or(1);
     let mut flat_colours: Vec<[f32; 3]> = Vec::new();
     for colour in colours {
         if let ModelColour::Flat(rgb) = colour {
@@ -598,21 +610,37 @@ fn textured_obj_albedo(models: &[tobj::Model], colours: &[ModelColour], textures
             }
         }
     }
-    // Rows: each texture (resampled to `width`, nearest), then one row per flat colour.
+    if let ([texture], true) = (textures, flat_colours.is_empty()) {
+        // One texture for everything: the file's UVs as they are (wrapping as usual).
+        let uvs = models
+            .iter()
+            .flat_map(|m| (0..m.mesh.indices.len() / 3).flat_map(move |t| (0..3).map(move |k| (m, t, k))))
+            .map(|(m, t, k)| corner_uv(&m.mesh, t, k))
+            .collect();
+        return Albedo::Texture {
+            uvs,
+            texture: texture.clone(),
+        };
+    }
+    // Atlas rows: each texture (resampled to the widest, nearest) between copies of
+    // its first and last rows, so v = 0 and v = 1 stay inside the block; then one
+    // row per flat colour.
+    let width = textures.iter().map(|t| t.width).max().unwrap_or(1);
     let mut block_rows = Vec::with_capacity(textures.len());
     let mut texels = Vec::new();
-    let mut row = 0usize;
     for texture in textures {
-        block_rows.push((row, texture.height));
-        for y in 0..texture.height {
+        block_rows.push((texels.len() / width + 1, texture.height));
+        let rows = std::iter::once(0)
+            .chain(0..texture.height)
+            .chain(std::iter::once(texture.height - 1));
+        for y in rows {
             for x in 0..width {
                 let sx = (x * texture.width) / width;
                 texels.push(texture.texels[y * texture.width + sx]);
             }
         }
-        row += texture.height;
     }
-    let flat_rows_start = row;
+    let flat_rows_start = texels.len() / width;
     for rgb in &flat_colours {
         texels.extend(std::iter::repeat_n(*rgb, width));
     }
@@ -629,21 +657,12 @@ fn textured_obj_albedo(models: &[tobj::Model], colours: &[ModelColour], textures
         match colour {
             ModelColour::Texture(index) => {
                 let (block_row, block_height) = block_rows[*index];
-                let margin = 0.5 / block_height as f32;
                 for t in 0..mesh.indices.len() / 3 {
-                    let corner_uv = |k: usize| {
-                        let i = mesh.texcoord_indices.get(3 * t + k).copied().unwrap_or(0) as usize;
-                        match mesh.texcoords.get(2 * i..2 * i + 2) {
-                            Some(uv) => Vec2::new(uv[0], uv[1]),
-                            None => Vec2::ZERO,
-                        }
-                    };
-                    let corners = [corner_uv(0), corner_uv(1), corner_uv(2)];
+                    let corners = [0, 1, 2].map(|k| corner_uv(mesh, t, k));
                     let shift = ((corners[0].y + corners[1].y + corners[2].y) / 3.0).floor();
                     for uv in corners {
-                        let v_local = (uv.y - shift).clamp(margin, 1.0 - margin);
-                        let u = if uv.x.is_finite() { uv.x } else { 0.0 };
-                        uvs.push(Vec2::new(u, atlas_v(block_row, block_height, v_local)));
+                        let v_local = (uv.y - shift).clamp(0.0, 1.0);
+                        uvs.push(Vec2::new(uv.x, atlas_v(block_row, block_height, v_local)));
                     }
                 }
             }
