@@ -13,7 +13,7 @@
 use std::path::Path;
 
 use glam::Vec3;
-use nelf_scene::head::{HeadParams, procedural_head};
+use nelf_scene::head::{HeadParams, head_traits, procedural_head};
 use nelf_scene::mesh::Mesh;
 use nelf_scene::mesh_io::{LoadOptions, linear_to_srgb, load_mesh};
 
@@ -31,6 +31,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "procedural head {seed}: {:.1} ms",
             start.elapsed().as_secs_f64() * 1e3
         );
+        eprintln!("{:?}", head_traits(seed.parse()?, &HeadParams::default()));
         mesh
     } else {
         let mut options = if source.ends_with("head.off") {

@@ -454,7 +454,9 @@ impl HeadShape {
                 [0.62, 0.58, 0.53]
             };
         }
-        if parts.hair < parts.skin.min(parts.lips) {
+        // Hair blends into skin over about a millimetre (no jagged hairline).
+        let hair_weight = (0.5 + (parts.skin.min(parts.lips) - parts.hair) / 0.3).clamp(0.0, 1.0);
+        if hair_weight >= 1.0 {
             return traits.hair_albedo;
         }
         // Lips fade into skin over a few millimetres.
@@ -469,10 +471,11 @@ impl HeadShape {
             0.0,
         );
         let brow_weight = (1.0 - (brow_distance - 0.35) / 0.35).clamp(0.0, 1.0) * 0.85;
+        let hair_weight = hair_weight.max(brow_weight);
         std::array::from_fn(|c| {
             let with_lips =
                 traits.skin_albedo[c] + (traits.lip_albedo[c] - traits.skin_albedo[c]) * lip_weight;
-            with_lips + (traits.hair_albedo[c] - with_lips) * brow_weight
+            with_lips + (traits.hair_albedo[c] - with_lips) * hair_weight
         })
     }
 }
