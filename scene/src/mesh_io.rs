@@ -12,8 +12,10 @@
 //!
 //! Our head convention: centred near the origin, +y up, facing +z (the frontal
 //! camera sits on +z looking toward −z). `../shared/data/meshes/head.off` (CGAL's
-//! scanned head, +y up) faces −x with clockwise triangles: load it with
-//! [`LoadOptions::head_off`] (turn +90° about +y, orient outward, fit 0.23 m).
+//! scanned head, +y up) faces −x (its nose is the extreme −x point, on the
+//! midline z ≈ 0) with clockwise triangles, and is open at the neck and at both
+//! eyes (58 boundary edges): load it with [`LoadOptions::head_off`] (turn +90°
+//! about +y, orient outward, fit 0.23 m).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
