@@ -17,11 +17,14 @@ struct Cli {
 enum Command {
     /// Print a .nelf file's header, sections, sizes and metadata.
     Inspect(cmd::inspect::InspectArgs),
+    /// Make capture folders (synthetic captures rendered by the path tracer).
+    Capture(cmd::capture::CaptureArgs),
 }
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
         Command::Inspect(args) => cmd::inspect::run(&args),
+        Command::Capture(args) => cmd::capture::run(&args),
     }
 }

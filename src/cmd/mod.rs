@@ -1,3 +1,4 @@
 //! One module per subcommand: options (clap) and a `run` that calls the libraries.
 
+pub mod capture;
 pub mod inspect;
