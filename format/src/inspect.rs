@@ -232,10 +232,13 @@ impl Inspection {
             self.stored_payload_bytes, self.raw_payload_bytes, self.compression_ratio, self.bytes_per_voxel
         );
         let _ = writeln!(s, "sections:");
+        let h = [
+            "kind", "req", "codec", "shuffle", "offset", "stored", "decoded", "ratio", "xxh3",
+        ];
         let _ = writeln!(
             s,
             "  {:<4} {:<4} {:<12} {:>7} {:>10} {:>12} {:>12} {:>7}  {}",
-            "kind", "req", "codec", "shuffle", "offset", "stored", "decoded", "ratio", "xxh3"
+            h[0], h[1], h[2], h[3], h[4], h[5], h[6], h[7], h[8]
         );
         for sec in &self.sections {
             let kind = if sec.known {

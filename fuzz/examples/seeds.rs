@@ -1,0 +1,35 @@
+//! Writes a seed corpus of small valid `.nelf` files for the `read` fuzz target:
+//! `cargo run --example seeds -- corpus/read` (from `fuzz/`).
+
+use std::path::PathBuf;
+
+use nelf_format::synthetic::SyntheticField;
+use nelf_format::{CoefficientEncoding, FormatError, WriteOptions, encode_asset};
+
+fn main() -> Result<(), FormatError> {
+    let dir = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "corpus/read".into()));
+    std::fs::create_dir_all(&dir).map_err(|source| FormatError::Io {
+        path: dir.clone(),
+        source,
+    })?;
+    // One brick: small seeds keep the fuzzer fast.
+    let field = SyntheticField::new(1, 1);
+    let cases = [
+        (CoefficientEncoding::U8Affine, 2, 1, true),
+        (CoefficientEncoding::F16, 3, 2, false),
+        (CoefficientEncoding::U8Affine, 4, 32, false),
+        (CoefficientEncoding::F16, 1, 3, true),
+    ];
+    for (i, (encoding, rank, chunk_bricks, shuffle)) in cases.into_iter().enumerate() {
+        let asset = field.asset(rank, encoding)?;
+        let options = WriteOptions {
+            zstd_level: 3,
+            chunk_bricks,
+            shuffle,
+        };
+        let (bytes, _) = encode_asset(&asset, &options)?;
+        let path = dir.join(format!("seed-{i}.nelf"));
+        std::fs::write(&path, bytes).map_err(|source| FormatError::Io { path, source })?;
+    }
+    Ok(())
+}
