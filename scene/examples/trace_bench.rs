@@ -5,15 +5,19 @@
 //!
 //! `cargo run --release -p nelf-scene --example trace_bench [-- --size 512 --head PATH --env PATH]`
 //!
-//! The head is `../shared/data/meshes/head.off` (read by a small OFF reader here,
-//! turned to face +z and scaled to 0.23 m); the lighting is an HDR lat-long map
-//! projected onto the 8 × 16 basis.
+//! Meshes: a 61k-triangle UV sphere and a procedural head (throughput),
+//! and the scanned `../shared/data/meshes/head.off` (2,918 triangles, 0.23 m,
+//! facing +z) for images and noise; the lighting is an HDR lat-long map projected
+//! onto the 8 × 16 basis.
 
 use std::time::Instant;
 
-use glam::{DMat3, DVec3, Mat3, Vec3};
-use nelf_format::conventions::{LatLong, PinholeCamera, project_envmap, shade};
-use nelf_scene::mesh::{Albedo, Mesh};
+use glam::{DVec3, Vec3};
+use nelf_format::conventions::{LatLong, PinholeCamera, shade};
+use nelf_scene::envmap::{envmap_to_basis, load_envmap};
+use nelf_scene::head::{HeadParams, procedural_head};
+use nelf_scene::mesh::Mesh;
+use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 use nelf_scene::render::{DirectSettings, RenderedImage, render_direct_image, render_lt_image};
 use nelf_scene::shapes::uv_sphere;
 use nelf_scene::tracer::{LtTracer, TraceSettings, stream_rng};
@@ -21,77 +25,6 @@ use rand::Rng;
 use rayon::prelude::*;
 
 type Error = Box<dyn std::error::Error>;
-
-/// Reads a plain ASCII OFF file (triangles and polygons fanned), no colours.
-fn read_off(path: &str) -> Result<Mesh, Error> {
-    let text = std::fs::read_to_string(path)?;
-    let tokens: Vec<&str> = text
-        .lines()
-        .map(|l| l.split('#').next().unwrap_or(""))
-        .flat_map(str::split_whitespace)
-        .collect();
-    if tokens.first() != Some(&"OFF") {
-        return Err(format!("{path}: not an OFF file").into());
-    }
-    let mut at = 1usize;
-    let mut number = || -> Result<f64, Error> {
-        let token = tokens.get(at).ok_or("truncated OFF")?;
-        at += 1;
-        Ok(token.parse()?)
-    };
-    let (nv, nf, _edges) = (number()? as usize, number()? as usize, number()?);
-    let mut positions = Vec::with_capacity(nv);
-    for _ in 0..nv {
-        positions.push(Vec3::new(number()? as f32, number()? as f32, number()? as f32));
-    }
-    let mut triangles = Vec::with_capacity(nf);
-    for _ in 0..nf {
-        let n = number()? as usize;
-        let ids: Vec<u32> = (0..n)
-            .map(|_| number().map(|v| v as u32))
-            .collect::<Result<_, _>>()?;
-        for i in 1..n.saturating_sub(1) {
-            triangles.push([ids[0], ids[i], ids[i + 1]]);
-        }
-    }
-    let mut mesh = Mesh {
-        positions,
-        triangles,
-        albedo: Albedo::Uniform([0.62, 0.42, 0.33]),
-    };
-    mesh.validate()?;
-    // Outward winding: positive signed volume.
-    let volume: f32 = (0..mesh.triangles.len())
-        .map(|t| {
-            let [a, b, c] = mesh.corners(t);
-            a.dot(b.cross(c))
-        })
-        .sum();
-    if volume < 0.0 {
-        for t in &mut mesh.triangles {
-            t.swap(1, 2);
-        }
-    }
-    // The scan's nose points along −x: turn it to face +z, 0.23 m tall, centred.
-    let turn = Mat3::from_rotation_y(std::f32::consts::FRAC_PI_2);
-    for p in &mut mesh.positions {
-        *p = turn * *p;
-    }
-    mesh.fit_height(Vec3::ZERO, 0.23);
-    Ok(mesh)
-}
-
-/// Loads an HDR lat-long map and projects it onto the 8 × 16 basis.
-fn read_env(path: &str) -> Result<LatLong, Error> {
-    let image = image::open(path)?.into_rgb32f();
-    let (w, h) = image.dimensions();
-    let texels = image
-        .pixels()
-        .map(|p| p.0.map(|v| if v.is_finite() { v.max(0.0) } else { 0.0 }))
-        .collect();
-    let env = LatLong::new(w as usize, h as usize, texels)?;
-    Ok(project_envmap(&env, DMat3::IDENTITY)?)
-}
 
 fn masked_psnr(reference: &RenderedImage, test: &RenderedImage) -> f64 {
     let (mut se, mut weight, mut peak) = (0.0f64, 0.0f64, 0.0f64);
@@ -175,6 +108,37 @@ fn ray_throughput(mesh: &Mesh, label: &str) -> Result<(), Error> {
             .filter(|(o, d)| bvh.any_hit(*o, *d, 0.0, inf))
             .count()
     });
+    // The tracer's pattern: many shadow rays from one surface point at a time.
+    let per_point = 1024usize;
+    let coherent: Vec<(Vec3, Vec3)> = shadow_rays
+        .iter()
+        .take(2000)
+        .flat_map(|&(o, _)| {
+            let normal = tracer
+                .bvh()
+                .closest_point(o, f32::INFINITY)
+                .map_or(Vec3::Y, |cp| {
+                    tracer.surface_point(cp.triangle, cp.b1, cp.b2).geometric_normal
+                });
+            let mut local = stream_rng(2, o.x.to_bits().into());
+            (0..per_point)
+                .map(|_| {
+                    let mut w = random_unit(&mut local);
+                    if w.dot(normal) < 0.0 {
+                        w = -w;
+                    }
+                    (o, w)
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect();
+    let k = coherent.len() as f64;
+    let (t3, h3) = time(&|| {
+        coherent
+            .iter()
+            .filter(|(o, d)| bvh.any_hit(*o, *d, 0.0, inf))
+            .count()
+    });
     println!(
         "{label}: {} triangles, {} BVH nodes",
         mesh.triangles.len(),
@@ -193,6 +157,11 @@ fn ray_throughput(mesh: &Mesh, label: &str) -> Result<(), Error> {
         m / t2 / 1e6,
         m / t2p / 1e6,
         rayon::current_num_threads()
+    );
+    println!(
+        "  any hit, {per_point} shadow rays per surface point in a row ({:.0}% occluded): {:.2} M rays/s on 1 thread",
+        100.0 * h3 as f64 / k,
+        k / t3 / 1e6
     );
     Ok(())
 }
@@ -287,10 +256,17 @@ fn main() -> Result<(), Error> {
 
     let sphere = uv_sphere(Vec3::ZERO, 0.12, 128, 240, [0.6; 3]);
     ray_throughput(&sphere, "UV sphere")?;
-    let head = read_off(&head_path)?;
+    let params = HeadParams {
+        cells_per_height: 106,
+        height_m: Some(0.23),
+        ..HeadParams::default()
+    };
+    let procedural = procedural_head(3, &params);
+    ray_throughput(&procedural, "procedural head (seed 3, 106 cells)")?;
+    let head = load_mesh(&head_path, &LoadOptions::head_off())?;
     ray_throughput(&head, "head.off")?;
 
-    let light = read_env(&env_path)?;
+    let light = envmap_to_basis(&load_envmap(&env_path)?, 0.0);
     let tracer = LtTracer::new(&head, TraceSettings::default())?;
     lt_noise(&tracer, &light);
 
