@@ -1,0 +1,36 @@
+//! `nelf-render`: the CPU reference renderer of `.nelf` assets — the numerical
+//! definition that the GPU shaders mirror, and the renderer the baker uses to choose a
+//! PCA rank and to weight its fit by visibility. Depends only on `nelf-format`.
+//!
+//! **Model.** A `.nelf` asset is a density σ (1/m) and a light-transport vector `T`
+//! (SPEC.md §8) on a sparse grid of 8³-voxel bricks. Under a distant environment map
+//! `L` (8 × 16 texels in the asset's light frame, solid angles folded into `T`) a point
+//! emits `radiance_c = Σ_j T[c·128 + j] · L[j][c]` (DESIGN.md). The image is the
+//! emission–absorption volume rendering integral (Max 1995)
+//!
+//! `C = ∫ T(t) σ(t) c(t) dt`, `T(t) = exp(−∫₀ᵗ σ)`,
+//!
+//! discretised as `C = Σ_i T_i (1 − e^{−σ_i Δ}) c_i`, `T_i = Π_{j<i} e^{−σ_j Δ}`, with σ and
+//! `c` interpolated trilinearly between voxel centres ([`grid`], [`march`]).
+//!
+//! **Relighting** is linear in `T` and `T = m + Σ_k c_k B_k`, so the lighting is projected
+//! once onto the PCA mean and basis ([`project_light`]) and each voxel's radiance costs
+//! `K` multiply-adds per channel ([`voxel_radiance`]) — exactly equal to shading the
+//! reconstructed `T` ([`radiance_from_lt`] is that unquantized reference).
+//!
+//! Typical use: [`render_asset`]; or [`BrickGrid::from_asset`] + [`project_light`] +
+//! [`voxel_radiance`] + [`render_volume`] to reuse pieces across frames, and
+//! [`visibility_weights`] to know how much each voxel shows in a view.
+
+pub mod error;
+pub mod grid;
+pub mod light;
+pub mod march;
+
+pub use error::RenderError;
+pub use grid::BrickGrid;
+pub use light::{ProjectedLight, project_light, project_light_texels, radiance_from_lt, voxel_radiance};
+pub use march::{
+    Image, MarchSettings, MarchStats, asset_density, render_asset, render_volume, render_volume_stats,
+    render_volume_unskipped, visibility_weights,
+};

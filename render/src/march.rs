@@ -1,0 +1,446 @@
+//! Emission–absorption ray marching of a brick grid (Max 1995, "Optical models for
+//! direct volume rendering"), the numerical definition the GPU shaders mirror.
+//!
+//! **Rays.** One ray per pixel, through the pixel centre:
+//! `(o, d) = PinholeCamera::pixel_ray(u, v)` (`d` unit length, so ray parameters are
+//! metres). No jitter: the image is a deterministic function of its inputs.
+//!
+//! **Interval.** The ray is clipped against the grid box `[bbox_min, bbox_max]` (slab
+//! test in `f64`; an axis with `d_a = 0` keeps the whole line if `o_a` is inside the
+//! slab, else misses): `t_entry = max(t_near, 0)`, `t_exit = t_far`. A ray with
+//! `t_exit ≤ t_entry` sees nothing (rgb 0, alpha 0).
+//!
+//! **Samples.** With step `Δ = step_voxels · voxel_size` (metres), sample `i` sits at
+//! `t_i = t_entry + (i + 0.5)·Δ`, `p_i = o + t_i d` (in `f64`), for every `i ≥ 0` with
+//! `t_i < t_exit` — i.e. `N = max(0, ⌈(t_exit − t_entry)/Δ − 0.5⌉)` samples, each
+//! standing for a full segment of length `Δ` (the last segment is not shortened at the
+//! box exit). At each sample `σ_i` and the radiance `c_i` are interpolated trilinearly
+//! and separately ([`crate::grid`]: the same 8 weights, missing voxels 0, weights not
+//! renormalised).
+//!
+//! **Compositing** (front to back, `f32`): `α_i = 1 − exp(−σ_i Δ)` (computed as
+//! `−expm1(−σ_i Δ)`), `w_i = T_i α_i`, `rgb += w_i c_i`, `T_{i+1} = T_i (1 − α_i)`,
+//! `T_0 = 1`. A sample with `σ_i = 0` changes nothing (its radiance is not even
+//! interpolated). **Early termination**: right after a sample leaves
+//! `T < min_transmittance` the ray stops. The pixel is premultiplied over black:
+//! `rgb = Σ w_i c_i`, `alpha = 1 − T_end`. For constant radiance `c` this is
+//! `c · (1 − exp(−Σ σ_i Δ))`, the discretised `c (1 − e^{−∫σ})`.
+//!
+//! **Empty-space skipping** never changes the image. When a sample's 8 trilinear corners
+//! all lie in one missing brick, the value is 0 on that brick's *core box* (the brick box
+//! shrunk by half a voxel, [`BrickGrid::empty_core_box`]) — every sample in it has σ = 0
+//! and contributes nothing. The marcher computes the ray's exit `t_out` from that box and
+//! resumes at lattice index `max(i + 1, ⌈(t_out − t_entry)/Δ − 0.5⌉ − 1)`: samples stay on
+//! the lattice `t_entry + (i + 0.5)Δ` and only samples inside the core box are skipped
+//! (resuming one sample early absorbs rounding of `t_out`). The result equals marching
+//! every sample with independent per-corner lookups, bit for bit (tested).
+//!
+//! **Visibility weights** (for PCA fitting): voxel `v` of the grid receives
+//! `Σ_pixels Σ_i w_i · trilinear_weight_i(v)`, i.e. the derivative of the sum of the
+//! image's channels with respect to that voxel's radiance. Hence for any per-voxel
+//! scalar radiance `r`, `Σ_pixels rgb_c = Σ_v weight_v · r_v` (tested).
+
+// The API passes `&MarchSettings` (fixed, and room for more fields than fit in 8 bytes).
+#![allow(clippy::trivially_copy_pass_by_ref)]
+
+use glam::DVec3;
+use nelf_format::Asset;
+use nelf_format::conventions::{LatLong, PinholeCamera};
+use rayon::prelude::*;
+
+use crate::error::RenderError;
+use crate::grid::{BrickGrid, Lookup};
+use crate::light::{project_light, voxel_radiance};
+
+/// Ray-marching parameters.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MarchSettings {
+    /// Step between samples in voxels (`Δ = step_voxels · voxel_size`); default 0.5.
+    pub step_voxels: f32,
+    /// Rays stop once their transmittance falls below this; default 1e-3 (0 = never).
+    pub min_transmittance: f32,
+}
+
+impl Default for MarchSettings {
+    fn default() -> Self {
+        Self {
+            step_voxels: 0.5,
+            min_transmittance: 1e-3,
+        }
+    }
+}
+
+impl MarchSettings {
+    /// Checks `step_voxels` is finite and in `[1e-3, 64]` and `min_transmittance` in `[0, 1)`.
+    pub fn validate(&self) -> Result<(), RenderError> {
+        if !(self.step_voxels.is_finite() && (1e-3..=64.0).contains(&self.step_voxels)) {
+            return Err(RenderError::BadSettings(format!(
+                "step_voxels = {} must be in [0.001, 64]",
+                self.step_voxels
+            )));
+        }
+        if !(self.min_transmittance.is_finite() && (0.0..1.0).contains(&self.min_transmittance)) {
+            return Err(RenderError::BadSettings(format!(
+                "min_transmittance = {} must be in [0, 1)",
+                self.min_transmittance
+            )));
+        }
+        Ok(())
+    }
+
+    /// Step `Δ` in metres for a grid.
+    pub fn step_m(&self, grid: &BrickGrid) -> f64 {
+        f64::from(self.step_voxels) * grid.geometry().voxel_size_m
+    }
+}
+
+/// A premultiplied image, row-major from the top-left: `rgb = Σ w_i c_i` (over black),
+/// `alpha = 1 − T_end`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Image {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Linear premultiplied radiance per pixel.
+    pub rgb: Vec<[f32; 3]>,
+    /// Coverage per pixel, `1 − transmittance`.
+    pub alpha: Vec<f32>,
+}
+
+impl Image {
+    /// A black, fully transparent image.
+    pub fn new(width: u32, height: u32) -> Self {
+        let n = width as usize * height as usize;
+        Self {
+            width,
+            height,
+            rgb: vec![[0.0; 3]; n],
+            alpha: vec![0.0; n],
+        }
+    }
+
+    /// Pixel `(u, v)`'s premultiplied radiance.
+    pub fn rgb_at(&self, u: u32, v: u32) -> [f32; 3] {
+        self.rgb[v as usize * self.width as usize + u as usize]
+    }
+
+    /// Pixel `(u, v)`'s alpha.
+    pub fn alpha_at(&self, u: u32, v: u32) -> f32 {
+        self.alpha[v as usize * self.width as usize + u as usize]
+    }
+}
+
+/// Counters of one render (for benchmarks): samples taken and skipped.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MarchStats {
+    /// Samples whose trilinear lookup was evaluated.
+    pub samples_evaluated: u64,
+    /// Samples of the lattice jumped over by empty-space skipping.
+    pub samples_skipped: u64,
+}
+
+impl std::ops::Add for MarchStats {
+    type Output = Self;
+    fn add(self, other: Self) -> Self {
+        Self {
+            samples_evaluated: self.samples_evaluated + other.samples_evaluated,
+            samples_skipped: self.samples_skipped + other.samples_skipped,
+        }
+    }
+}
+
+/// Whether to jump over missing bricks.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Skipping {
+    /// Jump over core boxes of missing bricks, fast single-brick lookups.
+    On,
+    /// Every sample, every corner looked up on its own.
+    Off,
+}
+
+/// One ray marcher over a grid and its densities.
+struct Marcher<'a> {
+    grid: &'a BrickGrid,
+    density: &'a [f32],
+    step_m: f64,
+    step_m_f32: f32,
+    min_transmittance: f32,
+    skipping: Skipping,
+}
+
+impl<'a> Marcher<'a> {
+    fn new(grid: &'a BrickGrid, density: &'a [f32], settings: MarchSettings, skipping: Skipping) -> Self {
+        let step_m = settings.step_m(grid);
+        Self {
+            grid,
+            density,
+            step_m,
+            step_m_f32: step_m as f32,
+            min_transmittance: settings.min_transmittance,
+            skipping,
+        }
+    }
+
+    /// Marches one ray; calls `visit(w_i, corners)` for every sample with `σ_i > 0` and
+    /// returns the final transmittance.
+    fn march(
+        &self,
+        origin: DVec3,
+        dir: DVec3,
+        stats: &mut MarchStats,
+        mut visit: impl FnMut(f32, &[(usize, f32)]),
+    ) -> f32 {
+        let Some((t_near, t_far)) = ray_box(origin, dir, self.grid.bbox_min(), self.grid.bbox_max()) else {
+            return 1.0;
+        };
+        let t_entry = t_near.max(0.0);
+        let count = ((t_far - t_entry) / self.step_m - 0.5).ceil();
+        if count.is_nan() || count <= 0.0 {
+            return 1.0;
+        }
+        let count = count.min(1e15) as u64;
+        let lattice_index = |t: f64| ((t - t_entry) / self.step_m - 0.5).ceil();
+        let mut transmittance = 1.0f32;
+        let mut corners = [(0usize, 0.0f32); 8];
+        let mut i = 0u64;
+        while i < count {
+            let t = t_entry + (i as f64 + 0.5) * self.step_m;
+            let p = origin + dir * t;
+            let n = match self.skipping {
+                Skipping::Off => self.grid.trilinear_general(p, &mut corners),
+                Skipping::On => match self.grid.lookup_trilinear(p, &mut corners) {
+                    Lookup::Corners(n) => n,
+                    Lookup::EmptyBrick(brick) => {
+                        stats.samples_evaluated += 1;
+                        let (lo, hi) = self.grid.empty_core_box(brick);
+                        let resume =
+                            ray_box(origin, dir, lo, hi).map_or(0.0, |(_, t_out)| lattice_index(t_out) - 1.0);
+                        let next = if resume > (i + 1) as f64 {
+                            (resume.min(count as f64)) as u64
+                        } else {
+                            i + 1
+                        };
+                        stats.samples_skipped += next - i - 1;
+                        i = next;
+                        continue;
+                    }
+                },
+            };
+            stats.samples_evaluated += 1;
+            i += 1;
+            let sigma: f32 = corners[..n].iter().map(|&(v, w)| w * self.density[v]).sum();
+            if sigma > 0.0 {
+                let alpha = -(-sigma * self.step_m_f32).exp_m1();
+                visit(transmittance * alpha, &corners[..n]);
+                transmittance *= 1.0 - alpha;
+                if transmittance < self.min_transmittance {
+                    break;
+                }
+            }
+        }
+        transmittance
+    }
+}
+
+/// Ray–box intersection `(t_near, t_far)` of the line `o + t d` (slab test); `None` if the
+/// line misses the box, only touches it (`t_far = t_near`) or the box is behind (`t_far ≤ 0`).
+fn ray_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
+    let mut t_near = f64::NEG_INFINITY;
+    let mut t_far = f64::INFINITY;
+    for a in 0..3 {
+        if d[a] == 0.0 {
+            if o[a] < lo[a] || o[a] > hi[a] {
+                return None;
+            }
+            continue;
+        }
+        let t0 = (lo[a] - o[a]) / d[a];
+        let t1 = (hi[a] - o[a]) / d[a];
+        t_near = t_near.max(t0.min(t1));
+        t_far = t_far.min(t0.max(t1));
+    }
+    (t_near < t_far && t_far > 0.0).then_some((t_near, t_far))
+}
+
+/// Checks the inputs shared by [`render_volume`] and [`visibility_weights`].
+fn check_inputs(
+    grid: &BrickGrid,
+    density: &[f32],
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+) -> Result<(), RenderError> {
+    settings.validate()?;
+    camera.validate()?;
+    if density.len() != grid.voxel_count() {
+        return Err(RenderError::LengthMismatch {
+            what: "density",
+            expected: grid.voxel_count(),
+            found: density.len(),
+        });
+    }
+    Ok(())
+}
+
+/// Ray-marches density (1/m, per voxel) and radiance (per voxel) through the pixel
+/// centres of `camera`: ray–box clipping, empty-space skipping over missing bricks,
+/// trilinear σ and radiance, `α_i = 1 − exp(−σ_i Δ)`, front-to-back compositing, early
+/// termination below `min_transmittance` (module docs give every detail). Deterministic,
+/// rows in parallel.
+pub fn render_volume(
+    grid: &BrickGrid,
+    density: &[f32],
+    radiance: &[[f32; 3]],
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+) -> Result<Image, RenderError> {
+    render_volume_with(grid, density, radiance, camera, settings, Skipping::On).map(|(image, _)| image)
+}
+
+/// [`render_volume`] that also counts samples evaluated and skipped.
+pub fn render_volume_stats(
+    grid: &BrickGrid,
+    density: &[f32],
+    radiance: &[[f32; 3]],
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+) -> Result<(Image, MarchStats), RenderError> {
+    render_volume_with(grid, density, radiance, camera, settings, Skipping::On)
+}
+
+/// [`render_volume`] without empty-space skipping and without the single-brick fast path:
+/// every lattice sample is evaluated and every trilinear corner looked up on its own.
+/// Slow; it exists to show (and test) that skipping changes nothing.
+pub fn render_volume_unskipped(
+    grid: &BrickGrid,
+    density: &[f32],
+    radiance: &[[f32; 3]],
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+) -> Result<Image, RenderError> {
+    render_volume_with(grid, density, radiance, camera, settings, Skipping::Off).map(|(image, _)| image)
+}
+
+fn render_volume_with(
+    grid: &BrickGrid,
+    density: &[f32],
+    radiance: &[[f32; 3]],
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+    skipping: Skipping,
+) -> Result<(Image, MarchStats), RenderError> {
+    check_inputs(grid, density, camera, settings)?;
+    if radiance.len() != grid.voxel_count() {
+        return Err(RenderError::LengthMismatch {
+            what: "radiance",
+            expected: grid.voxel_count(),
+            found: radiance.len(),
+        });
+    }
+    let marcher = Marcher::new(grid, density, *settings, skipping);
+    let mut image = Image::new(camera.width, camera.height);
+    let width = camera.width as usize;
+    let stats = image
+        .rgb
+        .par_chunks_mut(width)
+        .zip(image.alpha.par_chunks_mut(width))
+        .enumerate()
+        .map(|(row, (rgb_row, alpha_row))| {
+            let mut stats = MarchStats::default();
+            for (col, (rgb, alpha)) in rgb_row.iter_mut().zip(alpha_row.iter_mut()).enumerate() {
+                let (origin, dir) = camera.pixel_ray(col as u32, row as u32);
+                let mut sum = [0.0f32; 3];
+                let t_end = marcher.march(origin, dir, &mut stats, |w, corners| {
+                    let mut c = [0.0f32; 3];
+                    for &(v, cw) in corners {
+                        let r = radiance[v];
+                        for ch in 0..3 {
+                            c[ch] += cw * r[ch];
+                        }
+                    }
+                    for ch in 0..3 {
+                        sum[ch] += w * c[ch];
+                    }
+                });
+                *rgb = sum;
+                *alpha = 1.0 - t_end;
+            }
+            stats
+        })
+        .reduce(MarchStats::default, |a, b| a + b);
+    Ok((image, stats))
+}
+
+/// Rows per band of [`visibility_weights`]: rows `r` with `r mod BANDS = b` form band `b`,
+/// each accumulated on its own and summed in band order (deterministic).
+const VISIBILITY_BANDS: usize = 8;
+
+/// How much each voxel shows in `camera`'s image: **adds** to `out[v]` (one entry per
+/// voxel) `Σ_pixels Σ_i w_i · trilinear_weight_i(v)` — compositing weight times trilinear
+/// weight of every sample (module docs). Call once per camera on the same buffer to
+/// accumulate views; zero it first for one view. Deterministic.
+pub fn visibility_weights(
+    grid: &BrickGrid,
+    density: &[f32],
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+    out: &mut [f32],
+) -> Result<(), RenderError> {
+    check_inputs(grid, density, camera, settings)?;
+    if out.len() != grid.voxel_count() {
+        return Err(RenderError::LengthMismatch {
+            what: "visibility weights",
+            expected: grid.voxel_count(),
+            found: out.len(),
+        });
+    }
+    let marcher = Marcher::new(grid, density, *settings, Skipping::On);
+    let bands = VISIBILITY_BANDS.min(camera.height as usize);
+    let partial: Vec<Vec<f32>> = (0..bands)
+        .into_par_iter()
+        .map(|band| {
+            let mut acc = vec![0.0f32; out.len()];
+            let mut stats = MarchStats::default();
+            for row in (band..camera.height as usize).step_by(bands) {
+                for col in 0..camera.width {
+                    let (origin, dir) = camera.pixel_ray(col, row as u32);
+                    marcher.march(origin, dir, &mut stats, |w, corners| {
+                        for &(v, cw) in corners {
+                            acc[v] += w * cw;
+                        }
+                    });
+                }
+            }
+            acc
+        })
+        .collect();
+    for band in &partial {
+        for (o, a) in out.iter_mut().zip(band) {
+            *o += a;
+        }
+    }
+    Ok(())
+}
+
+/// Density σ (1/m) of every voxel of an asset, as `f32`.
+pub fn asset_density(asset: &Asset) -> Vec<f32> {
+    asset.density.iter().map(|d| d.to_f32()).collect()
+}
+
+/// Everything for one asset, camera and lighting: checks the asset, projects `env`
+/// (turned by `world_from_env`) onto its basis, computes per-voxel radiance with the
+/// first `rank` components (default all) and ray-marches.
+pub fn render_asset(
+    asset: &Asset,
+    camera: &PinholeCamera,
+    env: &LatLong,
+    world_from_env: glam::DMat3,
+    rank: Option<usize>,
+    settings: &MarchSettings,
+) -> Result<Image, RenderError> {
+    asset.validate()?;
+    let grid = BrickGrid::from_asset(asset)?;
+    let light = project_light(&asset.pca, asset.world_from_light, env, world_from_env)?;
+    let radiance = voxel_radiance(asset, &light, rank);
+    render_volume(&grid, &asset_density(asset), &radiance, camera, settings)
+}
