@@ -1,0 +1,34 @@
+//! `nelf-bake`: turns a capture (or a mesh) into a `.nelf` asset.
+//!
+//! 1. **Captures in** ([`capture_in`]): our `cameras.json` folders and COLMAP text
+//!    models, images decoded to linear RGB, masks, every problem an error naming
+//!    the file.
+//! 2. **Visual hull** ([`hull`]): voxels whose footprint meets every (dilated) mask,
+//!    conservative at voxel scale, as NeLF prunes its queries.
+//! 3. **Sparse grid** ([`grid`]): 8³ bricks over the hull, a density pass that drops
+//!    bricks below an opacity threshold, and the band of voxels whose light
+//!    transport can show.
+//! 4. **Field sources** ([`source`]): anything implementing
+//!    `nelf_scene::field::FieldSource`; today the ground-truth mesh field.
+//! 5. **PCA** ([`pca`]) weighted by visibility in the capture's views, the **rank**
+//!    chosen per scene by rendered-image loss ([`rank`]), quantized and written
+//!    ([`pipeline`]).
+
+pub mod capture_in;
+pub mod error;
+pub mod grid;
+pub mod hull;
+pub mod pca;
+pub mod pipeline;
+pub mod progress;
+pub mod rank;
+pub mod source;
+
+pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
+pub use error::BakeError;
+pub use pipeline::{
+    BakeConfig, BakeOutput, BakeReport, EncodingChoice, FieldBake, Reference, StageTimings, ViewPolicyChoice,
+    bake_capture, bake_field, bake_mesh, mesh_cameras, sidecar_path, write_bake,
+};
+pub use progress::Progress;
+pub use source::{GroundTruth, TraceOverrides};

@@ -1,0 +1,720 @@
+//! The bake, stage by stage: region (visual hull or mesh box) → density pass and
+//! brick drop → visibility weights → light transport on the band that shows →
+//! weighted PCA → rank choice by rendered loss → quantize → write.
+//!
+//! The asset written depends only on the inputs and the [`BakeConfig`]: every
+//! stage is deterministic (fixed chunking, sums in a fixed order), and timings are
+//! kept out of the file (they go to the `.bake.json` beside it), so baking twice
+//! gives byte-identical files.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use glam::{DVec3, Vec3};
+use nelf_format::conventions::{LT_DIM, LatLong, PinholeCamera};
+use nelf_format::{
+    Asset, CoefficientEncoding, Coefficients, WriteOptions, WriteReport, encode_density, write_asset,
+};
+use nelf_render::{MarchSettings, visibility_weights};
+use nelf_scene::envmap::load_envmap;
+use nelf_scene::field::{FieldSource, ViewPolicy};
+use nelf_scene::mesh::Mesh;
+use nelf_scene::synth::{SynthConfig, camera_for, source_viewpoints};
+use nelf_scene::tracer::MAX_AVERAGED_DIRECTIONS;
+use serde::{Deserialize, Serialize};
+
+use crate::capture_in::LoadedCapture;
+use crate::error::{BakeError, Result, io_error};
+use crate::grid::{
+    GridPlan, evaluate_density, evaluate_light_transport, geometry_for_box, light_transport_band,
+    plan_all_bricks, plan_from_hull, voxel_size_for,
+};
+use crate::hull::{HullCarver, hull_bounds};
+use crate::pca::{fit_weighted_pca, project_coefficients};
+use crate::progress::Progress;
+use crate::rank::{
+    CandidateLoss, RankScene, box_downsample, candidate_loss, candidate_ranks, light_texels, reduced_camera,
+    reference_renders, relative_error_vs_images, test_environments, unquantized_radiance,
+};
+use crate::source::{GroundTruth, TraceOverrides, describe_trace, mesh_field};
+
+/// Which outgoing direction the light transport is baked for (a baked vector has
+/// one; the viewer cannot change it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ViewPolicyChoice {
+    /// The mean of `T` over the directions toward every camera centre.
+    #[default]
+    AverageCameras,
+    /// `T` toward the mean of the camera centres.
+    MeanCamera,
+}
+
+/// How PCA coefficients are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum EncodingChoice {
+    /// One byte per coefficient, affine per component.
+    #[default]
+    U8,
+    /// IEEE binary16 per coefficient.
+    F16,
+}
+
+impl EncodingChoice {
+    /// The file's encoding.
+    pub fn encoding(self) -> CoefficientEncoding {
+        match self {
+            Self::U8 => CoefficientEncoding::U8Affine,
+            Self::F16 => CoefficientEncoding::F16,
+        }
+    }
+}
+
+/// Every setting of a bake (the `nelf bake` options); saved beside the asset in
+/// `<asset>.bake.json` and recorded in its metadata.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct BakeConfig {
+    /// Voxels along the longest side of the region baked (hull or mesh box); ignored
+    /// when --voxel-size-m is given.
+    #[arg(long, default_value_t = 128)]
+    pub resolution: u32,
+    /// Voxel edge in metres (overrides --resolution).
+    #[arg(long)]
+    pub voxel_size_m: Option<f64>,
+    /// Visual hull: grow every mask by this many pixels (a (2r+1)² square) before carving.
+    #[arg(long, default_value_t = 2)]
+    pub dilate_px: u32,
+    /// Drop a brick whose densest voxel is less opaque than this across one voxel
+    /// (`σ_min = −ln(1 − α)/voxel_size`).
+    #[arg(long, default_value_t = 0.01)]
+    pub min_brick_opacity: f64,
+    /// Evaluate light transport only where the optical depth from outside is below
+    /// this (plus one voxel around), elsewhere the PCA mean.
+    #[arg(long, default_value_t = 10.0)]
+    pub max_optical_depth: f64,
+    /// Ground-truth field: width of the density shell around the surface, voxels.
+    #[arg(long, default_value_t = 2.0)]
+    pub shell_voxels: f32,
+    /// Outgoing direction the light transport is baked for.
+    #[arg(long, value_enum, default_value_t)]
+    pub view_policy: ViewPolicyChoice,
+    /// Longest side, pixels, of the renders that weight the PCA and choose the rank.
+    #[arg(long, default_value_t = 128)]
+    pub render_size: u32,
+    /// Ray-march step of those renders, voxels.
+    #[arg(long, default_value_t = 0.5)]
+    pub step_voxels: f32,
+    /// PCA weight floor, relative to the mean visibility weight, so unseen voxels
+    /// still count a little.
+    #[arg(long, default_value_t = 0.01)]
+    pub weight_floor: f64,
+    /// Force the PCA rank K (skip the choice; its loss is still measured).
+    #[arg(long)]
+    pub rank: Option<usize>,
+    /// Largest rank the choice may take.
+    #[arg(long, default_value_t = 64)]
+    pub max_rank: usize,
+    /// Rank choice: largest rendered-image loss accepted, dB.
+    #[arg(long, default_value_t = 0.1)]
+    pub max_loss_db: f64,
+    /// Rank choice: the signal-to-noise ratio (dB) assumed for the unquantized grid
+    /// when no ground-truth images under known lighting exist (mesh bakes, captures
+    /// without an envmap).
+    #[arg(long, default_value_t = 40.0)]
+    pub reference_snr_db: f64,
+    /// Coefficient storage.
+    #[arg(long, value_enum, default_value_t)]
+    pub encoding: EncodingChoice,
+    /// Ground-truth path-tracer overrides.
+    #[command(flatten)]
+    pub trace: TraceOverrides,
+}
+
+impl Default for BakeConfig {
+    fn default() -> Self {
+        Self {
+            resolution: 128,
+            voxel_size_m: None,
+            dilate_px: 2,
+            min_brick_opacity: 0.01,
+            max_optical_depth: 10.0,
+            shell_voxels: 2.0,
+            view_policy: ViewPolicyChoice::AverageCameras,
+            render_size: 128,
+            step_voxels: 0.5,
+            weight_floor: 0.01,
+            rank: None,
+            max_rank: 64,
+            max_loss_db: 0.1,
+            reference_snr_db: 40.0,
+            encoding: EncodingChoice::U8,
+            trace: TraceOverrides::default(),
+        }
+    }
+}
+
+impl BakeConfig {
+    /// Checks ranges before any work.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(BakeError::Settings(m));
+        if let Some(k) = self.rank
+            && !(1..=LT_DIM).contains(&k)
+        {
+            return bad(format!("--rank {k} must be in 1..={LT_DIM}"));
+        }
+        if !(1..=LT_DIM).contains(&self.max_rank) {
+            return bad(format!("--max-rank {} must be in 1..={LT_DIM}", self.max_rank));
+        }
+        if !(self.max_loss_db.is_finite() && self.max_loss_db >= 0.0) {
+            return bad(format!("--max-loss-db {} must be ≥ 0", self.max_loss_db));
+        }
+        if !self.reference_snr_db.is_finite() {
+            return bad(format!(
+                "--reference-snr-db {} must be finite",
+                self.reference_snr_db
+            ));
+        }
+        if !(self.weight_floor.is_finite() && self.weight_floor >= 0.0) {
+            return bad(format!("--weight-floor {} must be ≥ 0", self.weight_floor));
+        }
+        if !(self.max_optical_depth.is_finite() && self.max_optical_depth > 0.0) {
+            return bad(format!(
+                "--max-optical-depth {} must be positive",
+                self.max_optical_depth
+            ));
+        }
+        if !(8..=4096).contains(&self.render_size) {
+            return bad(format!("--render-size {} must be in 8..=4096", self.render_size));
+        }
+        if !(self.shell_voxels.is_finite() && self.shell_voxels > 0.0) {
+            return bad(format!("--shell-voxels {} must be positive", self.shell_voxels));
+        }
+        self.march().validate()?;
+        Ok(())
+    }
+
+    /// Ray-marching settings of the bake's renders.
+    pub fn march(&self) -> MarchSettings {
+        MarchSettings {
+            step_voxels: self.step_voxels,
+            ..MarchSettings::default()
+        }
+    }
+}
+
+/// How the unquantized grid's own error `m₀` is known (see [`crate::rank`]).
+#[derive(Debug, Clone)]
+pub enum Reference {
+    /// Ground-truth images of the views (full resolution, linear RGB), their masks,
+    /// and the lighting they were taken under (lat-long, world frame).
+    Images {
+        /// One image per view.
+        images: Vec<Vec<[f32; 3]>>,
+        /// One mask per view.
+        masks: Vec<Vec<f32>>,
+        /// The lighting.
+        lighting: LatLong,
+    },
+    /// Assumed signal-to-noise ratio of the unquantized grid, dB.
+    AssumedSnrDb(f64),
+}
+
+/// Seconds spent in each stage.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct StageTimings {
+    /// Visual hull (or mesh box) and the candidate bricks.
+    pub hull_secs: f64,
+    /// Density of every candidate voxel, brick drop.
+    pub density_secs: f64,
+    /// Visibility weights of every view.
+    pub weights_secs: f64,
+    /// Light-transport band and its evaluation.
+    pub lt_secs: f64,
+    /// Weighted PCA and coefficients.
+    pub pca_secs: f64,
+    /// Rank choice (renders).
+    pub rank_secs: f64,
+    /// Encoding and writing the file.
+    pub write_secs: f64,
+}
+
+/// What a bake produced.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BakeReport {
+    /// Voxel edge, metres.
+    pub voxel_size_m: f64,
+    /// Grid extent in bricks.
+    pub grid_bricks: [u32; 3],
+    /// Voxels inside the visual hull (all candidate voxels for a mesh bake).
+    pub hull_voxels: usize,
+    /// Bricks evaluated for density.
+    pub candidate_bricks: usize,
+    /// Bricks kept.
+    pub bricks: usize,
+    /// Voxels kept (bricks × 512).
+    pub voxels: usize,
+    /// Voxels whose light transport was evaluated.
+    pub lt_voxels: usize,
+    /// PCA rank chosen.
+    pub rank: usize,
+    /// Energy kept at that rank.
+    pub energy_kept: f64,
+    /// Rendered loss at that rank, dB.
+    pub loss_db: f64,
+    /// Whether the loss met the target (always true when the rank was forced).
+    pub met_target: bool,
+    /// `m₀`, the unquantized grid's relative squared error against ground truth.
+    pub reference_relative_error: f64,
+    /// Every candidate tried.
+    pub candidates: Vec<CandidateLoss>,
+    /// Seconds per stage.
+    pub timings: StageTimings,
+    /// File size in bytes (0 until written).
+    pub file_size: u64,
+}
+
+/// A baked asset and its report.
+#[derive(Debug, Clone)]
+pub struct BakeOutput {
+    /// The asset (exactly what the file will hold).
+    pub asset: Asset,
+    /// What happened.
+    pub report: BakeReport,
+}
+
+/// A field to bake over a planned grid.
+pub struct FieldBake<'a> {
+    /// The source of density and light transport.
+    pub field: &'a dyn FieldSource,
+    /// Candidate bricks.
+    pub plan: GridPlan,
+    /// The views the asset is judged by (the capture's own cameras, full resolution).
+    pub cameras: Vec<PinholeCamera>,
+    /// Outgoing direction of the light transport.
+    pub view_policy: ViewPolicy,
+    /// How the unquantized grid's own error is known.
+    pub reference: Reference,
+    /// Provenance for the metadata (source files, field).
+    pub provenance: serde_json::Value,
+}
+
+impl std::fmt::Debug for FieldBake<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("FieldBake")
+            .field("plan_bricks", &self.plan.bricks.len())
+            .field("cameras", &self.cameras.len())
+            .field("view_policy", &self.view_policy)
+            .field("provenance", &self.provenance)
+            .finish_non_exhaustive()
+    }
+}
+
+/// The view policy `choice` for cameras centred at `centres` (at most 64 are
+/// averaged; more are subsampled evenly).
+pub fn view_policy_for(choice: ViewPolicyChoice, centres: &[DVec3]) -> Result<ViewPolicy> {
+    if centres.is_empty() {
+        return Err(BakeError::Settings(
+            "a view policy needs at least one camera".into(),
+        ));
+    }
+    let policy = match choice {
+        ViewPolicyChoice::AverageCameras => {
+            let n = centres.len();
+            let m = n.min(MAX_AVERAGED_DIRECTIONS);
+            ViewPolicy::AverageTowardPoints((0..m).map(|i| centres[i * n / m].as_vec3()).collect())
+        }
+        ViewPolicyChoice::MeanCamera => {
+            let mean = centres.iter().copied().sum::<DVec3>() / centres.len() as f64;
+            ViewPolicy::TowardPoint(mean.as_vec3())
+        }
+    };
+    policy.validate()?;
+    Ok(policy)
+}
+
+fn policy_json(policy: &ViewPolicy, choice: ViewPolicyChoice) -> serde_json::Value {
+    let points = |list: &[Vec3]| list.iter().map(Vec3::to_array).collect::<Vec<_>>();
+    let detail = match policy {
+        ViewPolicy::Direction(d) => serde_json::json!({ "direction": d.to_array() }),
+        ViewPolicy::TowardPoint(p) => serde_json::json!({ "toward_point_m": p.to_array() }),
+        ViewPolicy::AverageDirections(list) => serde_json::json!({ "average_directions": points(list) }),
+        ViewPolicy::AverageTowardPoints(list) => {
+            serde_json::json!({ "average_toward_points_m": points(list) })
+        }
+    };
+    serde_json::json!({ "choice": choice, "policy": detail })
+}
+
+/// Bakes `job` with `config`: density, weights, light transport, PCA, rank, asset.
+/// `hull_secs` is the time the caller spent planning the grid.
+pub fn bake_field(
+    job: &FieldBake<'_>,
+    config: &BakeConfig,
+    progress: &Progress,
+    hull_secs: f64,
+) -> Result<BakeOutput> {
+    config.validate()?;
+    let mut timings = StageTimings {
+        hull_secs,
+        ..StageTimings::default()
+    };
+
+    // Density and brick drop.
+    let t = Instant::now();
+    let dense = evaluate_density(&job.plan, job.field, config.min_brick_opacity, progress)?;
+    let grid = &dense.grid;
+    let density = &dense.density;
+    let voxels = grid.voxel_count();
+    timings.density_secs = t.elapsed().as_secs_f64();
+
+    // Visibility weights at reduced resolution.
+    let t = Instant::now();
+    let march = config.march();
+    let reduced: Vec<(PinholeCamera, u32)> = job
+        .cameras
+        .iter()
+        .map(|c| reduced_camera(c, config.render_size))
+        .collect();
+    let views: Vec<PinholeCamera> = reduced.iter().map(|(c, _)| *c).collect();
+    let mut visibility = vec![0.0f32; voxels];
+    let bar = progress.bar("weights", views.len() as u64, "views");
+    for cam in &views {
+        visibility_weights(grid, density, cam, &march, &mut visibility)?;
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    timings.weights_secs = t.elapsed().as_secs_f64();
+
+    // Light transport on the band.
+    let t = Instant::now();
+    let lt_voxels = light_transport_band(grid, density, config.max_optical_depth);
+    if lt_voxels.is_empty() {
+        return Err(BakeError::Empty("no voxel has positive density".into()));
+    }
+    let (lt, _) = evaluate_light_transport(grid, &lt_voxels, job.field, &job.view_policy, progress)?;
+    timings.lt_secs = t.elapsed().as_secs_f64();
+
+    // Weighted PCA.
+    let t = Instant::now();
+    let seen: Vec<f64> = lt_voxels.iter().map(|&v| f64::from(visibility[v])).collect();
+    let mean_seen = seen.iter().sum::<f64>() / seen.len() as f64;
+    let floor = if mean_seen > 0.0 {
+        config.weight_floor * mean_seen
+    } else {
+        1.0
+    };
+    let weights: Vec<f64> = seen.iter().map(|w| w + floor).collect();
+    let pca = fit_weighted_pca(&lt, &weights)?;
+    let data_rank = pca.numerical_rank();
+    let top_rank = match config.rank {
+        Some(k) => k,
+        None => config.max_rank.min(data_rank).max(1),
+    };
+    let model = pca.model(top_rank);
+    let compact = project_coefficients(&model, &lt);
+    let mut coefficients = vec![0.0f32; voxels * top_rank];
+    for (i, &v) in lt_voxels.iter().enumerate() {
+        coefficients[v * top_rank..(v + 1) * top_rank]
+            .copy_from_slice(&compact[i * top_rank..(i + 1) * top_rank]);
+    }
+    let encoding = config.encoding.encoding();
+    let world_from_light = job.field.world_from_light();
+    let stored_density = encode_density(density)?;
+    let full = Asset {
+        grid: *grid.geometry(),
+        world_from_light,
+        bricks: grid.bricks().to_vec(),
+        density: stored_density.clone(),
+        pca: model.clone(),
+        coefficients: Coefficients::quantize(&coefficients, top_rank, encoding)?,
+        metadata: serde_json::json!({}),
+    };
+    timings.pca_secs = t.elapsed().as_secs_f64();
+
+    // Rank choice.
+    let t = Instant::now();
+    let scene = RankScene {
+        grid,
+        density,
+        views: &views,
+        march,
+        world_from_light,
+    };
+    let (m0, reference_json, source_light) = match &job.reference {
+        Reference::Images {
+            images,
+            masks,
+            lighting,
+        } => {
+            let light = light_texels(lighting, world_from_light)?;
+            let radiance = unquantized_radiance(voxels, &lt_voxels, &lt, &model.mean, &light);
+            let mut small_images = Vec::with_capacity(images.len());
+            let mut small_masks = Vec::with_capacity(images.len());
+            for ((img, mask), (cam, (_, factor))) in
+                images.iter().zip(masks).zip(job.cameras.iter().zip(&reduced))
+            {
+                small_images.push(box_downsample(img, cam.width, cam.height, *factor));
+                let m: Vec<[f32; 1]> = mask.iter().map(|&x| [x]).collect();
+                small_masks.push(
+                    box_downsample(&m, cam.width, cam.height, *factor)
+                        .iter()
+                        .map(|x| x[0])
+                        .collect(),
+                );
+            }
+            let m0 = relative_error_vs_images(&scene, &radiance, &small_images, &small_masks)?;
+            let json = serde_json::json!({
+                "kind": "capture-images",
+                "relative_error": m0,
+                "snr_db": -10.0 * m0.log10(),
+            });
+            (m0, json, Some(lighting.clone()))
+        }
+        Reference::AssumedSnrDb(snr) => {
+            let m0 = 10f64.powf(-snr / 10.0);
+            let json = serde_json::json!({ "kind": "assumed-snr", "relative_error": m0, "snr_db": snr });
+            (m0, json, None)
+        }
+    };
+    if !(m0.is_finite() && m0 > 0.0) {
+        return Err(BakeError::Settings(format!(
+            "the unquantized grid's relative error against ground truth is {m0}; the rank cannot be chosen from it (force --rank)"
+        )));
+    }
+    let envs = test_environments(source_light.as_ref());
+    let references = reference_renders(&scene, &envs, &lt_voxels, &lt, &model.mean)?;
+    let ranks = match config.rank {
+        Some(k) => vec![k],
+        None => candidate_ranks(config.max_rank, data_rank),
+    };
+    let bar = progress.bar("rank", ranks.len() as u64, "candidates");
+    let mut candidates = Vec::new();
+    let mut chosen = None;
+    for &k in &ranks {
+        let per_env_db = candidate_loss(&scene, &references, &full, k, m0)?;
+        let loss = per_env_db.iter().copied().fold(0.0f64, f64::max);
+        candidates.push(CandidateLoss {
+            rank: k,
+            loss_db: loss,
+            per_env_db,
+            energy_kept: pca.energy_kept(k),
+        });
+        bar.inc(1);
+        if loss <= config.max_loss_db {
+            chosen = Some(candidates.len() - 1);
+            break;
+        }
+    }
+    bar.finish_and_clear();
+    let met_target = chosen.is_some() || config.rank.is_some();
+    let pick = chosen.unwrap_or(candidates.len() - 1);
+    let rank = candidates[pick].rank;
+    timings.rank_secs = t.elapsed().as_secs_f64();
+
+    // The asset at the chosen rank.
+    let truncated: Vec<f32> = coefficients
+        .chunks_exact(top_rank)
+        .flat_map(|c| c[..rank].iter().copied())
+        .collect();
+    let report = BakeReport {
+        voxel_size_m: grid.geometry().voxel_size_m,
+        grid_bricks: grid.geometry().grid_bricks,
+        hull_voxels: job.plan.hull_voxels,
+        candidate_bricks: dense.candidate_bricks,
+        bricks: grid.bricks().len(),
+        voxels,
+        lt_voxels: lt_voxels.len(),
+        rank,
+        energy_kept: pca.energy_kept(rank),
+        loss_db: candidates[pick].loss_db,
+        met_target,
+        reference_relative_error: m0,
+        candidates: candidates.clone(),
+        timings,
+        file_size: 0,
+    };
+    let metadata = serde_json::json!({
+        "generator": "nelf bake",
+        "generator_version": env!("CARGO_PKG_VERSION"),
+        "source": job.provenance,
+        "view_policy": policy_json(&job.view_policy, config.view_policy),
+        "settings": config,
+        "grid": {
+            "voxel_size_m": report.voxel_size_m,
+            "hull_voxels": report.hull_voxels,
+            "candidate_bricks": report.candidate_bricks,
+            "bricks": report.bricks,
+            "voxels": report.voxels,
+            "lt_voxels": report.lt_voxels,
+            "brick_density_threshold_per_m": dense.sigma_min_per_m,
+        },
+        "pca": {
+            "rank": rank,
+            "energy_kept": report.energy_kept,
+            "data_rank": data_rank,
+            "encoding": encoding.name(),
+            "weighting": "sum over the capture's views of the visibility weights (nelf-render), plus weight_floor × their mean",
+            "eigenvalues": pca.eigenvalues.iter().take(top_rank.max(rank)).collect::<Vec<_>>(),
+        },
+        "rank_choice": {
+            "forced": config.rank.is_some(),
+            "max_loss_db": config.max_loss_db,
+            "loss_db": report.loss_db,
+            "met_target": met_target,
+            "reference": reference_json,
+            "test_environments": envs.iter().map(|e| e.name.clone()).collect::<Vec<_>>(),
+            "render_size": config.render_size,
+            "candidates": candidates,
+            "loss_definition": "worst over test environments of 10·log10((m0 + mK)/m0), mK = Σ(I_K − I_0)²/Σ I_0² over the capture's views",
+        },
+    });
+    let asset = Asset {
+        pca: model.truncated(rank),
+        coefficients: Coefficients::quantize(&truncated, rank, encoding)?,
+        metadata,
+        density: stored_density,
+        ..full
+    };
+    asset.validate()?;
+    Ok(BakeOutput { asset, report })
+}
+
+/// Bakes a capture's ground-truth field: visual hull of its masks, the mesh of
+/// `truth` as the field, the capture's cameras as the views.
+pub fn bake_capture(
+    capture: &LoadedCapture,
+    truth: &GroundTruth,
+    config: &BakeConfig,
+    progress: &Progress,
+) -> Result<BakeOutput> {
+    config.validate()?;
+    let t = Instant::now();
+    let carver = HullCarver::new(&capture.cameras, &capture.masks, config.dilate_px)?;
+    let (lo, hi) = hull_bounds(&carver, capture.head_centre_m)?;
+    let voxel = voxel_size_for(hi - lo, config.resolution, config.voxel_size_m)?;
+    let plan = plan_from_hull(&carver, geometry_for_box(lo, hi, voxel)?);
+    let hull_secs = t.elapsed().as_secs_f64();
+
+    let mesh = truth.mesh()?;
+    let trace = config.trace.apply(truth.trace_settings());
+    let field = mesh_field(&mesh, trace, voxel, config.shell_voxels)?;
+    let centres: Vec<DVec3> = capture.cameras.iter().map(PinholeCamera::centre).collect();
+    let view_policy = view_policy_for(config.view_policy, &centres)?;
+    let reference = match capture.source_envmap_path() {
+        Some(path) => Reference::Images {
+            images: capture.images.clone(),
+            masks: capture.masks.clone(),
+            lighting: load_envmap(&path)?,
+        },
+        None => Reference::AssumedSnrDb(config.reference_snr_db),
+    };
+    let provenance = serde_json::json!({
+        "kind": "capture",
+        "capture": capture.dir.display().to_string(),
+        "camera_file": capture.camera_file.display().to_string(),
+        "views": capture.names,
+        "head_centre_m": capture.head_centre_m.to_array(),
+        "hull_box_m": [lo.to_array(), hi.to_array()],
+        "ground_truth": truth.describe(),
+        "field": describe_trace(&trace, config.shell_voxels),
+    });
+    let job = FieldBake {
+        field: &field,
+        plan,
+        cameras: capture.cameras.clone(),
+        view_policy,
+        reference,
+        provenance,
+    };
+    bake_field(&job, config, progress, hull_secs)
+}
+
+/// The synthetic cameras a mesh bake is judged by: the frontal cone of a default
+/// synthetic capture (`nelf_scene::synth::source_viewpoints`) around the mesh's
+/// bounding sphere, `size × size` pixels.
+pub fn mesh_cameras(mesh: &Mesh, size: u32) -> Vec<PinholeCamera> {
+    let (lo, hi) = mesh.bounds();
+    let centre = (0.5 * (lo + hi)).as_dvec3();
+    let radius = mesh
+        .positions
+        .iter()
+        .map(|p| (p.as_dvec3() - centre).length())
+        .fold(0.0, f64::max);
+    let config = SynthConfig {
+        width: size,
+        height: size,
+        ..SynthConfig::default()
+    };
+    source_viewpoints(&config)
+        .iter()
+        .map(|v| camera_for(v, centre, radius, &config))
+        .collect()
+}
+
+/// Bakes a mesh directly: the grid covers the mesh's field (its occupancy is the
+/// hull), the views are [`mesh_cameras`], and the rank is chosen against the
+/// assumed reference SNR. `description` goes into the metadata.
+pub fn bake_mesh(
+    mesh: &Mesh,
+    description: &serde_json::Value,
+    config: &BakeConfig,
+    progress: &Progress,
+) -> Result<BakeOutput> {
+    config.validate()?;
+    let t = Instant::now();
+    let (lo, hi) = mesh.bounds();
+    let voxel = voxel_size_for((hi - lo).as_dvec3(), config.resolution, config.voxel_size_m)?;
+    let trace = config.trace.apply(nelf_scene::tracer::TraceSettings::default());
+    let field = mesh_field(mesh, trace, voxel, config.shell_voxels)?;
+    let (flo, fhi) = field.bounds();
+    let plan = plan_all_bricks(geometry_for_box(flo.as_dvec3(), fhi.as_dvec3(), voxel)?);
+    let hull_secs = t.elapsed().as_secs_f64();
+    let cameras = mesh_cameras(mesh, config.render_size);
+    let centres: Vec<DVec3> = cameras.iter().map(PinholeCamera::centre).collect();
+    let view_policy = view_policy_for(config.view_policy, &centres)?;
+    let provenance = serde_json::json!({
+        "kind": "mesh",
+        "mesh": description,
+        "triangles": mesh.triangles.len(),
+        "field": describe_trace(&trace, config.shell_voxels),
+    });
+    let job = FieldBake {
+        field: &field,
+        plan,
+        cameras,
+        view_policy,
+        reference: Reference::AssumedSnrDb(config.reference_snr_db),
+        provenance,
+    };
+    bake_field(&job, config, progress, hull_secs)
+}
+
+/// Where the bake's settings and report are saved beside an asset: the asset's path
+/// with its extension replaced by `bake.json` (`head.nelf` → `head.bake.json`).
+pub fn sidecar_path(asset_path: &Path) -> PathBuf {
+    asset_path.with_extension("bake.json")
+}
+
+/// Writes the asset atomically (default [`WriteOptions`]) and, beside it,
+/// `<asset>.bake.json` with the configuration and the report (timings included).
+/// Fills in `write_secs` and `file_size`.
+pub fn write_bake(output: &mut BakeOutput, config: &BakeConfig, path: &Path) -> Result<WriteReport> {
+    let t = Instant::now();
+    let written = write_asset(path, &output.asset, &WriteOptions::default())?;
+    output.report.timings.write_secs = t.elapsed().as_secs_f64();
+    output.report.file_size = written.file_size;
+    let sidecar = sidecar_path(path);
+    let json = serde_json::json!({
+        "asset": path.display().to_string(),
+        "config": config,
+        "source": output.asset.metadata.get("source"),
+        "report": output.report,
+    });
+    let text = serde_json::to_string_pretty(&json).map_err(|e| BakeError::Json {
+        path: sidecar.clone(),
+        message: e.to_string(),
+    })?;
+    std::fs::write(&sidecar, text + "\n").map_err(|e| io_error(&sidecar, e))?;
+    Ok(written)
+}
