@@ -1,0 +1,29 @@
+//! `nelf-field`: the NeLF network (Sun, Lin, Bi, Xu, Ramamoorthi, "NeLF: Neural
+//! Light-transport Field for Portrait View Synthesis and Relighting", EGSR 2021) in
+//! candle, parameter-compatible with the official PyTorch checkpoint (key names of
+//! its `state_dict`), checked against the official implementation's numbers
+//! (`../shared/nelf-oracle/`).
+//!
+//! * [`model::Model`]: encoder ([`encoder`]), light estimate ([`light`]), per-point
+//!   networks ([`nelfnet`]), batched evaluation with visual-hull pruning;
+//! * [`render`]: coarse/fine volume rendering of the network (the reference a bake
+//!   must match);
+//! * [`capture`]: a capture folder (metres, our world) as network inputs
+//!   (millimetres, the network's world);
+//! * [`source::NelfField`]: the baker's [`nelf_scene::field::FieldSource`].
+//!
+//! Runs in `f32` on the CPU; the `cuda` feature enables candle's CUDA backend.
+
+pub mod encoder;
+pub mod error;
+pub mod geometry;
+pub mod layers;
+pub mod light;
+pub mod model;
+pub mod nelfnet;
+pub mod render;
+pub mod views;
+
+pub use error::NetError;
+pub use model::{Model, NelfConfig};
+pub use views::{EncodedViews, SourceViews, Stage};

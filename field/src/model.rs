@@ -1,0 +1,290 @@
+//! The whole NeLF model (official `NelfFt`): the image encoder, the light
+//! aggregation and the coarse and fine per-point networks, loaded from a
+//! safetensors file whose keys are the official `state_dict`'s (`layout.tsv` in the
+//! parity fixtures). Per-point evaluation prunes points outside the visual hull
+//! (σ = 0, colour 0 there, as the official `compute_color`) and runs the network
+//! in bounded batches on all cores.
+
+use std::path::Path;
+
+use candle_core::{DType, Device, Tensor};
+use candle_nn::VarBuilder;
+use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
+use rayon::prelude::*;
+
+use crate::encoder::{EncoderOutput, ImageEncoder, SOURCE_FEATURE_CHANNELS};
+use crate::error::NetError;
+use crate::light::{aggregate_light, net_solid_angles};
+use crate::nelfnet::{NelfNet, NelfNetTrace, PointInputs};
+use crate::views::{EncodedViews, SourceViews, Stage};
+
+/// Model arguments (official `config_nelf_ft` values by default).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NelfConfig {
+    /// Coarse samples per ray (and inverse-CDF bins), 64.
+    pub coarse_samples: usize,
+    /// Importance samples per ray added for the fine pass, 128.
+    pub fine_samples: usize,
+    /// Radius around the head centre that bounds rays, millimetres (the official
+    /// `head_diameter = 200`, used as a radius).
+    pub head_radius_mm: f32,
+    /// Points per network batch (bounds memory: about 20 KB per point and view).
+    pub batch_points: usize,
+}
+
+impl Default for NelfConfig {
+    fn default() -> Self {
+        Self {
+            coarse_samples: 64,
+            fine_samples: 128,
+            head_radius_mm: 200.0,
+            batch_points: 2048,
+        }
+    }
+}
+
+/// The NeLF model.
+#[derive(Debug, Clone)]
+pub struct Model {
+    encoder: ImageEncoder,
+    coarse: NelfNet,
+    fine: NelfNet,
+    config: NelfConfig,
+    device: Device,
+}
+
+/// Per-point outputs of a batch: density and colour or light transport, zero
+/// outside the hull.
+#[derive(Debug, Clone, PartialEq)]
+pub struct PointValues {
+    /// `(N)` σ, 1/mm.
+    pub sigma: Vec<f32>,
+    /// `(N, C)` values per point (`C = 3` colours, or 384 light transport).
+    pub values: Vec<f32>,
+    /// `(N)` whether the point is inside the hull (and was evaluated).
+    pub inside: Vec<bool>,
+}
+
+impl Model {
+    /// Builds the model from `vb` (root prefix: keys `image_encoder.*`,
+    /// `coarse_appearance_encoder.*`, `fine_appearance_encoder.*`).
+    pub fn new(vb: &VarBuilder, config: NelfConfig) -> Result<Self, NetError> {
+        if config.coarse_samples < 2
+            || config.batch_points == 0
+            || !config.head_radius_mm.is_finite()
+            || config.head_radius_mm <= 0.0
+        {
+            return Err(NetError::input(format!(
+                "unusable model configuration {config:?}"
+            )));
+        }
+        Ok(Self {
+            encoder: ImageEncoder::new(&vb.pp("image_encoder"))?,
+            coarse: NelfNet::new(&vb.pp("coarse_appearance_encoder"))?,
+            fine: NelfNet::new(&vb.pp("fine_appearance_encoder"))?,
+            config,
+            device: vb.device().clone(),
+        })
+    }
+
+    /// Loads the weights from a safetensors file (official key names; f32, or any
+    /// float type, converted) onto `device`.
+    pub fn load(path: impl AsRef<Path>, config: NelfConfig, device: &Device) -> Result<Self, NetError> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|e| NetError::file(path, e.to_string()))?;
+        let vb = VarBuilder::from_buffered_safetensors(bytes, DType::F32, device)
+            .map_err(|e| NetError::file(path, format!("not a safetensors file: {e}")))?;
+        Self::new(&vb, config).map_err(|e| NetError::file(path, format!("not NeLF weights: {e}")))
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &NelfConfig {
+        &self.config
+    }
+
+    /// The device the network runs on.
+    pub fn device(&self) -> &Device {
+        &self.device
+    }
+
+    /// The image encoder.
+    pub fn encoder(&self) -> &ImageEncoder {
+        &self.encoder
+    }
+
+    /// The per-point network of `stage`.
+    pub fn net(&self, stage: Stage) -> &NelfNet {
+        match stage {
+            Stage::Coarse => &self.coarse,
+            Stage::Fine => &self.fine,
+        }
+    }
+
+    /// Encodes the source views, keeping every encoder intermediate.
+    pub fn encode_traced(&self, views: &SourceViews) -> Result<(EncodedViews, EncoderOutput), NetError> {
+        views.validate()?;
+        let (v, h, w) = (views.views(), views.height, views.width);
+        let images = Tensor::from_slice(&views.images, (v, h, w, 3), &self.device)?
+            .permute((0, 3, 1, 2))?
+            .contiguous()?;
+        let out = self.encoder.forward(&images)?;
+        let features = out
+            .feature
+            .permute((0, 2, 3, 1))?
+            .flatten_all()?
+            .to_vec1::<f32>()?;
+        debug_assert_eq!(features.len(), v * (h / 2) * (w / 2) * SOURCE_FEATURE_CHANNELS);
+        let light_feature = out.light_feature.flatten_all()?.to_vec1::<f32>()?;
+        let rotations: Vec<_> = views
+            .cameras
+            .iter()
+            .map(crate::geometry::NetCamera::rotation)
+            .collect();
+        let light = aggregate_light(&light_feature, &rotations, h / 16, w / 16)?;
+        let encoded = EncodedViews {
+            width: w,
+            height: h,
+            cameras: views.cameras.clone(),
+            projections: views
+                .cameras
+                .iter()
+                .map(crate::geometry::NetCamera::projection)
+                .collect(),
+            centres: views
+                .cameras
+                .iter()
+                .map(crate::geometry::NetCamera::centre)
+                .collect(),
+            images: views.images.clone(),
+            masks_dilated: crate::geometry::dilate_masks(&views.masks, w, h),
+            features,
+            light,
+        };
+        Ok((encoded, out))
+    }
+
+    /// Encodes the source views.
+    pub fn encode(&self, views: &SourceViews) -> Result<EncodedViews, NetError> {
+        Ok(self.encode_traced(views)?.0)
+    }
+
+    /// Runs `stage`'s network on `points` (mm) toward unit `target_dirc`, without
+    /// the hull test, returning its inputs and every intermediate.
+    pub fn run_points(
+        &self,
+        encoded: &EncodedViews,
+        points: &[[f32; 3]],
+        target_dirc: &[[f32; 3]],
+        stage: Stage,
+    ) -> Result<(PointInputs, NelfNetTrace), NetError> {
+        let inputs = encoded
+            .gather(points, target_dirc, stage)?
+            .to_tensors(&self.device)?;
+        let trace = self.net(stage).forward(&inputs)?;
+        Ok((inputs, trace))
+    }
+
+    /// Evaluates the points inside the hull in parallel batches; `per_batch` turns
+    /// one batch's network pass into `(σ, values)` rows of `width` floats.
+    fn evaluate_in_hull(
+        &self,
+        encoded: &EncodedViews,
+        points: &[[f32; 3]],
+        target_dirc: &[[f32; 3]],
+        stage: Stage,
+        width: usize,
+        per_batch: &(dyn Fn(&PointInputs, &NelfNetTrace) -> Result<Tensor, NetError> + Sync),
+    ) -> Result<PointValues, NetError> {
+        if points.len() != target_dirc.len() {
+            return Err(NetError::input(format!(
+                "{} points and {} target directions",
+                points.len(),
+                target_dirc.len()
+            )));
+        }
+        let inside = encoded.hull(points).inside;
+        let index: Vec<usize> = (0..points.len()).filter(|&i| inside[i]).collect();
+        let batches: Vec<(Vec<f32>, Vec<f32>)> = index
+            .par_chunks(self.config.batch_points)
+            .map(|chunk| {
+                let p: Vec<[f32; 3]> = chunk.iter().map(|&i| points[i]).collect();
+                let d: Vec<[f32; 3]> = chunk.iter().map(|&i| target_dirc[i]).collect();
+                let (inputs, trace) = self.run_points(encoded, &p, &d, stage)?;
+                let sigma = trace.density.flatten_all()?.to_vec1::<f32>()?;
+                let values = per_batch(&inputs, &trace)?.flatten_all()?.to_vec1::<f32>()?;
+                Ok((sigma, values))
+            })
+            .collect::<Result<_, NetError>>()?;
+        let mut sigma = vec![0.0f32; points.len()];
+        let mut values = vec![0.0f32; points.len() * width];
+        for (chunk, (s, vals)) in index.chunks(self.config.batch_points).zip(batches) {
+            for (k, &i) in chunk.iter().enumerate() {
+                sigma[i] = s[k];
+                values[i * width..(i + 1) * width].copy_from_slice(&vals[k * width..(k + 1) * width]);
+            }
+        }
+        Ok(PointValues {
+            sigma,
+            values,
+            inside,
+        })
+    }
+
+    /// σ (1/mm) and colour (`values`: `(N, 3)`) of `points` (mm) seen along unit
+    /// `target_dirc` (point → viewer) under the network-layout light `light`
+    /// (`(3, 8, 16)` radiance); zero outside the hull.
+    pub fn shade_points(
+        &self,
+        encoded: &EncodedViews,
+        points: &[[f32; 3]],
+        target_dirc: &[[f32; 3]],
+        stage: Stage,
+        light: &[f32],
+    ) -> Result<PointValues, NetError> {
+        let irradiance = self.irradiance(light)?;
+        self.evaluate_in_hull(encoded, points, target_dirc, stage, 3, &|inputs, trace| {
+            Ok(NelfNet::shade(trace, &inputs.source_rgb, &irradiance)?.rgb)
+        })
+    }
+
+    /// σ (1/mm) and light-transport vectors (`values`: `(N, 384)`, network layout,
+    /// the network's solid angles folded in) of `points` (mm) seen along unit
+    /// `target_dirc`; zero outside the hull.
+    pub fn light_transport_points(
+        &self,
+        encoded: &EncodedViews,
+        points: &[[f32; 3]],
+        target_dirc: &[[f32; 3]],
+        stage: Stage,
+    ) -> Result<PointValues, NetError> {
+        let omega = Tensor::from_slice(&net_solid_angles(), ENV_TEXELS, &self.device)?;
+        self.evaluate_in_hull(encoded, points, target_dirc, stage, LT_DIM, &|inputs, trace| {
+            NelfNet::light_transport(trace, &inputs.source_rgb, &omega)
+        })
+    }
+
+    /// The irradiance tensor `(3, 128)` = `light · Ω` of a network-layout light.
+    pub fn irradiance(&self, light: &[f32]) -> Result<Tensor, NetError> {
+        Ok(Tensor::from_vec(
+            irradiance_values(light)?,
+            (3, ENV_TEXELS),
+            &self.device,
+        )?)
+    }
+}
+
+/// `light · Ω` for a network-layout light `(3, 8, 16)` (the official `target_irradiance`).
+pub fn irradiance_values(light: &[f32]) -> Result<Vec<f32>, NetError> {
+    if light.len() != LT_DIM {
+        return Err(NetError::input(format!(
+            "a light has {LT_DIM} values, got {}",
+            light.len()
+        )));
+    }
+    let omega = net_solid_angles();
+    Ok(light
+        .iter()
+        .enumerate()
+        .map(|(i, l)| l * omega[i % ENV_TEXELS])
+        .collect())
+}
