@@ -273,3 +273,43 @@ fn corner_weights(f: [f32; 3]) -> [f32; 8] {
     let wz = [1.0 - f[2], f[2]];
     std::array::from_fn(|c| (wx[c & 1] * wy[(c >> 1) & 1]) * wz[c >> 2])
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fast_lookup_equals_per_corner_lookup() {
+        let geometry = GridGeometry {
+            bbox_min_m: [-0.3, 0.1, 0.0],
+            voxel_size_m: 0.02,
+            grid_bricks: [3, 2, 2],
+        };
+        let bricks = vec![[0, 0, 0], [1, 0, 0], [0, 1, 0], [2, 1, 0], [1, 1, 1]];
+        let grid = BrickGrid::new(geometry, bricks).unwrap();
+        let mut state = 12345u32;
+        let (mut fast, mut slow) = ([(0, 0.0); 8], [(0, 0.0); 8]);
+        let mut empty = 0;
+        for _ in 0..20_000 {
+            let mut next = || {
+                state ^= state << 13;
+                state ^= state >> 17;
+                state ^= state << 5;
+                f64::from(state) / f64::from(u32::MAX)
+            };
+            let u = DVec3::new(next() * 26.0 - 1.0, next() * 18.0 - 1.0, next() * 18.0 - 1.0);
+            let p = grid.bbox_min() + u * 0.02;
+            let n_slow = grid.trilinear_general(p, &mut slow);
+            match grid.lookup_trilinear(p, &mut fast) {
+                Lookup::Corners(n) => assert_eq!(fast[..n], slow[..n_slow]),
+                Lookup::EmptyBrick(brick) => {
+                    empty += 1;
+                    assert_eq!(n_slow, 0);
+                    let (lo, hi) = grid.empty_core_box(brick);
+                    assert!(p.cmpge(lo).all() && p.cmple(hi).all());
+                }
+            }
+        }
+        assert!(empty > 1000);
+    }
+}

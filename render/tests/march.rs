@@ -1,0 +1,297 @@
+//! Ray marching: the discretised emission–absorption integral, early termination,
+//! empty-space skipping and visibility weights.
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
+mod common;
+
+use common::{Rng, all_bricks, geometry, orbit_camera, random_map, synthetic};
+use glam::{DMat3, DVec3};
+use nelf_format::CoefficientEncoding;
+use nelf_format::conventions::PinholeCamera;
+use nelf_render::{
+    BrickGrid, MarchSettings, RenderError, asset_density, project_light, render_volume, render_volume_stats,
+    render_volume_unskipped, visibility_weights, voxel_radiance,
+};
+
+const SLAB_VOXEL_M: f64 = 0.005;
+/// Slab voxels along z: layers `SLAB_FIRST .. SLAB_FIRST + SLAB_LAYERS`.
+const SLAB_FIRST: usize = 8;
+const SLAB_LAYERS: usize = 10;
+
+/// A 2 × 2 × 4-brick grid (16 × 16 × 32 voxels of 5 mm, all bricks present) holding a
+/// slab of density `sigma` in voxel layers 8..18 along z, radiance `rgb` everywhere.
+fn slab(sigma: f32, rgb: [f32; 3]) -> (BrickGrid, Vec<f32>, Vec<[f32; 3]>) {
+    let grid = BrickGrid::new(
+        geometry([-0.04, -0.04, 0.0], SLAB_VOXEL_M, [2, 2, 4]),
+        all_bricks([2, 2, 4]),
+    )
+    .unwrap();
+    let density = (0..grid.voxel_count())
+        .map(|v| {
+            let k = grid.bricks()[v / 512][2] as usize * 8 + (v % 512) / 64;
+            if (SLAB_FIRST..SLAB_FIRST + SLAB_LAYERS).contains(&k) {
+                sigma
+            } else {
+                0.0
+            }
+        })
+        .collect();
+    (grid.clone(), density, vec![rgb; grid.voxel_count()])
+}
+
+/// Layer (global z index) of voxel `v` of the slab grid.
+fn layer(grid: &BrickGrid, v: usize) -> usize {
+    grid.bricks()[v / 512][2] as usize * 8 + (v % 512) / 64
+}
+
+/// A 9 × 9 camera 1 m in front of the slab grid looking along +z, 2° field of view.
+fn head_on_camera() -> PinholeCamera {
+    PinholeCamera::look_at(
+        DVec3::new(0.0, 0.0, -1.0),
+        DVec3::new(0.0, 0.0, 1.0),
+        DVec3::Y,
+        9,
+        9,
+        2f64.to_radians(),
+    )
+}
+
+#[test]
+fn homogeneous_slab_gives_one_minus_exp_optical_depth() {
+    // σ L = 40 1/m × 10 voxels × 5 mm = 2. With Δ = ½ voxel and the ray entering on a voxel
+    // face, every sample interval lies inside one linear piece of the trilinear profile, so
+    // the midpoint sum of σ is exact and rgb = c (1 − e^{−σL}) up to f32 rounding head-on.
+    let c = [0.2f32, 0.5, 1.0];
+    let (grid, density, radiance) = slab(40.0, c);
+    let camera = head_on_camera();
+    let image = render_volume(&grid, &density, &radiance, &camera, &MarchSettings::default()).unwrap();
+    let optical_depth = 40.0 * SLAB_LAYERS as f64 * SLAB_VOXEL_M;
+    let want = 1.0 - (-optical_depth).exp();
+    assert!(
+        (f64::from(image.alpha_at(4, 4)) - want).abs() < 2e-6,
+        "{} vs {want}",
+        image.alpha_at(4, 4)
+    );
+    for (got, c) in image.rgb_at(4, 4).into_iter().zip(c) {
+        let (got, c) = (f64::from(got), f64::from(c));
+        assert!((got - c * want).abs() < 2e-6 * c, "{got}");
+    }
+    // Off-axis rays cross the slab obliquely: path length L / cos θ, midpoint error small.
+    for v in 0..9 {
+        for u in 0..9 {
+            let (_, d) = camera.pixel_ray(u, v);
+            let want = 1.0 - (-optical_depth / d.z).exp();
+            let got = f64::from(image.alpha_at(u, v));
+            assert!((got - want).abs() < 1e-4, "pixel ({u}, {v}): {got} vs {want}");
+            assert!((f64::from(image.rgb_at(u, v)[1]) - 0.5 * got).abs() < 1e-6);
+        }
+    }
+}
+
+#[test]
+fn opaque_slab_terminates_early() {
+    let c = [1.0f32, 0.25, 0.5];
+    let (grid, density, radiance) = slab(400.0, c);
+    let camera = head_on_camera();
+    let settings = MarchSettings::default();
+    let (image, stats) = render_volume_stats(&grid, &density, &radiance, &camera, &settings).unwrap();
+    let alpha = image.alpha_at(4, 4);
+    // Stopped right after T fell below 1e-3: each plateau sample multiplies T by e^{−1}.
+    assert!(
+        alpha > 1.0 - 1e-3 && alpha < 1.0 - 1e-3 * (-1.01f32).exp(),
+        "alpha {alpha}"
+    );
+    for (got, c) in image.rgb_at(4, 4).into_iter().zip(c) {
+        assert!((got - c * alpha).abs() < 1e-5);
+    }
+    // Without termination every ray takes all its 64 samples (the grid is 32 voxels deep).
+    let no_stop = MarchSettings {
+        min_transmittance: 0.0,
+        ..settings
+    };
+    let (full, full_stats) = render_volume_stats(&grid, &density, &radiance, &camera, &no_stop).unwrap();
+    assert!(full.alpha_at(4, 4) > 1.0 - 1e-6);
+    assert!(stats.samples_evaluated * 2 < full_stats.samples_evaluated);
+    assert_eq!(full_stats.samples_evaluated, 81 * 64);
+}
+
+#[test]
+fn rays_missing_the_box_see_nothing_and_cameras_inside_work() {
+    let (grid, density, radiance) = slab(40.0, [1.0; 3]);
+    let away = PinholeCamera::look_at(
+        DVec3::new(0.0, 0.0, -1.0),
+        DVec3::new(0.0, 0.0, -2.0),
+        DVec3::Y,
+        5,
+        5,
+        0.5,
+    );
+    let image = render_volume(&grid, &density, &radiance, &away, &MarchSettings::default()).unwrap();
+    assert!(image.alpha.iter().all(|&a| a == 0.0) && image.rgb.iter().all(|c| *c == [0.0; 3]));
+    // From inside the slab, looking back out of it: only the slab in front is seen.
+    let inside = PinholeCamera::look_at(
+        DVec3::new(0.0, 0.0, 0.065),
+        DVec3::new(0.0, 0.0, -1.0),
+        DVec3::Y,
+        5,
+        5,
+        0.01,
+    );
+    let image = render_volume(&grid, &density, &radiance, &inside, &MarchSettings::default()).unwrap();
+    // From z = 65 mm (voxel coordinate 13) back to z = 0: a plateau from the last centre at
+    // 8.5 to 13 (4.5 voxels) plus the ramp from 8.5 to 7.5 (½ voxel of σ): σ · 5 voxels.
+    let want = 1.0 - (-40.0f64 * 5.0 * SLAB_VOXEL_M).exp();
+    assert!(
+        (f64::from(image.alpha_at(2, 2)) - want).abs() < 1e-5,
+        "{} vs {want}",
+        image.alpha_at(2, 2)
+    );
+}
+
+#[test]
+fn empty_space_skipping_changes_nothing() {
+    let asset = synthetic(60_000, 6, CoefficientEncoding::U8Affine, 5);
+    let grid = BrickGrid::from_asset(&asset).unwrap();
+    let density = asset_density(&asset);
+    let env = random_map(32, 16, 4, 2.0);
+    let light = project_light(&asset.pca, asset.world_from_light, &env, DMat3::IDENTITY).unwrap();
+    let radiance = voxel_radiance(&asset, &light, None);
+    let inside = PinholeCamera::look_at(
+        DVec3::new(0.02, 0.03, -0.01),
+        DVec3::new(0.5, -0.2, 1.0),
+        DVec3::Y,
+        40,
+        32,
+        1.5,
+    );
+    let cameras = [
+        orbit_camera(0.0, 0.0, 0.6, 40, 32),
+        orbit_camera(37.0, 21.0, 0.45, 40, 32),
+        orbit_camera(-123.0, -64.0, 0.8, 33, 27),
+        inside,
+    ];
+    for settings in [
+        MarchSettings::default(),
+        MarchSettings {
+            step_voxels: 0.37,
+            min_transmittance: 0.0,
+        },
+        MarchSettings {
+            step_voxels: 1.3,
+            min_transmittance: 0.05,
+        },
+    ] {
+        for (n, camera) in cameras.iter().enumerate() {
+            let (skipped, stats) =
+                render_volume_stats(&grid, &density, &radiance, camera, &settings).unwrap();
+            let reference = render_volume_unskipped(&grid, &density, &radiance, camera, &settings).unwrap();
+            assert_eq!(skipped, reference, "camera {n}, {settings:?}");
+            // The shell's 6³-brick grid has empty bricks inside and in the corners.
+            assert!(
+                stats.samples_skipped > stats.samples_evaluated / 10,
+                "camera {n}: {stats:?}"
+            );
+            assert!(skipped.alpha.iter().any(|&a| a > 0.5));
+        }
+    }
+}
+
+#[test]
+fn visibility_weights_are_the_gradient_of_image_brightness() {
+    // Σ_pixels rgb = Σ_v weight_v · r_v for any per-voxel grey radiance r.
+    let asset = synthetic(12_000, 4, CoefficientEncoding::F16, 8);
+    let grid = BrickGrid::from_asset(&asset).unwrap();
+    let density = asset_density(&asset);
+    let camera = orbit_camera(20.0, 10.0, 0.5, 36, 28);
+    let settings = MarchSettings::default();
+    let mut weights = vec![0.0f32; grid.voxel_count()];
+    visibility_weights(&grid, &density, &camera, &settings, &mut weights).unwrap();
+    assert!(weights.iter().all(|&w| w >= 0.0));
+    let mut rng = Rng::new(3);
+    for _ in 0..3 {
+        let grey: Vec<f32> = (0..grid.voxel_count()).map(|_| rng.next()).collect();
+        let radiance: Vec<[f32; 3]> = grey.iter().map(|&g| [g, 2.0 * g, 1.0]).collect();
+        let image = render_volume(&grid, &density, &radiance, &camera, &settings).unwrap();
+        let image_sum: f64 = image.rgb.iter().map(|c| f64::from(c[0])).sum();
+        let weighted: f64 = weights
+            .iter()
+            .zip(&grey)
+            .map(|(&w, &g)| f64::from(w) * f64::from(g))
+            .sum();
+        assert!(
+            (image_sum - weighted).abs() < 1e-4 * image_sum,
+            "{image_sum} vs {weighted}"
+        );
+        // With radiance 1 everywhere the identity is Σ pixels = Σ weights.
+        let ones: f64 = image.rgb.iter().map(|c| f64::from(c[2])).sum();
+        let total: f64 = weights.iter().map(|&w| f64::from(w)).sum();
+        assert!(
+            (ones - total).abs() < 1e-4 * total && total > 10.0,
+            "{ones} vs {total}"
+        );
+    }
+    // Calling again accumulates.
+    let mut twice = weights.clone();
+    visibility_weights(&grid, &density, &camera, &settings, &mut twice).unwrap();
+    for (a, b) in weights.iter().zip(&twice) {
+        assert!((2.0 * a - b).abs() <= 1e-6 * b.abs());
+    }
+}
+
+#[test]
+fn voxels_behind_an_opaque_slab_get_no_weight() {
+    let (grid, density, _) = slab(400.0, [1.0; 3]);
+    let camera = head_on_camera();
+    let mut weights = vec![0.0f32; grid.voxel_count()];
+    visibility_weights(&grid, &density, &camera, &MarchSettings::default(), &mut weights).unwrap();
+    let by_layer = |range: std::ops::Range<usize>| -> f32 {
+        (0..grid.voxel_count())
+            .filter(|&v| range.contains(&layer(&grid, v)))
+            .map(|v| weights[v])
+            .sum()
+    };
+    assert!(by_layer(SLAB_FIRST..SLAB_FIRST + 2) > 10.0);
+    assert_eq!(by_layer(SLAB_FIRST + 6..32), 0.0);
+    assert_eq!(by_layer(0..SLAB_FIRST - 1), 0.0);
+}
+
+#[test]
+fn bad_inputs_are_refused() {
+    let (grid, density, radiance) = slab(40.0, [1.0; 3]);
+    let camera = head_on_camera();
+    let ok = MarchSettings::default();
+    let short = &density[1..];
+    assert!(matches!(
+        render_volume(&grid, short, &radiance, &camera, &ok),
+        Err(RenderError::LengthMismatch { what: "density", .. })
+    ));
+    assert!(matches!(
+        render_volume(&grid, &density, &radiance[1..], &camera, &ok),
+        Err(RenderError::LengthMismatch { what: "radiance", .. })
+    ));
+    let mut weights = vec![0.0; 3];
+    assert!(visibility_weights(&grid, &density, &camera, &ok, &mut weights).is_err());
+    for bad in [
+        MarchSettings {
+            step_voxels: 0.0,
+            ..ok
+        },
+        MarchSettings {
+            step_voxels: f32::NAN,
+            ..ok
+        },
+        MarchSettings {
+            min_transmittance: 1.0,
+            ..ok
+        },
+    ] {
+        assert!(matches!(
+            render_volume(&grid, &density, &radiance, &camera, &bad),
+            Err(RenderError::BadSettings(_))
+        ));
+    }
+    let mut broken = camera;
+    broken.rotation = DMat3::from_diagonal(DVec3::new(1.0, 1.0, -1.0));
+    let err = render_volume(&grid, &density, &radiance, &broken, &ok).unwrap_err();
+    assert!(err.to_string().contains("not a rotation"), "{err}");
+}
