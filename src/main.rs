@@ -19,6 +19,8 @@ enum Command {
     Inspect(cmd::inspect::InspectArgs),
     /// Make capture folders (synthetic captures rendered by the path tracer).
     Capture(cmd::capture::CaptureArgs),
+    /// Render a .nelf asset under an environment map (CPU reference renderer).
+    Render(cmd::render::RenderArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -26,5 +28,6 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Inspect(args) => cmd::inspect::run(&args),
         Command::Capture(args) => cmd::capture::run(&args),
+        Command::Render(args) => cmd::render::run(&args),
     }
 }
