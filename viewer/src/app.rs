@@ -1,0 +1,806 @@
+//! The interactive viewer (`nelf view ASSET`): an eframe/egui window whose central
+//! area is drawn by [`GpuRenderer`] on eframe's own wgpu device, through an
+//! `egui_wgpu` paint callback (relight + march in `prepare`, the tone-mapping display
+//! pass in `paint`).
+//!
+//! Controls: drag to orbit, right/middle-drag (or shift-drag) to pan, scroll to zoom;
+//! environment maps from a built-in list (given by the caller), a path field, or
+//! drag-and-drop of EXR/HDR files (and of `.nelf` files, which replace the asset);
+//! rotation slider and auto-rotate; exposure and tone curve; a PCA rank slider that
+//! truncates `K`; debug views (density, alpha, one PCA component); frame time; F12 or
+//! the button saves a screenshot of the window.
+//!
+//! **Lighting at start**: `--envmap FILE` if given; else the capture's light sitting
+//! beside the asset — `<asset stem>.light.exr` / `.light.hdr` in the asset's folder, or
+//! the `envmap` of a capture folder (`cameras.json`) that holds the asset; else the
+//! first built-in map; else a uniform white sky.
+//!
+//! **Errors never end the app**: an unreadable or damaged asset or environment map, or
+//! a GPU error, is shown in the window (red text) and the app keeps running.
+
+use std::path::{Path, PathBuf};
+use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::{Arc, Mutex};
+
+use eframe::egui;
+use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait};
+use glam::DVec3;
+use nelf_format::conventions::{LatLong, PinholeCamera, rotation_y};
+use nelf_render::MarchSettings;
+
+use crate::atlas::RelightView;
+use crate::error::ViewerError;
+use crate::gpu::{DisplaySettings, GpuRenderer, MarchView, ToneMap, ViewSettings};
+
+/// A named environment map offered in the picker.
+#[derive(Debug, Clone)]
+pub struct NamedEnvmap {
+    /// Name shown.
+    pub name: String,
+    /// The map (lat-long, linear, world frame).
+    pub env: LatLong,
+}
+
+/// Loads an environment map file (EXR/HDR) into a lat-long map, or says why not.
+/// The `nelf` command passes `nelf_scene::envmap::load_envmap`.
+pub type EnvmapLoader = Box<dyn Fn(&Path) -> Result<LatLong, String> + Send>;
+
+/// How to start the viewer.
+pub struct ViewerConfig {
+    /// The asset to show (`None`: start empty; drop a `.nelf` on the window).
+    pub asset_path: Option<PathBuf>,
+    /// An environment map file to light it with.
+    pub envmap_path: Option<PathBuf>,
+    /// Built-in maps for the picker (e.g. procedural skies).
+    pub builtin_envmaps: Vec<NamedEnvmap>,
+    /// Loader for EXR/HDR files.
+    pub load_envmap: EnvmapLoader,
+    /// Save a screenshot of the window here after [`ViewerConfig::screenshot_after_frames`] frames.
+    pub screenshot_path: Option<PathBuf>,
+    /// Frames drawn before the screenshot is taken.
+    pub screenshot_after_frames: u32,
+    /// Close the window once the screenshot is saved.
+    pub exit_after_screenshot: bool,
+    /// Initial window size in points.
+    pub window_size: [f32; 2],
+}
+
+impl std::fmt::Debug for ViewerConfig {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ViewerConfig")
+            .field("asset_path", &self.asset_path)
+            .field("envmap_path", &self.envmap_path)
+            .field("builtin_envmaps", &self.builtin_envmaps.len())
+            .field("screenshot_path", &self.screenshot_path)
+            .field("screenshot_after_frames", &self.screenshot_after_frames)
+            .field("exit_after_screenshot", &self.exit_after_screenshot)
+            .field("window_size", &self.window_size)
+            .finish_non_exhaustive()
+    }
+}
+
+impl ViewerConfig {
+    /// A configuration showing `asset_path` with `load_envmap` as the file loader.
+    pub fn new(asset_path: Option<PathBuf>, load_envmap: EnvmapLoader) -> Self {
+        Self {
+            asset_path,
+            envmap_path: None,
+            builtin_envmaps: Vec::new(),
+            load_envmap,
+            screenshot_path: None,
+            screenshot_after_frames: 3,
+            exit_after_screenshot: false,
+            window_size: [1280.0, 800.0],
+        }
+    }
+}
+
+/// Opens the viewer window and runs until it is closed.
+pub fn run_viewer(config: ViewerConfig) -> Result<(), ViewerError> {
+    let options = eframe::NativeOptions {
+        viewport: egui::ViewportBuilder::default()
+            .with_title("nelf view")
+            .with_inner_size(config.window_size)
+            .with_drag_and_drop(true),
+        renderer: eframe::Renderer::Wgpu,
+        ..Default::default()
+    };
+    eframe::run_native(
+        "nelf view",
+        options,
+        Box::new(move |cc| Ok(Box::new(ViewerApp::new(cc, config)))),
+    )
+    .map_err(|e| ViewerError::App(e.to_string()))
+}
+
+/// GPU state kept in `egui_wgpu`'s callback resources (shared with the paint callback).
+struct ViewerGpu {
+    renderer: GpuRenderer,
+    format: eframe::wgpu::TextureFormat,
+    /// Error of the last frame's GPU work, shown by the UI.
+    frame_error: Arc<Mutex<Option<String>>>,
+    /// Whether the last `prepare` succeeded (so `paint` has something to draw).
+    frame_ready: bool,
+}
+
+/// One frame's drawing request.
+struct FrameCallback {
+    camera: PinholeCamera,
+    settings: ViewSettings,
+    display: DisplaySettings,
+}
+
+impl CallbackTrait for FrameCallback {
+    fn prepare(
+        &self,
+        _device: &eframe::wgpu::Device,
+        _queue: &eframe::wgpu::Queue,
+        _screen: &egui_wgpu::ScreenDescriptor,
+        encoder: &mut eframe::wgpu::CommandEncoder,
+        resources: &mut CallbackResources,
+    ) -> Vec<eframe::wgpu::CommandBuffer> {
+        if let Some(gpu) = resources.get_mut::<ViewerGpu>() {
+            match gpu.renderer.encode_frame(encoder, &self.camera, &self.settings) {
+                Ok(()) => {
+                    gpu.renderer
+                        .prepare_display(gpu.format, &self.display, self.settings.view);
+                    gpu.frame_ready = true;
+                }
+                Err(e) => {
+                    gpu.frame_ready = false;
+                    if let Ok(mut slot) = gpu.frame_error.lock() {
+                        *slot = Some(e.to_string());
+                    }
+                }
+            }
+        }
+        Vec::new()
+    }
+
+    fn paint(
+        &self,
+        _info: egui::PaintCallbackInfo,
+        pass: &mut eframe::wgpu::RenderPass<'static>,
+        resources: &CallbackResources,
+    ) {
+        if let Some(gpu) = resources.get::<ViewerGpu>()
+            && gpu.frame_ready
+        {
+            gpu.renderer.paint(pass, gpu.format);
+        }
+    }
+}
+
+/// The debug views offered in the UI.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum DebugView {
+    Shaded,
+    Density,
+    Alpha,
+    Component,
+}
+
+/// Orbit camera around a target.
+#[derive(Debug, Clone, Copy)]
+struct Orbit {
+    target: DVec3,
+    yaw_rad: f64,
+    pitch_rad: f64,
+    distance_m: f64,
+    fov_x_rad: f64,
+}
+
+impl Orbit {
+    /// Frames a box: looks at its centre from +z (the front of a head).
+    fn framing(min: [f64; 3], max: [f64; 3]) -> Self {
+        let lo = DVec3::from_array(min);
+        let hi = DVec3::from_array(max);
+        let radius = 0.5 * (hi - lo).length();
+        let fov_x_rad = 40f64.to_radians();
+        Self {
+            target: 0.5 * (lo + hi),
+            yaw_rad: 0.0,
+            pitch_rad: 0.0,
+            distance_m: (radius / (0.5 * fov_x_rad).sin()).max(1e-3),
+            fov_x_rad,
+        }
+    }
+
+    fn eye(&self) -> DVec3 {
+        let (sy, cy) = self.yaw_rad.sin_cos();
+        let (sp, cp) = self.pitch_rad.sin_cos();
+        self.target + self.distance_m * DVec3::new(cp * sy, sp, cp * cy)
+    }
+
+    fn camera(&self, width: u32, height: u32) -> PinholeCamera {
+        PinholeCamera::look_at(self.eye(), self.target, DVec3::Y, width, height, self.fov_x_rad)
+    }
+
+    /// Moves the target in the image plane by `(dx, dy)` points of a view `width` points wide.
+    fn pan(&mut self, dx: f64, dy: f64, width: f64) {
+        let forward = (self.target - self.eye()).normalize();
+        let right = forward.cross(DVec3::Y).normalize();
+        let up = right.cross(forward);
+        let metres_per_point = 2.0 * self.distance_m * (0.5 * self.fov_x_rad).tan() / width.max(1.0);
+        self.target += (-dx * right + dy * up) * metres_per_point;
+    }
+}
+
+/// The loaded map and its name.
+struct CurrentEnv {
+    name: String,
+    env: LatLong,
+}
+
+struct ViewerApp {
+    builtin: Vec<NamedEnvmap>,
+    loaded_envs: Vec<NamedEnvmap>,
+    load_envmap: EnvmapLoader,
+    env: Option<CurrentEnv>,
+    env_path_text: String,
+    asset_path: Option<PathBuf>,
+    asset_rank: usize,
+    max_density_per_m: f32,
+    orbit: Option<Orbit>,
+    rotation_deg: f32,
+    auto_rotate: bool,
+    auto_rotate_deg_per_s: f32,
+    exposure_ev: f32,
+    tone_map: ToneMap,
+    rank: usize,
+    debug_view: DebugView,
+    component: usize,
+    render_scale: f32,
+    jitter: bool,
+    frame_index: u32,
+    frame_ms_smoothed: f32,
+    march_size: [u32; 2],
+    errors: Vec<String>,
+    frame_error: Arc<Mutex<Option<String>>>,
+    gpu_ok: bool,
+    screenshots: Screenshots,
+    applied: AppliedLighting,
+}
+
+/// A screenshot on its way: the path to save it to (`None`: a numbered file) and the image.
+type ScreenshotMessage = (Option<PathBuf>, Arc<egui::ColorImage>);
+
+/// Screenshot requests: the scripted one (`--screenshot`) and the key/button ones.
+struct Screenshots {
+    /// Scripted screenshot path.
+    path: Option<PathBuf>,
+    /// Frames before the scripted screenshot.
+    after_frames: u32,
+    /// Close the window after the scripted screenshot.
+    exit_after: bool,
+    /// Whether the scripted screenshot was requested.
+    requested: bool,
+    /// Numbered screenshots saved so far.
+    taken: u32,
+    /// Frames shown so far.
+    frames_shown: u32,
+    sender: Sender<ScreenshotMessage>,
+    receiver: Receiver<ScreenshotMessage>,
+}
+
+/// What the renderer was last told, to send only changes.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+struct AppliedLighting {
+    rotation_deg: f32,
+    rank: usize,
+    view: RelightView,
+}
+
+impl ViewerApp {
+    fn new(cc: &eframe::CreationContext<'_>, config: ViewerConfig) -> Self {
+        let (screenshot_sender, screenshot_receiver) = channel();
+        let mut app = Self {
+            builtin: config.builtin_envmaps,
+            loaded_envs: Vec::new(),
+            load_envmap: config.load_envmap,
+            env: None,
+            env_path_text: String::new(),
+            asset_path: None,
+            asset_rank: 0,
+            max_density_per_m: 1.0,
+            orbit: None,
+            rotation_deg: 0.0,
+            auto_rotate: false,
+            auto_rotate_deg_per_s: 30.0,
+            exposure_ev: 0.0,
+            tone_map: ToneMap::Aces,
+            rank: 0,
+            debug_view: DebugView::Shaded,
+            component: 0,
+            render_scale: 1.0,
+            jitter: true,
+            frame_index: 0,
+            frame_ms_smoothed: 0.0,
+            march_size: [0, 0],
+            errors: Vec::new(),
+            frame_error: Arc::new(Mutex::new(None)),
+            gpu_ok: false,
+            screenshots: Screenshots {
+                path: config.screenshot_path,
+                after_frames: config.screenshot_after_frames,
+                exit_after: config.exit_after_screenshot,
+                requested: false,
+                taken: 0,
+                frames_shown: 0,
+                sender: screenshot_sender,
+                receiver: screenshot_receiver,
+            },
+            applied: AppliedLighting::default(),
+        };
+        match &cc.wgpu_render_state {
+            Some(state) => match GpuRenderer::from_device(state.device.clone(), state.queue.clone()) {
+                Ok(renderer) => {
+                    state.renderer.write().callback_resources.insert(ViewerGpu {
+                        renderer,
+                        format: state.target_format,
+                        frame_error: Arc::clone(&app.frame_error),
+                        frame_ready: false,
+                    });
+                    app.gpu_ok = true;
+                }
+                Err(e) => app.errors.push(format!("GPU renderer: {e}")),
+            },
+            None => app
+                .errors
+                .push("no wgpu render state: the viewer needs eframe's wgpu renderer".into()),
+        }
+        if let Some(path) = config.asset_path {
+            app.load_asset(cc.wgpu_render_state.as_ref(), &path);
+        }
+        // Lighting at start: --envmap, else the capture's light beside the asset, else a built-in.
+        let start_env = config
+            .envmap_path
+            .clone()
+            .or_else(|| app.asset_path.as_deref().and_then(capture_light_beside));
+        let mut have_env = false;
+        if let Some(path) = start_env {
+            have_env = app.load_env_file(cc.wgpu_render_state.as_ref(), &path);
+        }
+        if !have_env {
+            let first = app.builtin.first().cloned().unwrap_or_else(|| NamedEnvmap {
+                name: "uniform white".into(),
+                env: LatLong::constant(16, 8, [1.0; 3]),
+            });
+            app.set_env(cc.wgpu_render_state.as_ref(), first.name, first.env);
+        }
+        app
+    }
+
+    fn with_gpu<R>(state: Option<&egui_wgpu::RenderState>, f: impl FnOnce(&mut ViewerGpu) -> R) -> Option<R> {
+        let state = state?;
+        let mut renderer = state.renderer.write();
+        renderer.callback_resources.get_mut::<ViewerGpu>().map(f)
+    }
+
+    /// Reads and uploads an asset; on any failure keeps the previous one and shows why.
+    fn load_asset(&mut self, state: Option<&egui_wgpu::RenderState>, path: &Path) {
+        let asset = match nelf_format::read_asset(path) {
+            Ok(a) => a,
+            Err(e) => {
+                self.errors.push(format!("cannot load {}: {e}", path.display()));
+                return;
+            }
+        };
+        let result = Self::with_gpu(state, |gpu| gpu.renderer.load_asset(&asset));
+        match result {
+            Some(Ok(info)) => {
+                self.asset_path = Some(path.to_path_buf());
+                self.asset_rank = info.rank;
+                self.rank = info.rank;
+                self.component = self.component.min(info.rank.saturating_sub(1));
+                self.max_density_per_m = info.max_density_per_m.max(1e-6);
+                self.orbit = Some(Orbit::framing(asset.grid.bbox_min_m, asset.grid.bbox_max_m()));
+                self.applied = AppliedLighting::default();
+                if let Some(env) = &self.env {
+                    let (name, env) = (env.name.clone(), env.env.clone());
+                    self.set_env(state, name, env);
+                }
+            }
+            Some(Err(e)) => self.errors.push(format!("cannot show {}: {e}", path.display())),
+            None => self
+                .errors
+                .push(format!("cannot show {}: no GPU renderer", path.display())),
+        }
+    }
+
+    /// Loads an EXR/HDR map with the caller's loader; true on success.
+    fn load_env_file(&mut self, state: Option<&egui_wgpu::RenderState>, path: &Path) -> bool {
+        match (self.load_envmap)(path) {
+            Ok(env) => {
+                let name = path.file_name().map_or_else(
+                    || path.display().to_string(),
+                    |n| n.to_string_lossy().into_owned(),
+                );
+                self.loaded_envs.retain(|e| e.name != name);
+                self.loaded_envs.push(NamedEnvmap {
+                    name: name.clone(),
+                    env: env.clone(),
+                });
+                self.set_env(state, name, env)
+            }
+            Err(e) => {
+                self.errors
+                    .push(format!("cannot load environment map {}: {e}", path.display()));
+                false
+            }
+        }
+    }
+
+    /// Makes `env` the lighting (projected at the current rotation); true on success.
+    fn set_env(&mut self, state: Option<&egui_wgpu::RenderState>, name: String, env: LatLong) -> bool {
+        let rotation = rotation_y(f64::from(self.rotation_deg).to_radians());
+        let has_asset = self.asset_path.is_some();
+        let result = if has_asset {
+            Self::with_gpu(state, |gpu| gpu.renderer.set_lighting(&env, rotation))
+        } else {
+            Some(Ok(()))
+        };
+        match result {
+            Some(Ok(())) => {
+                self.applied.rotation_deg = self.rotation_deg;
+                self.env = Some(CurrentEnv { name, env });
+                true
+            }
+            Some(Err(e)) => {
+                self.errors
+                    .push(format!("cannot use environment map {name}: {e}"));
+                false
+            }
+            None => false,
+        }
+    }
+
+    /// Sends rotation, rank and relight-view changes to the renderer.
+    fn apply_lighting_changes(&mut self, state: Option<&egui_wgpu::RenderState>) {
+        if self.asset_path.is_none() || self.env.is_none() {
+            return;
+        }
+        let view = if self.debug_view == DebugView::Component {
+            RelightView::Component(self.component)
+        } else {
+            RelightView::Shaded
+        };
+        let wanted = AppliedLighting {
+            rotation_deg: self.rotation_deg,
+            rank: self.rank,
+            view,
+        };
+        if wanted == self.applied {
+            return;
+        }
+        let rotation = rotation_y(f64::from(self.rotation_deg).to_radians());
+        let rotate = wanted.rotation_deg != self.applied.rotation_deg;
+        let rank = self.rank;
+        let result = Self::with_gpu(state, |gpu| {
+            gpu.renderer.set_rank(Some(rank));
+            gpu.renderer.set_relight_view(view);
+            if rotate {
+                gpu.renderer.set_light_rotation(rotation)
+            } else {
+                Ok(())
+            }
+        });
+        if let Some(Err(e)) = result {
+            self.errors.push(format!("relight: {e}"));
+        }
+        self.applied = wanted;
+    }
+
+    fn handle_dropped_files(&mut self, ctx: &egui::Context, state: Option<&egui_wgpu::RenderState>) {
+        let dropped: Vec<PathBuf> = ctx.input(|i| {
+            i.raw
+                .dropped_files
+                .iter()
+                .map(|f| f.path().to_path_buf())
+                .collect()
+        });
+        for path in dropped {
+            let ext = path
+                .extension()
+                .map(|e| e.to_string_lossy().to_ascii_lowercase())
+                .unwrap_or_default();
+            if ext == "nelf" {
+                self.load_asset(state, &path);
+            } else {
+                self.load_env_file(state, &path);
+            }
+        }
+    }
+
+    fn controls(&mut self, ui: &mut egui::Ui, state: Option<&egui_wgpu::RenderState>) {
+        ui.heading("nelf view");
+        match &self.asset_path {
+            Some(p) => ui.label(format!(
+                "asset: {}",
+                p.file_name()
+                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+            )),
+            None => ui.label("no asset: drop a .nelf file here"),
+        };
+        ui.label(format!(
+            "frame {:.1} ms ({:.0} fps), march {}×{}",
+            self.frame_ms_smoothed,
+            if self.frame_ms_smoothed > 0.0 {
+                1000.0 / self.frame_ms_smoothed
+            } else {
+                0.0
+            },
+            self.march_size[0],
+            self.march_size[1]
+        ));
+        ui.separator();
+
+        ui.label("Lighting");
+        let current = self.env.as_ref().map(|e| e.name.clone()).unwrap_or_default();
+        let mut choice: Option<NamedEnvmap> = None;
+        egui::ComboBox::from_id_salt("envmap")
+            .selected_text(current.clone())
+            .show_ui(ui, |ui| {
+                for e in self.builtin.iter().chain(&self.loaded_envs) {
+                    if ui.selectable_label(e.name == current, &e.name).clicked() {
+                        choice = Some(e.clone());
+                    }
+                }
+            });
+        if let Some(e) = choice {
+            self.set_env(state, e.name, e.env);
+        }
+        ui.horizontal(|ui| {
+            ui.add(
+                egui::TextEdit::singleline(&mut self.env_path_text)
+                    .hint_text("EXR/HDR path")
+                    .desired_width(150.0),
+            );
+            if ui.button("Load").clicked() {
+                let path = PathBuf::from(self.env_path_text.trim());
+                self.load_env_file(state, &path);
+            }
+        });
+        ui.label("(or drop an EXR/HDR file on the window)");
+        ui.add(egui::Slider::new(&mut self.rotation_deg, -180.0..=180.0).text("rotation °"));
+        ui.horizontal(|ui| {
+            ui.checkbox(&mut self.auto_rotate, "auto-rotate");
+            ui.add(
+                egui::DragValue::new(&mut self.auto_rotate_deg_per_s)
+                    .speed(1.0)
+                    .suffix(" °/s"),
+            );
+        });
+        ui.add(egui::Slider::new(&mut self.exposure_ev, -8.0..=8.0).text("exposure EV"));
+        egui::ComboBox::from_id_salt("tonemap")
+            .selected_text(match self.tone_map {
+                ToneMap::Aces => "ACES",
+                ToneMap::Linear => "linear",
+            })
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut self.tone_map, ToneMap::Aces, "ACES");
+                ui.selectable_value(&mut self.tone_map, ToneMap::Linear, "linear");
+            });
+        ui.separator();
+
+        ui.label("PCA");
+        ui.add(egui::Slider::new(&mut self.rank, 0..=self.asset_rank).text("rank used"));
+        egui::ComboBox::from_id_salt("view")
+            .selected_text(match self.debug_view {
+                DebugView::Shaded => "shaded",
+                DebugView::Density => "density",
+                DebugView::Alpha => "alpha",
+                DebugView::Component => "one component",
+            })
+            .show_ui(ui, |ui| {
+                ui.selectable_value(&mut self.debug_view, DebugView::Shaded, "shaded");
+                ui.selectable_value(&mut self.debug_view, DebugView::Density, "density");
+                ui.selectable_value(&mut self.debug_view, DebugView::Alpha, "alpha");
+                ui.selectable_value(&mut self.debug_view, DebugView::Component, "one component");
+            });
+        if self.debug_view == DebugView::Component {
+            ui.add(
+                egui::Slider::new(&mut self.component, 0..=self.asset_rank.saturating_sub(1))
+                    .text("component"),
+            );
+        }
+        ui.separator();
+
+        ui.label("Rendering");
+        ui.add(egui::Slider::new(&mut self.render_scale, 0.25..=1.0).text("resolution scale"));
+        ui.checkbox(&mut self.jitter, "jitter samples");
+        if ui.button("Screenshot (F12)").clicked() {
+            self.request_screenshot(ui.ctx(), None);
+        }
+        if !self.errors.is_empty() {
+            ui.separator();
+            for e in &self.errors {
+                ui.colored_label(egui::Color32::from_rgb(255, 90, 90), e);
+            }
+            if ui.button("Clear errors").clicked() {
+                self.errors.clear();
+            }
+        }
+    }
+
+    fn request_screenshot(&mut self, ctx: &egui::Context, path: Option<PathBuf>) {
+        let sender = self.screenshots.sender.clone();
+        ctx.request_screenshot(move |image| {
+            let _ = sender.send((path, image));
+        });
+        ctx.request_repaint();
+    }
+
+    fn save_screenshots(&mut self, ctx: &egui::Context) {
+        while let Ok((path, image)) = self.screenshots.receiver.try_recv() {
+            let scripted = path.is_some();
+            let path = path.unwrap_or_else(|| {
+                self.screenshots.taken += 1;
+                PathBuf::from(format!("nelf-screenshot-{:03}.png", self.screenshots.taken))
+            });
+            match save_color_image(&image, &path) {
+                Ok(()) => eprintln!("nelf view: saved screenshot {}", path.display()),
+                Err(e) => self
+                    .errors
+                    .push(format!("cannot save screenshot {}: {e}", path.display())),
+            }
+            if scripted && self.screenshots.exit_after {
+                ctx.send_viewport_cmd(egui::ViewportCommand::Close);
+            }
+        }
+    }
+
+    fn viewport(&mut self, ui: &mut egui::Ui) {
+        let rect = ui.available_rect_before_wrap();
+        let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
+        let Some(orbit) = self.orbit.as_mut() else {
+            ui.centered_and_justified(|ui| {
+                ui.label("No asset loaded. Drop a .nelf file on the window.");
+            });
+            return;
+        };
+        let shift = ui.input(|i| i.modifiers.shift);
+        let delta = response.drag_delta();
+        if response.dragged_by(egui::PointerButton::Primary) && !shift {
+            orbit.yaw_rad -= f64::from(delta.x) * 0.01;
+            orbit.pitch_rad = (orbit.pitch_rad + f64::from(delta.y) * 0.01).clamp(-1.5, 1.5);
+        } else if response.dragged_by(egui::PointerButton::Secondary)
+            || response.dragged_by(egui::PointerButton::Middle)
+            || (response.dragged_by(egui::PointerButton::Primary) && shift)
+        {
+            orbit.pan(f64::from(delta.x), f64::from(delta.y), f64::from(rect.width()));
+        }
+        if response.hovered() {
+            let scroll = ui.input(|i| i.smooth_scroll_delta.y);
+            let zoom = ui.input(egui::InputState::zoom_delta);
+            orbit.distance_m *= (-f64::from(scroll) * 0.002).exp() / f64::from(zoom.max(1e-3));
+        }
+        let ppp = ui.ctx().pixels_per_point();
+        let width = ((rect.width() * ppp * self.render_scale).round() as u32).max(1);
+        let height = ((rect.height() * ppp * self.render_scale).round() as u32).max(1);
+        self.march_size = [width, height];
+        let camera = orbit.camera(width, height);
+        let view = match self.debug_view {
+            DebugView::Shaded | DebugView::Component => MarchView::Shaded,
+            DebugView::Density => MarchView::Density {
+                sigma_white_per_m: self.max_density_per_m,
+            },
+            DebugView::Alpha => MarchView::Alpha,
+        };
+        self.frame_index = self.frame_index.wrapping_add(1);
+        let callback = FrameCallback {
+            camera,
+            settings: ViewSettings {
+                march: MarchSettings::default(),
+                jitter: self.jitter,
+                frame_index: self.frame_index,
+                view,
+            },
+            display: DisplaySettings {
+                exposure_ev: self.exposure_ev,
+                tone_map: self.tone_map,
+                ..DisplaySettings::default()
+            },
+        };
+        ui.painter()
+            .add(egui_wgpu::Callback::new_paint_callback(rect, callback));
+    }
+}
+
+impl eframe::App for ViewerApp {
+    fn ui(&mut self, ui: &mut egui::Ui, frame: &mut eframe::Frame) {
+        let ctx = ui.ctx().clone();
+        let state = frame.wgpu_render_state().cloned();
+        let state = state.as_ref();
+        let dt = ctx.input(|i| i.unstable_dt);
+        self.frame_ms_smoothed = if self.frame_ms_smoothed == 0.0 {
+            dt * 1000.0
+        } else {
+            0.9 * self.frame_ms_smoothed + 0.1 * dt * 1000.0
+        };
+        self.handle_dropped_files(&ctx, state);
+        if self.auto_rotate {
+            self.rotation_deg += self.auto_rotate_deg_per_s * dt.min(0.1);
+            if self.rotation_deg > 180.0 {
+                self.rotation_deg -= 360.0;
+            } else if self.rotation_deg < -180.0 {
+                self.rotation_deg += 360.0;
+            }
+            ctx.request_repaint();
+        }
+        if ctx.input(|i| i.key_pressed(egui::Key::F12)) {
+            self.request_screenshot(&ctx, None);
+        }
+        if let Ok(mut slot) = self.frame_error.lock()
+            && let Some(e) = slot.take()
+            && self.errors.last() != Some(&e)
+        {
+            self.errors.push(e);
+        }
+        self.apply_lighting_changes(state);
+        egui::Panel::left("controls")
+            .resizable(false)
+            .default_size(280.0)
+            .show(ui, |ui| {
+                egui::ScrollArea::vertical().show(ui, |ui| self.controls(ui, state));
+            });
+        egui::CentralPanel::no_frame().show(ui, |ui| {
+            if self.gpu_ok {
+                self.viewport(ui);
+            } else {
+                ui.centered_and_justified(|ui| {
+                    ui.colored_label(egui::Color32::from_rgb(255, 90, 90), "GPU renderer unavailable");
+                });
+            }
+        });
+        self.save_screenshots(&ctx);
+        self.screenshots.frames_shown = self.screenshots.frames_shown.saturating_add(1);
+        if let Some(path) = self.screenshots.path.clone()
+            && !self.screenshots.requested
+        {
+            ctx.request_repaint();
+            if self.screenshots.frames_shown >= self.screenshots.after_frames {
+                self.screenshots.requested = true;
+                self.request_screenshot(&ctx, Some(path));
+            }
+        }
+    }
+}
+
+/// The light of the capture beside `asset`: `<stem>.light.exr|hdr` next to it, or the
+/// `envmap` of a capture folder (`cameras.json`) in the asset's folder.
+pub fn capture_light_beside(asset: &Path) -> Option<PathBuf> {
+    let dir = asset.parent()?;
+    let stem = asset.file_stem()?.to_string_lossy().into_owned();
+    for ext in ["exr", "hdr"] {
+        let candidate = dir.join(format!("{stem}.light.{ext}"));
+        if candidate.is_file() {
+            return Some(candidate);
+        }
+    }
+    let capture_dir = if dir.as_os_str().is_empty() {
+        Path::new(".")
+    } else {
+        dir
+    };
+    if capture_dir.join("cameras.json").is_file()
+        && let Ok(capture) = nelf_format::capture::Capture::load(capture_dir)
+    {
+        return capture.envmap_path(capture_dir).filter(|p| p.is_file());
+    }
+    None
+}
+
+/// Writes an egui screenshot as PNG.
+fn save_color_image(image: &egui::ColorImage, path: &Path) -> Result<(), String> {
+    let [w, h] = image.size;
+    let bytes: Vec<u8> = image.pixels.iter().flat_map(egui::Color32::to_array).collect();
+    let buffer =
+        image::RgbaImage::from_raw(w as u32, h as u32, bytes).ok_or("screenshot has the wrong size")?;
+    if let Some(parent) = path.parent()
+        && !parent.as_os_str().is_empty()
+    {
+        std::fs::create_dir_all(parent).map_err(|e| e.to_string())?;
+    }
+    buffer.save(path).map_err(|e| e.to_string())
+}

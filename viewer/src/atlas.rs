@@ -1,0 +1,450 @@
+//! How an asset is laid out in GPU memory (CPU side, no device needed).
+//!
+//! * **Atlas**: one slot of 10³ texels per brick — its 8³ voxels plus a 1-voxel apron
+//!   holding the neighbouring bricks' border voxels (0 where a neighbour is missing),
+//!   built by the relight pass. Hardware trilinear filtering of a point anywhere within
+//!   half a voxel of a brick's box then reads only that brick's slot and equals the
+//!   reference's trilinear interpolation across brick borders (`nelf_render::grid`).
+//!   Slot `s` (= brick index `s`, file order) sits at slot coordinates
+//!   `(s mod 2^x_bits, (s >> x_bits) mod 2^y_bits, s >> (x_bits + y_bits))`: powers of two
+//!   along x and y make the shaders' slot addressing bit operations.
+//! * **Indirection grid**: one `u32` per brick cell of the grid (x fastest), 0 for a
+//!   missing brick, else brick index + 1; it drives empty-space skipping and the apron
+//!   build.
+//! * **Coefficients** stay as stored (8-bit codes or f16 halves), packed into `u32`
+//!   words, `⌈K/4⌉` or `⌈K/2⌉` words per voxel; the dequantisation is folded into the
+//!   projected lighting ([`fold_light`]).
+
+use nelf_format::Coefficients;
+use nelf_format::spec::BRICK_VOXELS;
+use nelf_render::ProjectedLight;
+
+use crate::error::ViewerError;
+
+/// Texels along an atlas slot edge (8 voxels + 2 apron voxels).
+pub const SLOT_TEXELS: u32 = 10;
+/// Largest indirection grid (brick cells) the viewer builds: 2²⁴ cells = 64 MiB.
+pub const MAX_INDIRECTION_CELLS: u64 = 1 << 24;
+
+/// Placement of brick slots in the atlas.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct AtlasLayout {
+    /// log2 of the slot count along x.
+    pub x_bits: u32,
+    /// log2 of the slot count along y.
+    pub y_bits: u32,
+    /// Slot count along z.
+    pub slots_z: u32,
+    /// Slots in use (= bricks).
+    pub slot_count: u32,
+}
+
+impl AtlasLayout {
+    /// A near-cubic layout for `bricks` slots whose texel extent fits `max_texels` per
+    /// axis (the device's `max_texture_dimension_3d`).
+    pub fn for_bricks(bricks: usize, max_texels: u32) -> Result<Self, ViewerError> {
+        let max_slots = max_texels / SLOT_TEXELS;
+        if max_slots == 0 {
+            return Err(ViewerError::TooLarge(format!(
+                "3D textures limited to {max_texels} texels"
+            )));
+        }
+        let max_pow2_bits = max_slots.ilog2();
+        let n = bricks.max(1) as f64;
+        let want_x = n.cbrt().ceil() as u32;
+        let x_bits = want_x.max(1).next_power_of_two().ilog2().min(max_pow2_bits);
+        let want_y = (n / f64::from(1u32 << x_bits)).sqrt().ceil() as u32;
+        let y_bits = want_y.max(1).next_power_of_two().ilog2().min(max_pow2_bits);
+        let per_layer = 1u64 << (x_bits + y_bits);
+        let slots_z = (bricks.max(1) as u64).div_ceil(per_layer);
+        if slots_z > u64::from(max_slots) {
+            return Err(ViewerError::TooLarge(format!(
+                "{bricks} bricks need {slots_z} atlas layers of {per_layer} slots, the device allows {max_slots}"
+            )));
+        }
+        Ok(Self {
+            x_bits,
+            y_bits,
+            slots_z: slots_z as u32,
+            slot_count: bricks as u32,
+        })
+    }
+
+    /// Atlas size in texels.
+    pub fn texels(&self) -> [u32; 3] {
+        [
+            (1 << self.x_bits) * SLOT_TEXELS,
+            (1 << self.y_bits) * SLOT_TEXELS,
+            self.slots_z * SLOT_TEXELS,
+        ]
+    }
+
+    /// Slot coordinates (in slots) of slot `index` (the shaders' `slot_coords`).
+    pub fn slot_coords(&self, index: u32) -> [u32; 3] {
+        [
+            index & ((1 << self.x_bits) - 1),
+            (index >> self.x_bits) & ((1 << self.y_bits) - 1),
+            index >> (self.x_bits + self.y_bits),
+        ]
+    }
+
+    /// Atlas texel holding local voxel `local` (each in `-1..=8`) of brick `index`.
+    pub fn texel_of(&self, index: u32, local: [i32; 3]) -> [u32; 3] {
+        let s = self.slot_coords(index);
+        std::array::from_fn(|a| s[a] * SLOT_TEXELS + (local[a] + 1) as u32)
+    }
+}
+
+/// The indirection grid: `grid_bricks` cells, x fastest, 0 = missing, else brick index + 1.
+pub fn indirection_grid(grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Result<Vec<u32>, ViewerError> {
+    let cells = grid_bricks.iter().map(|&n| u64::from(n)).product::<u64>();
+    if cells > MAX_INDIRECTION_CELLS {
+        return Err(ViewerError::TooLarge(format!(
+            "grid of {grid_bricks:?} bricks has {cells} cells, the viewer's indirection grid holds at most \
+             {MAX_INDIRECTION_CELLS}"
+        )));
+    }
+    let mut table = vec![0u32; cells as usize];
+    let [nx, ny, _] = grid_bricks.map(|n| n as usize);
+    for (index, b) in bricks.iter().enumerate() {
+        if (0..3).any(|a| u32::from(b[a]) >= grid_bricks[a]) {
+            return Err(ViewerError::TooLarge(format!(
+                "brick {index} at {b:?} lies outside the grid {grid_bricks:?}"
+            )));
+        }
+        let [x, y, z] = b.map(usize::from);
+        table[x + nx * (y + ny * z)] = index as u32 + 1;
+    }
+    Ok(table)
+}
+
+/// Brick coordinates packed for the relight pass: `(x | y << 16, z)`.
+pub fn packed_bricks(bricks: &[[u16; 3]]) -> Vec<[u32; 2]> {
+    bricks
+        .iter()
+        .map(|b| [u32::from(b[0]) | (u32::from(b[1]) << 16), u32::from(b[2])])
+        .collect()
+}
+
+/// Coefficients as the relight pass reads them.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct PackedCoefficients {
+    /// Words, voxel-major, [`PackedCoefficients::words_per_voxel`] per voxel.
+    pub words: Vec<u32>,
+    /// `⌈K/4⌉` (8-bit) or `⌈K/2⌉` (f16).
+    pub words_per_voxel: u32,
+    /// 1 = 8-bit affine codes, 2 = f16 values (the shader's encoding number).
+    pub encoding: i32,
+}
+
+/// Packs stored coefficients (codes or halves, little-endian within a word).
+pub fn pack_coefficients(coefficients: &Coefficients) -> PackedCoefficients {
+    let rank = coefficients.rank().max(1);
+    match coefficients {
+        Coefficients::U8Affine { codes, .. } => {
+            let per_voxel = rank.div_ceil(4);
+            let mut words = vec![0u32; codes.len() / rank * per_voxel];
+            for (voxel, chunk) in codes.chunks_exact(rank).enumerate() {
+                for (k, &code) in chunk.iter().enumerate() {
+                    words[voxel * per_voxel + k / 4] |= u32::from(code) << (8 * (k % 4));
+                }
+            }
+            PackedCoefficients {
+                words,
+                words_per_voxel: per_voxel as u32,
+                encoding: 1,
+            }
+        }
+        Coefficients::F16 { values, .. } => {
+            let per_voxel = rank.div_ceil(2);
+            let mut words = vec![0u32; values.len() / rank * per_voxel];
+            for (voxel, chunk) in values.chunks_exact(rank).enumerate() {
+                for (k, v) in chunk.iter().enumerate() {
+                    words[voxel * per_voxel + k / 2] |= u32::from(v.to_bits()) << (16 * (k % 2));
+                }
+            }
+            PackedCoefficients {
+                words,
+                words_per_voxel: per_voxel as u32,
+                encoding: 2,
+            }
+        }
+    }
+}
+
+/// Densities (f16 bits) packed two per word, voxel order.
+pub fn pack_density(density: &[half::f16]) -> Vec<u32> {
+    density
+        .chunks(2)
+        .map(|pair| {
+            let lo = u32::from(pair[0].to_bits());
+            let hi = pair.get(1).map_or(0, |h| u32::from(h.to_bits()));
+            lo | (hi << 16)
+        })
+        .collect()
+}
+
+/// What the relight pass shows per voxel.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum RelightView {
+    /// Radiance with the first `rank` components.
+    #[default]
+    Shaded,
+    /// `|c_k · P_k|`: what component `k` alone adds under the current lighting.
+    Component(usize),
+}
+
+/// Lighting with the coefficient dequantisation folded in (see `relight.wgsl`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FoldedLight {
+    /// Radiance of a voxel whose codes are all 0.
+    pub mean_rgb: [f32; 3],
+    /// Per-code radiance of each component used, `[r, g, b, 0]`.
+    pub components: Vec<[f32; 4]>,
+}
+
+/// How stored coefficients turn into numbers: the part of [`Coefficients`] the
+/// lighting fold needs (no per-voxel data).
+#[derive(Debug, Clone, PartialEq)]
+pub enum Dequantization {
+    /// `c_k = offset_k + scale_k · code`.
+    Affine {
+        /// Per-component step.
+        scale: Vec<f32>,
+        /// Per-component value of code 0.
+        offset: Vec<f32>,
+    },
+    /// f16 values are the coefficients.
+    Identity {
+        /// Rank `K`.
+        rank: usize,
+    },
+}
+
+impl Dequantization {
+    /// The dequantisation of stored coefficients.
+    pub fn of(coefficients: &Coefficients) -> Self {
+        match coefficients {
+            Coefficients::U8Affine { scale, offset, .. } => Self::Affine {
+                scale: scale.clone(),
+                offset: offset.clone(),
+            },
+            Coefficients::F16 { rank, .. } => Self::Identity { rank: *rank },
+        }
+    }
+
+    /// Rank `K`.
+    pub fn rank(&self) -> usize {
+        match self {
+            Self::Affine { scale, .. } => scale.len(),
+            Self::Identity { rank } => *rank,
+        }
+    }
+}
+
+/// Folds 8-bit affine parameters into the projected lighting: with `c_k = o_k + s_k q_k`,
+/// `mean' = P_mean + Σ o_k P_k` and `light'_k = s_k P_k` (sums in `f64`); f16 coefficients
+/// pass through. `rank` components are used (clamped to what exists); for
+/// [`RelightView::Component`] only that one, without the mean.
+pub fn fold_light(
+    light: &ProjectedLight,
+    dequantization: &Dequantization,
+    rank: usize,
+    view: RelightView,
+) -> FoldedLight {
+    let stored = dequantization.rank().min(light.rank());
+    let (mut mean, count, only) = match view {
+        RelightView::Shaded => (light.mean_rgb.map(f64::from), rank.min(stored), None),
+        RelightView::Component(k) => ([0.0; 3], (k + 1).min(stored), Some(k)),
+    };
+    let mut components = Vec::with_capacity(count);
+    for k in 0..count {
+        let p = light.component_rgb[k];
+        if only.is_some_and(|o| o != k) {
+            components.push([0.0; 4]);
+            continue;
+        }
+        match dequantization {
+            Dequantization::Affine { scale, offset } => {
+                for c in 0..3 {
+                    mean[c] += f64::from(offset[k]) * f64::from(p[c]);
+                }
+                let s = f64::from(scale[k]);
+                components.push([
+                    (s * f64::from(p[0])) as f32,
+                    (s * f64::from(p[1])) as f32,
+                    (s * f64::from(p[2])) as f32,
+                    0.0,
+                ]);
+            }
+            Dequantization::Identity { .. } => components.push([p[0], p[1], p[2], 0.0]),
+        }
+    }
+    FoldedLight {
+        mean_rgb: mean.map(|m| m as f32),
+        components,
+    }
+}
+
+/// Bytes of GPU memory an asset occupies.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct GpuMemory {
+    /// The relit RGBA16F atlas (with aprons and unused slots).
+    pub atlas_bytes: u64,
+    /// Packed coefficients.
+    pub coefficient_bytes: u64,
+    /// Packed densities.
+    pub density_bytes: u64,
+    /// Indirection grid.
+    pub indirection_bytes: u64,
+    /// Brick coordinates and the lighting buffer.
+    pub other_bytes: u64,
+}
+
+impl GpuMemory {
+    /// Sum of all parts.
+    pub fn total(&self) -> u64 {
+        self.atlas_bytes
+            + self.coefficient_bytes
+            + self.density_bytes
+            + self.indirection_bytes
+            + self.other_bytes
+    }
+}
+
+/// Voxels of `bricks` bricks.
+pub fn voxel_count(bricks: usize) -> usize {
+    bricks * BRICK_VOXELS
+}
+
+#[cfg(test)]
+mod tests {
+    use half::f16;
+    use nelf_format::CoefficientEncoding;
+
+    use super::*;
+
+    #[test]
+    fn layout_holds_every_brick_once_within_limits() {
+        for bricks in [1usize, 5, 64, 600, 4097, 100_000] {
+            let layout = AtlasLayout::for_bricks(bricks, 2048).unwrap();
+            let t = layout.texels();
+            assert!(
+                t.iter().all(|&v| v <= 2048 && v % SLOT_TEXELS == 0),
+                "{bricks}: {t:?}"
+            );
+            let capacity = (t[0] / 10) as usize * (t[1] / 10) as usize * (t[2] / 10) as usize;
+            assert!(
+                capacity >= bricks && capacity < 4 * bricks + 8,
+                "{bricks}: capacity {capacity}"
+            );
+            let mut seen = std::collections::HashSet::new();
+            for s in 0..bricks as u32 {
+                let c = layout.slot_coords(s);
+                assert!((0..3).all(|a| c[a] < t[a] / 10));
+                assert!(seen.insert(c));
+            }
+            assert_eq!(layout.texel_of(0, [-1, -1, -1]), [0, 0, 0]);
+        }
+        assert!(AtlasLayout::for_bricks(10_000_000, 2048).is_err());
+        assert!(AtlasLayout::for_bricks(10, 9).is_err());
+    }
+
+    #[test]
+    fn indirection_marks_bricks_and_refuses_huge_grids() {
+        let table = indirection_grid([2, 3, 4], &[[1, 0, 0], [0, 2, 3]]).unwrap();
+        assert_eq!(table.len(), 24);
+        assert_eq!(table[1], 1);
+        assert_eq!(table[2 * (2 + 3 * 3)], 2);
+        assert_eq!(table.iter().filter(|&&v| v != 0).count(), 2);
+        assert!(indirection_grid([65536, 65536, 2], &[]).is_err());
+        assert!(indirection_grid([2, 2, 2], &[[5, 0, 0]]).is_err());
+        assert_eq!(packed_bricks(&[[3, 65535, 7]]), vec![[3 | (65535 << 16), 7]]);
+    }
+
+    #[test]
+    fn packing_round_trips_codes_and_halves() {
+        let values: Vec<f32> = (0..5 * 7).map(|i| (i as f32 * 0.73).sin() * 3.0).collect();
+        let q = Coefficients::quantize(&values, 5, CoefficientEncoding::U8Affine).unwrap();
+        let p = pack_coefficients(&q);
+        assert_eq!((p.words_per_voxel, p.encoding, p.words.len()), (2, 1, 14));
+        let Coefficients::U8Affine { codes, .. } = &q else {
+            panic!()
+        };
+        for (i, &code) in codes.iter().enumerate() {
+            let (v, k) = (i / 5, i % 5);
+            let word = p.words[v * 2 + k / 4];
+            assert_eq!((word >> (8 * (k % 4))) & 0xff, u32::from(code));
+        }
+        let h = Coefficients::quantize(&values, 5, CoefficientEncoding::F16).unwrap();
+        let p = pack_coefficients(&h);
+        assert_eq!((p.words_per_voxel, p.encoding), (3, 2));
+        let back = h.to_f32();
+        for (i, want) in back.iter().enumerate() {
+            let (v, k) = (i / 5, i % 5);
+            let bits = (p.words[v * 3 + k / 2] >> (16 * (k % 2))) & 0xffff;
+            assert_eq!(f16::from_bits(bits as u16).to_f32(), *want);
+        }
+        let d = pack_density(&[f16::from_f32(1.0), f16::from_f32(2.0), f16::from_f32(3.0)]);
+        assert_eq!(d.len(), 2);
+        assert_eq!(f16::from_bits((d[0] >> 16) as u16).to_f32(), 2.0);
+        assert_eq!(f16::from_bits(d[1] as u16).to_f32(), 3.0);
+    }
+
+    #[test]
+    fn folded_light_reproduces_reference_radiance() {
+        let values: Vec<f32> = (0..4 * 9).map(|i| (i as f32 * 1.37).cos() * 2.0 + 0.5).collect();
+        let light = ProjectedLight {
+            mean_rgb: [0.3, 0.2, 0.1],
+            component_rgb: vec![
+                [1.0, -0.5, 0.25],
+                [0.1, 0.2, 0.3],
+                [-1.0, 0.0, 2.0],
+                [0.5, 0.5, 0.5],
+            ],
+        };
+        for encoding in [CoefficientEncoding::U8Affine, CoefficientEncoding::F16] {
+            let q = Coefficients::quantize(&values, 4, encoding).unwrap();
+            let packed = pack_coefficients(&q);
+            for rank in [0usize, 2, 4] {
+                let folded = fold_light(&light, &Dequantization::of(&q), rank, RelightView::Shaded);
+                assert_eq!(folded.components.len(), rank);
+                let mut c = vec![0.0f32; 4];
+                for v in 0..9 {
+                    q.voxel_f32(v, &mut c);
+                    let want = light.radiance(&c[..rank]);
+                    let mut got = folded.mean_rgb;
+                    for (k, comp) in folded.components.iter().enumerate() {
+                        let code = if packed.encoding == 1 {
+                            ((packed.words[v] >> (8 * k)) & 0xff) as f32
+                        } else {
+                            let w = packed.words[v * 2 + k / 2] >> (16 * (k % 2));
+                            f16::from_bits((w & 0xffff) as u16).to_f32()
+                        };
+                        for ch in 0..3 {
+                            got[ch] += code * comp[ch];
+                        }
+                    }
+                    for ch in 0..3 {
+                        assert!(
+                            (got[ch] - want[ch]).abs() < 1e-5,
+                            "{encoding:?} rank {rank}: {got:?} vs {want:?}"
+                        );
+                    }
+                }
+            }
+            // A single component's view: c_k · P_k only.
+            let only = fold_light(&light, &Dequantization::of(&q), 4, RelightView::Component(2));
+            assert_eq!(only.components.len(), 3);
+            assert_eq!(only.components[0], [0.0; 4]);
+            let mut c = vec![0.0f32; 4];
+            q.voxel_f32(0, &mut c);
+            let code0 = match &q {
+                Coefficients::U8Affine { codes, .. } => f32::from(codes[2]),
+                Coefficients::F16 { values, .. } => values[2].to_f32(),
+            };
+            let got = only.mean_rgb[2] + code0 * only.components[2][2];
+            assert!((got - c[2] * 2.0).abs() < 1e-5);
+        }
+    }
+}

@@ -1,0 +1,25 @@
+//! `nelf-viewer`: real-time viewing of `.nelf` light-transport assets.
+//!
+//! * [`gpu::GpuRenderer`] — the wgpu renderer, usable without a window: a brick atlas
+//!   with 1-voxel aprons and an indirection grid ([`atlas`]), a relight compute pass run
+//!   once per lighting change (the environment map projected onto the asset's PCA basis,
+//!   then a `K`-term dot product per voxel), and a ray-march compute pass per frame that
+//!   mirrors the CPU reference renderer `nelf_render` (same rays, sample lattice,
+//!   trilinear interpolation, compositing and early termination).
+//! * [`app`] — the interactive viewer (eframe/egui on the same renderer): orbit, zoom,
+//!   pan, environment maps, rotation, exposure, PCA rank, debug views, screenshots.
+//! * [`shaders`] — the WGSL passes in `../shaders/` and their Rust mirrors.
+//!
+//! The CPU reference renderer itself is the `nelf-render` crate, which this crate
+//! compares against in its tests.
+
+pub mod app;
+pub mod atlas;
+pub mod error;
+pub mod gpu;
+pub mod shaders;
+
+pub use app::{NamedEnvmap, ViewerConfig, run_viewer};
+pub use atlas::{GpuMemory, RelightView};
+pub use error::ViewerError;
+pub use gpu::{AssetInfo, DisplayImage, DisplaySettings, GpuRenderer, MarchView, ToneMap, ViewSettings};

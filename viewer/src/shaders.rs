@@ -1,0 +1,307 @@
+//! The WGSL shaders (one file per pass in `../shaders/`, embedded at compile time) and
+//! the `#[repr(C)]` mirrors of the structs they read.
+//!
+//! **Imports.** Shared helpers live once, in `shaders/common.wgsl`. A shader pulls them
+//! in with a line of the form `#import "common.wgsl"`; [`preprocess`] replaces such a
+//! line by the named file's text (itself preprocessed), each file at most once per
+//! shader (later imports of the same file become empty), and reports unknown files and
+//! import cycles. Nothing else is rewritten: line numbers of the importing file shift by
+//! the imported text, which error messages from [`preprocess`] account for by naming
+//! the file.
+//!
+//! **Mirrors.** Every uniform struct has a Rust twin with the same field order, made only
+//! of 16-byte vectors so WGSL's uniform layout rules (vec4 alignment 16) and `repr(C)`
+//! agree; a test compares sizes and offsets with the layout naga computes.
+
+use std::collections::HashSet;
+
+/// Shared helpers: atlas addressing, ray–box, hashing, tone mapping, sRGB.
+pub const COMMON_WGSL: &str = include_str!("../../shaders/common.wgsl");
+/// The relight pass (compute).
+pub const RELIGHT_WGSL: &str = include_str!("../../shaders/relight.wgsl");
+/// The ray-march pass (compute).
+pub const MARCH_WGSL: &str = include_str!("../../shaders/march.wgsl");
+/// The display pass (tone mapping, sRGB; full-screen triangle).
+pub const DISPLAY_WGSL: &str = include_str!("../../shaders/display.wgsl");
+/// The benchmark's bare dense-texture march (the speed ceiling of a texture march).
+pub const DENSE_MARCH_WGSL: &str = include_str!("../../shaders/dense_march.wgsl");
+
+/// Files that `#import` may name, with their text.
+pub const LIBRARY: &[(&str, &str)] = &[("common.wgsl", COMMON_WGSL)];
+
+/// The entry shaders: (file name, text).
+pub const PASSES: &[(&str, &str)] = &[
+    ("relight.wgsl", RELIGHT_WGSL),
+    ("march.wgsl", MARCH_WGSL),
+    ("display.wgsl", DISPLAY_WGSL),
+    ("dense_march.wgsl", DENSE_MARCH_WGSL),
+];
+
+/// A problem found while resolving `#import` lines.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+pub enum PreprocessError {
+    /// An `#import` names a file that is not in [`LIBRARY`].
+    #[error("{file}:{line}: #import of unknown file {name:?}")]
+    UnknownImport {
+        /// File holding the import.
+        file: String,
+        /// 1-based line number.
+        line: usize,
+        /// Name imported.
+        name: String,
+    },
+    /// An `#import` line is not `#import "name"`.
+    #[error("{file}:{line}: malformed #import (expected `#import \"file.wgsl\"`)")]
+    Malformed {
+        /// File holding the import.
+        file: String,
+        /// 1-based line number.
+        line: usize,
+    },
+    /// Files import each other.
+    #[error("import cycle: {0}")]
+    Cycle(String),
+}
+
+/// Resolves the `#import "file"` lines of `source` (named `name` in messages) against
+/// [`LIBRARY`].
+pub fn preprocess(name: &str, source: &str) -> Result<String, PreprocessError> {
+    let mut done = HashSet::new();
+    let mut stack = vec![name.to_string()];
+    let mut out = String::with_capacity(source.len() + COMMON_WGSL.len());
+    expand(name, source, &mut done, &mut stack, &mut out)?;
+    Ok(out)
+}
+
+fn expand(
+    name: &str,
+    source: &str,
+    done: &mut HashSet<String>,
+    stack: &mut Vec<String>,
+    out: &mut String,
+) -> Result<(), PreprocessError> {
+    for (index, line) in source.lines().enumerate() {
+        let trimmed = line.trim();
+        let Some(rest) = trimmed.strip_prefix("#import") else {
+            out.push_str(line);
+            out.push('\n');
+            continue;
+        };
+        let imported = rest
+            .trim()
+            .strip_prefix('"')
+            .and_then(|r| r.strip_suffix('"'))
+            .filter(|r| !r.is_empty() && !r.contains('"'))
+            .ok_or_else(|| PreprocessError::Malformed {
+                file: name.to_string(),
+                line: index + 1,
+            })?;
+        if stack.iter().any(|s| s == imported) {
+            return Err(PreprocessError::Cycle(format!(
+                "{} → {imported}",
+                stack.join(" → ")
+            )));
+        }
+        if done.contains(imported) {
+            continue;
+        }
+        let text = LIBRARY
+            .iter()
+            .find(|(n, _)| *n == imported)
+            .map(|(_, t)| *t)
+            .ok_or_else(|| PreprocessError::UnknownImport {
+                file: name.to_string(),
+                line: index + 1,
+                name: imported.to_string(),
+            })?;
+        stack.push(imported.to_string());
+        expand(imported, text, done, stack, out)?;
+        stack.pop();
+        done.insert(imported.to_string());
+    }
+    Ok(())
+}
+
+/// Uniform of the relight pass (`RelightParams` in `relight.wgsl`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct RelightParams {
+    /// Slot packing `x_bits`, `y_bits`; slot (brick) count; components used.
+    pub atlas: [u32; 4],
+    /// Grid extent in bricks; `w`: coefficient encoding (1 = 8-bit affine, 2 = f16).
+    pub grid_bricks: [i32; 4],
+    /// Stored rank, u32 words per voxel, 1 = show |rgb|, unused.
+    pub words: [u32; 4],
+    /// Folded mean radiance (rgb), unused.
+    pub light_mean: [f32; 4],
+}
+
+/// Uniform of the march pass (`MarchParams` in `march.wgsl`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct MarchParams {
+    /// Column 0 of `Rᵀ` (row 0 of the camera's `R`), unused.
+    pub world_from_camera_x: [f32; 4],
+    /// Column 1 of `Rᵀ`, unused.
+    pub world_from_camera_y: [f32; 4],
+    /// Column 2 of `Rᵀ`, unused.
+    pub world_from_camera_z: [f32; 4],
+    /// Camera centre in lattice coordinates `(p − bbox_min)/voxel − 0.5`; `w` = 1/voxel size (1/m).
+    pub origin_u: [f32; 4],
+    /// `fx, fy, cx, cy` in pixels.
+    pub intrinsics: [f32; 4],
+    /// Upper grid-box corner in lattice coordinates; `w` = step Δ in metres.
+    pub box_max_u: [f32; 4],
+    /// `1 / atlas size` in texels; `w` = minimum transmittance.
+    pub atlas_inv_size: [f32; 4],
+    /// Grid extent in bricks, unused.
+    pub grid_bricks: [i32; 4],
+    /// Image width, height, frame index, flags (bit 0: jitter).
+    pub image: [u32; 4],
+    /// View (0 shaded, 1 density, 2 alpha), slot packing `x_bits`, `y_bits`, unused.
+    pub view: [u32; 4],
+    /// Density-view scale (1/σ shown as white), unused ×3.
+    pub scales: [f32; 4],
+}
+
+/// Sample counters written by the march when `COUNT_SAMPLES` is on (`Counters`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct Counters {
+    /// Trilinear atlas samples taken.
+    pub samples: u32,
+    /// Lattice steps visited (samples plus skips).
+    pub steps: u32,
+}
+
+/// Uniform of the display pass (`DisplayParams` in `display.wgsl`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct DisplayParams {
+    /// Background radiance (linear rgb); `w` = exposure multiplier `2^EV`.
+    pub background: [f32; 4],
+    /// Tone map (0 linear, 1 ACES), encode sRGB (1), debug view (1), unused.
+    pub mode: [u32; 4],
+}
+
+/// Uniform of the benchmark's dense march (`DenseParams` in `dense_march.wgsl`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct DenseParams {
+    /// Image width, height, steps per ray, unused.
+    pub image: [u32; 4],
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn module(name: &str, text: &str) -> naga::Module {
+        let source = preprocess(name, text).unwrap();
+        match naga::front::wgsl::parse_str(&source) {
+            Ok(m) => m,
+            Err(e) => panic!("{name}: {}", e.emit_to_string(&source)),
+        }
+    }
+
+    #[test]
+    fn every_shader_parses_and_validates() {
+        for (name, text) in PASSES {
+            let source = preprocess(name, text).unwrap();
+            let module = module(name, text);
+            let mut validator = naga::valid::Validator::new(
+                naga::valid::ValidationFlags::all(),
+                naga::valid::Capabilities::default(),
+            );
+            if let Err(e) = validator.validate(&module) {
+                panic!("{name}: {}", e.emit_to_string(&source));
+            }
+            assert!(!module.entry_points.is_empty(), "{name} has no entry point");
+        }
+    }
+
+    /// `(size, [(member name, offset)])` of WGSL struct `name` in `module`.
+    fn wgsl_layout(module: &naga::Module, name: &str) -> (u32, Vec<(String, u32)>) {
+        for (_, ty) in module.types.iter() {
+            if ty.name.as_deref() == Some(name)
+                && let naga::TypeInner::Struct { members, span } = &ty.inner
+            {
+                let fields = members
+                    .iter()
+                    .map(|m| (m.name.clone().unwrap_or_default(), m.offset))
+                    .collect();
+                return (*span, fields);
+            }
+        }
+        panic!("struct {name} not found");
+    }
+
+    macro_rules! assert_mirror {
+        ($module:expr, $ty:ident, [$($field:ident),* $(,)?]) => {{
+            let (span, fields) = wgsl_layout(&$module, stringify!($ty));
+            assert_eq!(span as usize, std::mem::size_of::<$ty>(), "size of {}", stringify!($ty));
+            let rust: Vec<(String, u32)> =
+                vec![$((stringify!($field).to_string(), std::mem::offset_of!($ty, $field) as u32)),*];
+            assert_eq!(fields, rust, "fields of {}", stringify!($ty));
+        }};
+    }
+
+    #[test]
+    fn rust_mirrors_match_wgsl_layouts() {
+        let relight = module("relight.wgsl", RELIGHT_WGSL);
+        assert_mirror!(relight, RelightParams, [atlas, grid_bricks, words, light_mean]);
+        let march = module("march.wgsl", MARCH_WGSL);
+        assert_mirror!(
+            march,
+            MarchParams,
+            [
+                world_from_camera_x,
+                world_from_camera_y,
+                world_from_camera_z,
+                origin_u,
+                intrinsics,
+                box_max_u,
+                atlas_inv_size,
+                grid_bricks,
+                image,
+                view,
+                scales,
+            ]
+        );
+        assert_mirror!(march, Counters, [samples, steps]);
+        let display = module("display.wgsl", DISPLAY_WGSL);
+        assert_mirror!(display, DisplayParams, [background, mode]);
+        let dense = module("dense_march.wgsl", DENSE_MARCH_WGSL);
+        assert_mirror!(dense, DenseParams, [image]);
+    }
+
+    #[test]
+    fn imports_are_expanded_once_and_checked() {
+        let twice = "#import \"common.wgsl\"\n  #import \"common.wgsl\"\nfn f() {}\n";
+        let out = preprocess("t.wgsl", twice).unwrap();
+        assert_eq!(out.matches("fn pcg_hash").count(), 1);
+        assert!(out.ends_with("fn f() {}\n"));
+        assert!(!out.lines().any(|l| l.trim_start().starts_with("#import")));
+        assert_eq!(
+            preprocess("t.wgsl", "x\n#import \"nope.wgsl\"\n"),
+            Err(PreprocessError::UnknownImport {
+                file: "t.wgsl".into(),
+                line: 2,
+                name: "nope.wgsl".into()
+            })
+        );
+        assert!(matches!(
+            preprocess("t.wgsl", "#import common.wgsl\n"),
+            Err(PreprocessError::Malformed { line: 1, .. })
+        ));
+        assert!(matches!(
+            preprocess("common.wgsl", "#import \"common.wgsl\"\n"),
+            Err(PreprocessError::Cycle(_))
+        ));
+        // Every pass imports the shared helpers rather than copying them.
+        for (name, text) in PASSES {
+            assert!(text.contains("#import \"common.wgsl\""), "{name}");
+            assert!(!text.contains("fn pcg_hash"), "{name} copies a helper");
+        }
+    }
+}
