@@ -42,3 +42,10 @@ impl NetError {
         }
     }
 }
+
+impl From<NetError> for nelf_scene::field::FieldError {
+    /// A network failure seen by the baker: [`nelf_scene::field::FieldError::Backend`].
+    fn from(e: NetError) -> Self {
+        Self::Backend(e.to_string())
+    }
+}

@@ -14,6 +14,7 @@
 //!
 //! Runs in `f32` on the CPU; the `cuda` feature enables candle's CUDA backend.
 
+pub mod capture;
 pub mod encoder;
 pub mod error;
 pub mod geometry;
@@ -22,8 +23,11 @@ pub mod light;
 pub mod model;
 pub mod nelfnet;
 pub mod render;
+pub mod source;
 pub mod views;
 
+pub use capture::NetCapture;
 pub use error::NetError;
 pub use model::{Model, NelfConfig};
+pub use source::NelfField;
 pub use views::{EncodedViews, SourceViews, Stage};

@@ -263,6 +263,50 @@ impl Model {
         })
     }
 
+    /// σ (1/mm) of `points` (mm) seen along unit `target_dirc`, zero outside the
+    /// hull (`values` empty); skips the light-transport and blend networks.
+    pub fn density_points(
+        &self,
+        encoded: &EncodedViews,
+        points: &[[f32; 3]],
+        target_dirc: &[[f32; 3]],
+        stage: Stage,
+    ) -> Result<PointValues, NetError> {
+        if points.len() != target_dirc.len() {
+            return Err(NetError::input(format!(
+                "{} points and {} target directions",
+                points.len(),
+                target_dirc.len()
+            )));
+        }
+        let inside = encoded.hull(points).inside;
+        let index: Vec<usize> = (0..points.len()).filter(|&i| inside[i]).collect();
+        let batches: Vec<Vec<f32>> = index
+            .par_chunks(self.config.batch_points)
+            .map(|chunk| {
+                let p: Vec<[f32; 3]> = chunk.iter().map(|&i| points[i]).collect();
+                let d: Vec<[f32; 3]> = chunk.iter().map(|&i| target_dirc[i]).collect();
+                let inputs = encoded.gather(&p, &d, stage)?.to_tensors(&self.device)?;
+                Ok(self
+                    .net(stage)
+                    .density(&inputs)?
+                    .flatten_all()?
+                    .to_vec1::<f32>()?)
+            })
+            .collect::<Result<_, NetError>>()?;
+        let mut sigma = vec![0.0f32; points.len()];
+        for (chunk, s) in index.chunks(self.config.batch_points).zip(batches) {
+            for (k, &i) in chunk.iter().enumerate() {
+                sigma[i] = s[k];
+            }
+        }
+        Ok(PointValues {
+            sigma,
+            values: Vec::new(),
+            inside,
+        })
+    }
+
     /// The irradiance tensor `(3, 128)` = `light · Ω` of a network-layout light.
     pub fn irradiance(&self, light: &[f32]) -> Result<Tensor, NetError> {
         Ok(Tensor::from_vec(

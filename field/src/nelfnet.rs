@@ -99,6 +99,23 @@ impl NelfNetTrace {
     }
 }
 
+/// The density path's intermediates.
+#[derive(Debug)]
+struct Trunk {
+    dirc_mlp_in: Tensor,
+    dirc_mlp_out: Tensor,
+    input_feature: Tensor,
+    geometry_in: Tensor,
+    geometry_out: Tensor,
+    feature: Tensor,
+    view_weight: Tensor,
+    weight_mean: Tensor,
+    weight_var: Tensor,
+    density_in: Tensor,
+    density_raw: Tensor,
+    density: Tensor,
+}
+
 /// Shaded colours of a pass.
 #[derive(Debug, Clone)]
 pub struct Shaded {
@@ -141,8 +158,8 @@ impl NelfNet {
         })
     }
 
-    /// Runs the network on a batch (`V ≥ 2`), returning every intermediate.
-    pub fn forward(&self, input: &PointInputs) -> Result<NelfNetTrace, NetError> {
+    /// The density path: directions, geometry and weighted moments, σ.
+    fn trunk(&self, input: &PointInputs) -> Result<Trunk, NetError> {
         let (n, v, _) = input.source_rgb.dims3()?;
         if v < 2 {
             return Err(NetError::input(format!(
@@ -182,8 +199,35 @@ impl NelfNet {
         let density_in = Tensor::cat(&[&weight_mean, &weight_var], 1)?;
         let density_raw = self.density_mlp.forward(&density_in)?;
         let density = softplus(&density_raw)?;
+        Ok(Trunk {
+            dirc_mlp_in,
+            dirc_mlp_out,
+            input_feature,
+            geometry_in,
+            geometry_out,
+            feature,
+            view_weight,
+            weight_mean,
+            weight_var,
+            density_in,
+            density_raw,
+            density,
+        })
+    }
+
+    /// σ `(N, 1)` (1/mm) only, skipping the light-transport and blend networks.
+    pub fn density(&self, input: &PointInputs) -> Result<Tensor, NetError> {
+        Ok(self.trunk(input)?.density)
+    }
+
+    /// Runs the network on a batch (`V ≥ 2`), returning every intermediate.
+    pub fn forward(&self, input: &PointInputs) -> Result<NelfNetTrace, NetError> {
+        let t = self.trunk(input)?;
+        let (n, v, _) = input.source_rgb.dims3()?;
+        let rows = n * v;
+        let f = 3 + LATENT_CHANNELS;
         let lt_in = Tensor::cat(
-            &[&input.source_rgb, &input.latent, &input.source_dirc, &feature],
+            &[&input.source_rgb, &input.latent, &input.source_dirc, &t.feature],
             2,
         )?;
         let lt_scale = softplus(
@@ -192,24 +236,24 @@ impl NelfNet {
                 .forward(&lt_in.reshape((rows, f + 3 + GEOMETRY_FEATURES))?)?,
         )?
         .reshape((n, v, LT_DIM))?;
-        let blend_in = Tensor::cat(&[&dirc_mlp_in, &feature], 2)?;
+        let blend_in = Tensor::cat(&[&t.dirc_mlp_in, &t.feature], 2)?;
         let blend_logits = self
             .blend_mlp
             .forward(&blend_in.reshape((rows, 6 + GEOMETRY_FEATURES))?)?
             .reshape((n, v, 1))?;
         let blend_softmax = candle_nn::ops::softmax(&blend_logits, 1)?;
         Ok(NelfNetTrace {
-            dirc_mlp_in,
-            dirc_mlp_out,
-            input_feature,
-            geometry_in,
-            geometry_out,
-            view_weight,
-            weight_mean,
-            weight_var,
-            density_in,
-            density_raw,
-            density,
+            dirc_mlp_in: t.dirc_mlp_in,
+            dirc_mlp_out: t.dirc_mlp_out,
+            input_feature: t.input_feature,
+            geometry_in: t.geometry_in,
+            geometry_out: t.geometry_out,
+            view_weight: t.view_weight,
+            weight_mean: t.weight_mean,
+            weight_var: t.weight_var,
+            density_in: t.density_in,
+            density_raw: t.density_raw,
+            density: t.density,
             lt_scale,
             blend_in,
             blend_logits,

@@ -1,0 +1,202 @@
+//! A capture in our conventions (metres, world frame +y up, OpenCV cameras;
+//! `format/CAPTURE.md`) as the network's inputs (millimetres, its own world frame).
+//!
+//! **Units.** The network thinks in millimetres (its near/far bounds, head radius,
+//! depths and densities): points and camera translations are multiplied by
+//! [`MM_PER_M`], densities divided by it (σ in 1/mm → 1/m).
+//!
+//! **World frame.** The per-point networks take world-frame directions, so the
+//! world must be oriented as in the official data: up = +z, the face toward −y
+//! (cameras on the −y side). Our synthetic captures have up = +y and the face
+//! toward +z, so the default `net_from_world` is a rotation of +90° about x
+//! (`+y ↦ +z`, `+z ↦ −y`). A point maps as `x_net = 1000 · net_from_world · x`; a
+//! camera `[R|t]` as `[R·net_from_worldᵀ | 1000·t]` (intrinsics unchanged).
+//!
+//! **Images.** Every view must have one size; images are multiplied by their masks
+//! (the official tester does the same) and cropped at the right and bottom to
+//! multiples of 16 (the encoder halves the resolution four times), which keeps the
+//! principal point where it was.
+
+use glam::{DMat3, DVec3};
+use nelf_format::conventions::PinholeCamera;
+
+use crate::error::NetError;
+use crate::geometry::NetCamera;
+use crate::light::world_from_light;
+use crate::views::SourceViews;
+
+/// Millimetres per metre: the network's unit is the millimetre.
+pub const MM_PER_M: f64 = 1000.0;
+
+/// The default rotation from our world (+y up, face toward +z) to the network's
+/// (+z up, face toward −y): +90° about x.
+pub fn default_net_from_world() -> DMat3 {
+    DMat3::from_rotation_x(std::f64::consts::FRAC_PI_2)
+}
+
+/// A capture prepared for the network.
+#[derive(Debug, Clone)]
+pub struct NetCapture {
+    /// The network's inputs (millimetres, network frame).
+    pub views: SourceViews,
+    /// Our cameras (metres, world frame), with the cropped image size.
+    pub cameras: Vec<PinholeCamera>,
+    /// Rotation from our world frame to the network's.
+    pub net_from_world: DMat3,
+    /// Centre of the head (rays are bounded by a sphere around it), metres.
+    pub head_centre_m: DVec3,
+}
+
+impl NetCapture {
+    /// Prepares views: `images` (linear RGB, row-major) and `masks` (`[0, 1]`) of the
+    /// size of each camera, all views one size, at least two; `head_centre_m` in our
+    /// world; `net_from_world` a rotation ([`default_net_from_world`] for our captures).
+    pub fn new(
+        cameras: &[PinholeCamera],
+        images: &[Vec<[f32; 3]>],
+        masks: &[Vec<f32>],
+        head_centre_m: DVec3,
+        net_from_world: DMat3,
+    ) -> Result<Self, NetError> {
+        if !nelf_format::conventions::is_rotation(net_from_world, 1e-6) {
+            return Err(NetError::input("net_from_world is not a rotation"));
+        }
+        if !head_centre_m.is_finite() {
+            return Err(NetError::input("the head centre is not finite"));
+        }
+        let v = cameras.len();
+        if v < 2 || images.len() != v || masks.len() != v {
+            return Err(NetError::input(format!(
+                "{v} cameras, {} images and {} masks: need at least 2 views, one of each",
+                images.len(),
+                masks.len()
+            )));
+        }
+        let (full_w, full_h) = (cameras[0].width as usize, cameras[0].height as usize);
+        let (w, h) = (full_w / 16 * 16, full_h / 16 * 16);
+        if w == 0 || h == 0 {
+            return Err(NetError::input(format!(
+                "images of {full_w}×{full_h} are smaller than 16 pixels"
+            )));
+        }
+        let mut view_images = Vec::with_capacity(v * w * h * 3);
+        let mut view_masks = Vec::with_capacity(v * w * h);
+        let mut ours = Vec::with_capacity(v);
+        for (i, ((cam, image), mask)) in cameras.iter().zip(images).zip(masks).enumerate() {
+            cam.validate()?;
+            if cam.width as usize != full_w || cam.height as usize != full_h {
+                return Err(NetError::input(format!(
+                    "view {i} is {}×{}, view 0 {full_w}×{full_h}: the network needs one size",
+                    cam.width, cam.height
+                )));
+            }
+            if image.len() != full_w * full_h || mask.len() != full_w * full_h {
+                return Err(NetError::input(format!(
+                    "view {i}: {} pixels and {} mask values for a {full_w}×{full_h} camera",
+                    image.len(),
+                    mask.len()
+                )));
+            }
+            for y in 0..h {
+                for x in 0..w {
+                    let m = mask[y * full_w + x];
+                    let m = if m.is_finite() { m.clamp(0.0, 1.0) } else { 0.0 };
+                    let rgb = image[y * full_w + x];
+                    view_images.extend(rgb.map(|c| if c.is_finite() { c * m } else { 0.0 }));
+                    view_masks.push(m);
+                }
+            }
+            let mut cropped = *cam;
+            cropped.width = w as u32;
+            cropped.height = h as u32;
+            ours.push(cropped);
+        }
+        let views = SourceViews {
+            images: view_images,
+            masks: view_masks,
+            cameras: ours
+                .iter()
+                .map(|c| NetCamera::from_pinhole(c, net_from_world))
+                .collect(),
+            width: w,
+            height: h,
+        };
+        views.validate()?;
+        Ok(Self {
+            views,
+            cameras: ours,
+            net_from_world,
+            head_centre_m,
+        })
+    }
+
+    /// A point of our world (metres) in the network's (millimetres).
+    pub fn to_net_point(&self, p_m: DVec3) -> [f32; 3] {
+        (self.net_from_world * p_m * MM_PER_M).as_vec3().to_array()
+    }
+
+    /// A direction of our world in the network's frame.
+    pub fn to_net_direction(&self, d: DVec3) -> [f32; 3] {
+        (self.net_from_world * d).as_vec3().to_array()
+    }
+
+    /// One of our cameras as the network sees it.
+    pub fn net_camera(&self, camera: &PinholeCamera) -> NetCamera {
+        NetCamera::from_pinhole(camera, self.net_from_world)
+    }
+
+    /// The head centre in the network's frame (millimetres).
+    pub fn head_centre_net(&self) -> [f32; 3] {
+        self.to_net_point(self.head_centre_m)
+    }
+
+    /// Rotation from the light frame of the network's lighting and light transport
+    /// (columns reversed into our layout, [`crate::light`]) to our world: `R₀ᵀ·F`.
+    pub fn world_from_light(&self) -> DMat3 {
+        world_from_light(self.cameras[0].rotation)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn default_frame_turns_y_up_into_z_up() {
+        let a = default_net_from_world();
+        assert!((a * DVec3::Y).abs_diff_eq(DVec3::Z, 1e-12));
+        assert!((a * DVec3::Z).abs_diff_eq(DVec3::NEG_Y, 1e-12));
+    }
+
+    #[test]
+    fn crops_to_multiples_of_sixteen_and_masks_images() {
+        let cams: Vec<PinholeCamera> = [0.0f64, 0.4]
+            .iter()
+            .map(|&a| {
+                let eye = DVec3::new(a.sin(), 0.0, a.cos());
+                PinholeCamera::look_at(eye, DVec3::ZERO, DVec3::Y, 40, 35, 0.5)
+            })
+            .collect();
+        let images = vec![vec![[1.0f32, 2.0, 3.0]; 40 * 35]; 2];
+        let masks = vec![vec![0.5f32; 40 * 35]; 2];
+        let cap = NetCapture::new(&cams, &images, &masks, DVec3::ZERO, default_net_from_world()).unwrap();
+        assert_eq!((cap.views.width, cap.views.height), (32, 32));
+        assert_eq!(cap.views.images[..3], [0.5, 1.0, 1.5]);
+        assert_eq!(cap.cameras[0].cx, cams[0].cx);
+        // The network camera sees our points where ours do (mm, rotated frame).
+        let p = DVec3::new(0.01, 0.02, -0.03);
+        let want = cams[1].project(p).unwrap();
+        let net = &cap.views.cameras[1];
+        let g = crate::geometry::project_normalized(&net.projection(), 32, 32, cap.to_net_point(p));
+        assert!((f64::from((g[0] + 1.0) * 16.0) - want.x).abs() < 1e-3);
+        assert!((f64::from((g[1] + 1.0) * 16.0) - want.y).abs() < 1e-3);
+        let bad = NetCapture::new(
+            &cams[..1],
+            &images[..1],
+            &masks[..1],
+            DVec3::ZERO,
+            default_net_from_world(),
+        );
+        assert!(bad.is_err());
+    }
+}

@@ -1,0 +1,304 @@
+//! The NeLF network as the baker's field source ([`FieldSource`]): density and the
+//! 384-vector of light transport at any points of our world.
+//!
+//! * **Units and frames**: points (metres, our world) go to the network as
+//!   `1000 · net_from_world · x` ([`crate::capture`]); σ comes back in 1/mm and is
+//!   multiplied by 1000 (1/m); light transport is dimensionless.
+//! * **Light frame**: the network's 8 × 16 texels are exactly our texels in the
+//!   light frame `world_from_light = R₀ᵀ·diag(−1, −1, 1)` with columns reversed
+//!   ([`crate::light`]): no resampling. The network's solid angles
+//!   (`sin θ · 2π²/128`) are folded into `T`, so `T·L` reproduces the network's own
+//!   rendering exactly.
+//! * **View dependence**: the network's σ and `T` depend on the target direction
+//!   (through its direction MLP and the view blending); a baked voxel stores one.
+//!   The [`ViewPolicy`] names the directions (our world, point → viewer); with
+//!   several, σ and `T` are their means. [`NelfField::recommended_view_policy`] is
+//!   the policy chosen by measurement (`field/README.md`).
+//! * **Pruning**: outside the visual hull of the dilated masks σ = 0 and `T` = 0,
+//!   as in the official renderer; [`FieldSource::bounds`] is the hull's box.
+//! * **Throughput**: batches of [`crate::NelfConfig::batch_points`] run in parallel
+//!   on all cores; memory is bounded by [`NelfField::chunk_points`] points at a time.
+
+use glam::{DMat3, DVec3, Vec3};
+use indicatif::ProgressBar;
+use nelf_format::conventions::{LT_DIM, LatLong};
+use nelf_scene::field::{FieldError, FieldSource, ViewPolicy, check_batch};
+use nelf_scene::tracer::MAX_AVERAGED_DIRECTIONS;
+
+use crate::capture::{MM_PER_M, NetCapture};
+use crate::error::NetError;
+use crate::light::{net_light_to_latlong, net_to_ours};
+use crate::model::Model;
+use crate::views::{EncodedViews, Stage};
+
+/// Cells per side of the grid that finds the hull's bounding box.
+const BOUNDS_GRID: usize = 96;
+
+/// The NeLF network over one capture, as a [`FieldSource`].
+#[derive(Debug)]
+pub struct NelfField {
+    model: Model,
+    encoded: EncodedViews,
+    net_from_world: DMat3,
+    world_from_light: DMat3,
+    head_centre_m: DVec3,
+    camera_centres_m: Vec<DVec3>,
+    bounds: (Vec3, Vec3),
+    stage: Stage,
+    chunk_points: usize,
+}
+
+impl NelfField {
+    /// Encodes the capture's views and finds the hull's bounds.
+    pub fn new(model: Model, capture: &NetCapture) -> Result<Self, NetError> {
+        let encoded = model.encode(&capture.views)?;
+        Self::from_encoded(model, encoded, capture)
+    }
+
+    /// A field over views `capture` already encoded by `model` (`encoded`).
+    pub fn from_encoded(model: Model, encoded: EncodedViews, capture: &NetCapture) -> Result<Self, NetError> {
+        if encoded.views() != capture.cameras.len() {
+            return Err(NetError::input("the encoded views are not the capture's"));
+        }
+        let mut field = Self {
+            model,
+            encoded,
+            net_from_world: capture.net_from_world,
+            world_from_light: capture.world_from_light(),
+            head_centre_m: capture.head_centre_m,
+            camera_centres_m: capture
+                .cameras
+                .iter()
+                .map(nelf_format::conventions::PinholeCamera::centre)
+                .collect(),
+            bounds: (Vec3::ZERO, Vec3::ZERO),
+            stage: Stage::Fine,
+            chunk_points: 16_384,
+        };
+        field.bounds = field.hull_bounds();
+        Ok(field)
+    }
+
+    /// Evaluates with `stage`'s network (default: fine, as the final render).
+    #[must_use]
+    pub fn with_stage(mut self, stage: Stage) -> Self {
+        self.stage = stage;
+        self
+    }
+
+    /// Bounds memory: at most `points` are evaluated at a time (default 16384).
+    #[must_use]
+    pub fn with_chunk_points(mut self, points: usize) -> Self {
+        self.chunk_points = points.max(1);
+        self
+    }
+
+    /// Points evaluated at a time.
+    pub fn chunk_points(&self) -> usize {
+        self.chunk_points
+    }
+
+    /// The model.
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    /// The encoded views.
+    pub fn encoded(&self) -> &EncodedViews {
+        &self.encoded
+    }
+
+    /// The head centre, metres.
+    pub fn head_centre_m(&self) -> DVec3 {
+        self.head_centre_m
+    }
+
+    /// The source cameras' centres, metres.
+    pub fn camera_centres_m(&self) -> &[DVec3] {
+        &self.camera_centres_m
+    }
+
+    /// The network's estimate of the capture's lighting: an 8 × 16 map of radiance
+    /// in this field's light frame ([`FieldSource::world_from_light`]).
+    pub fn source_light(&self) -> Result<LatLong, NetError> {
+        net_light_to_latlong(&self.encoded.light().source_light)
+    }
+
+    /// The policy chosen by measuring baked-vs-direct PSNR (`field/README.md`):
+    /// the mean over the directions toward every source camera.
+    pub fn recommended_view_policy(&self) -> ViewPolicy {
+        ViewPolicy::AverageTowardPoints(
+            self.camera_centres_m
+                .iter()
+                .take(MAX_AVERAGED_DIRECTIONS)
+                .map(|c| c.as_vec3())
+                .collect(),
+        )
+    }
+
+    /// A point of our world in the network's (mm).
+    fn to_net(&self, p: Vec3) -> [f32; 3] {
+        (self.net_from_world * p.as_dvec3() * MM_PER_M)
+            .as_vec3()
+            .to_array()
+    }
+
+    /// Unit direction toward the mean source camera from `x`: where a policy's
+    /// direction is undefined.
+    fn fallback_direction(&self, x: Vec3) -> Vec3 {
+        let n = self.camera_centres_m.len().max(1) as f64;
+        let mean = self.camera_centres_m.iter().copied().sum::<DVec3>() / n;
+        (mean.as_vec3() - x).normalize_or(Vec3::Z)
+    }
+
+    /// The box of the visual hull inside the sphere the renderer samples (the head
+    /// radius around the head centre), grown by one cell of a 96³ search grid.
+    fn hull_bounds(&self) -> (Vec3, Vec3) {
+        let radius_m = f64::from(self.model.config().head_radius_mm) / MM_PER_M;
+        let cell = 2.0 * radius_m / BOUNDS_GRID as f64;
+        let origin = self.head_centre_m - DVec3::splat(radius_m);
+        let centres: Vec<DVec3> = (0..BOUNDS_GRID.pow(3))
+            .map(|i| {
+                let (x, y, z) = (
+                    i % BOUNDS_GRID,
+                    (i / BOUNDS_GRID) % BOUNDS_GRID,
+                    i / BOUNDS_GRID.pow(2),
+                );
+                origin + (DVec3::new(x as f64, y as f64, z as f64) + 0.5) * cell
+            })
+            .collect();
+        let net: Vec<[f32; 3]> = centres.iter().map(|p| self.to_net(p.as_vec3())).collect();
+        let inside = self.encoded.hull(&net).inside;
+        let mut lo = DVec3::splat(f64::INFINITY);
+        let mut hi = DVec3::splat(f64::NEG_INFINITY);
+        for (p, _) in centres.iter().zip(&inside).filter(|(_, i)| **i) {
+            lo = lo.min(*p);
+            hi = hi.max(*p);
+        }
+        if lo.x > hi.x {
+            let c = self.head_centre_m.as_vec3();
+            return (c, c);
+        }
+        ((lo - cell).as_vec3(), (hi + cell).as_vec3())
+    }
+
+    /// The network-frame target directions of `points` for each of the policy's
+    /// directions: `count` lists of `points.len()`.
+    fn target_directions(&self, points: &[Vec3], view: &ViewPolicy) -> Vec<Vec<[f32; 3]>> {
+        let mut lists: Vec<Vec<[f32; 3]>> = Vec::new();
+        let mut omegas = [Vec3::ZERO; MAX_AVERAGED_DIRECTIONS];
+        for (i, x) in points.iter().enumerate() {
+            let count = view.directions_at(*x, self.fallback_direction(*x), &mut omegas);
+            if i == 0 {
+                lists = vec![Vec::with_capacity(points.len()); count];
+            }
+            for (list, w) in lists.iter_mut().zip(&omegas[..count]) {
+                let d = (self.net_from_world * w.as_dvec3()).normalize_or(DVec3::Z);
+                list.push(d.as_vec3().to_array());
+            }
+        }
+        lists
+    }
+
+    /// [`FieldSource::evaluate`] with an optional progress bar (length set to the
+    /// number of points, ticked per chunk).
+    pub fn evaluate_with_progress(
+        &self,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+        progress: Option<&ProgressBar>,
+    ) -> Result<(), FieldError> {
+        check_batch(points, density, lt)?;
+        view.validate()?;
+        if let Some(pb) = progress {
+            pb.set_length(points.len() as u64);
+        }
+        let chunk = self.chunk_points;
+        for ((p, d), t) in points
+            .chunks(chunk)
+            .zip(density.chunks_mut(chunk))
+            .zip(lt.chunks_mut(chunk * LT_DIM))
+        {
+            let net: Vec<[f32; 3]> = p.iter().map(|x| self.to_net(*x)).collect();
+            let directions = self.target_directions(p, view);
+            let scale = 1.0 / directions.len().max(1) as f32;
+            d.fill(0.0);
+            t.fill(0.0);
+            for dirs in &directions {
+                let values = self
+                    .model
+                    .light_transport_points(&self.encoded, &net, dirs, self.stage)?;
+                let mut ours = vec![0.0f32; LT_DIM];
+                for (i, (sigma, out)) in d.iter_mut().zip(t.chunks_mut(LT_DIM)).enumerate() {
+                    if !values.inside[i] {
+                        continue;
+                    }
+                    *sigma += scale * values.sigma[i] * MM_PER_M as f32;
+                    net_to_ours(&values.values[i * LT_DIM..(i + 1) * LT_DIM], &mut ours);
+                    for (o, v) in out.iter_mut().zip(&ours) {
+                        *o += scale * v;
+                    }
+                }
+            }
+            if let Some(pb) = progress {
+                pb.inc(p.len() as u64);
+            }
+        }
+        Ok(())
+    }
+}
+
+impl FieldSource for NelfField {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        self.evaluate_with_progress(points, view, density, lt, None)
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        self.bounds
+    }
+
+    fn world_from_light(&self) -> DMat3 {
+        self.world_from_light
+    }
+
+    /// σ under [`NelfField::recommended_view_policy`] (the mean over its
+    /// directions), without the light-transport network.
+    fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
+        if density.len() != points.len() {
+            return Err(FieldError::LengthMismatch {
+                points: points.len(),
+                density: density.len(),
+                lt: 0,
+                lt_needed: points.len() * LT_DIM,
+            });
+        }
+        if let Some(index) = points.iter().position(|p| !p.is_finite()) {
+            return Err(FieldError::NotFinite { index });
+        }
+        let view = self.recommended_view_policy();
+        for (p, d) in points
+            .chunks(self.chunk_points)
+            .zip(density.chunks_mut(self.chunk_points))
+        {
+            let net: Vec<[f32; 3]> = p.iter().map(|x| self.to_net(*x)).collect();
+            let directions = self.target_directions(p, &view);
+            let scale = MM_PER_M as f32 / directions.len().max(1) as f32;
+            d.fill(0.0);
+            for dirs in &directions {
+                let values = self.model.density_points(&self.encoded, &net, dirs, self.stage)?;
+                for (o, s) in d.iter_mut().zip(&values.sigma) {
+                    *o += scale * s;
+                }
+            }
+        }
+        Ok(())
+    }
+}
