@@ -16,9 +16,18 @@
 //! (the official tester does the same) and cropped at the right and bottom to
 //! multiples of 16 (the encoder halves the resolution four times), which keeps the
 //! principal point where it was.
+//!
+//! [`load_capture_dir`] reads a capture folder: EXR images are linear, PNG/JPEG
+//! sRGB-decoded (IEC 61966-2-1); masks are the mask file's value in `[0, 1]` or the
+//! image's alpha; the head centre is the point nearest every optical axis.
+
+use std::path::Path;
 
 use glam::{DMat3, DVec3};
+use image::DynamicImage;
+use nelf_format::capture::Capture;
 use nelf_format::conventions::PinholeCamera;
+use nelf_scene::mesh_io::srgb_to_linear;
 
 use crate::error::NetError;
 use crate::geometry::NetCamera;
@@ -157,9 +166,139 @@ impl NetCapture {
     }
 }
 
+/// The least-squares point nearest every camera's optical axis
+/// (`argmin_c Σ_i |(I − a_i a_iᵀ)(c − o_i)|²`), or `None` when the axes are
+/// (nearly) parallel.
+pub fn head_centre(cameras: &[PinholeCamera]) -> Option<DVec3> {
+    let mut a = DMat3::ZERO;
+    let mut b = DVec3::ZERO;
+    for cam in cameras {
+        let d = cam.forward().normalize();
+        let projector = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += projector;
+        b += projector * cam.centre();
+    }
+    let n = cameras.len() as f64;
+    if a.determinant().partial_cmp(&(1e-6 * n * n * n)) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let c = a.inverse() * b;
+    c.is_finite().then_some(c)
+}
+
+fn decode(path: &Path) -> Result<DynamicImage, NetError> {
+    image::ImageReader::open(path)
+        .map_err(|e| NetError::file(path, e.to_string()))?
+        .with_guessed_format()
+        .map_err(|e| NetError::file(path, e.to_string()))?
+        .decode()
+        .map_err(|e| NetError::file(path, e.to_string()))
+}
+
+fn clamp_mask(v: f32) -> f32 {
+    if v.is_nan() { 0.0 } else { v.clamp(0.0, 1.0) }
+}
+
+/// One view's linear RGB (EXR as is, PNG/JPEG sRGB-decoded) and mask (the mask
+/// file's luminance, else the image's alpha), checked against the camera's size.
+fn load_view(
+    dir: &Path,
+    view: &nelf_format::capture::CaptureView,
+) -> Result<(Vec<[f32; 3]>, Vec<f32>), NetError> {
+    let path = view.image_path(dir);
+    let image = decode(&path)?;
+    let (w, h) = (view.camera.width, view.camera.height);
+    if image.width() != w || image.height() != h {
+        return Err(NetError::file(
+            &path,
+            format!("{}×{} image for a {w}×{h} camera", image.width(), image.height()),
+        ));
+    }
+    let linear = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+    let rgba = image.to_rgba32f();
+    let decode_channel = |c: f32| {
+        let c = if c.is_finite() { c.max(0.0) } else { 0.0 };
+        if linear { c } else { srgb_to_linear(c) }
+    };
+    let rgb = rgba
+        .pixels()
+        .map(|p| [0, 1, 2].map(|k| decode_channel(p.0[k])))
+        .collect();
+    let mask: Vec<f32> = if let Some(mask_path) = view.mask_path(dir) {
+        let m = decode(&mask_path)?;
+        if m.width() != w || m.height() != h {
+            return Err(NetError::file(
+                &mask_path,
+                format!("mask is {}×{}, image {w}×{h}", m.width(), m.height()),
+            ));
+        }
+        m.to_luma32f().pixels().map(|p| clamp_mask(p.0[0])).collect()
+    } else if image.color().has_alpha() {
+        rgba.pixels().map(|p| clamp_mask(p.0[3])).collect()
+    } else {
+        return Err(NetError::file(
+            &path,
+            format!("view {:?} has no mask file and no alpha", view.name),
+        ));
+    };
+    if !mask.iter().any(|&m| m > 0.5) {
+        return Err(NetError::file(
+            &path,
+            format!("view {:?}: the mask is empty", view.name),
+        ));
+    }
+    Ok((rgb, mask))
+}
+
+/// Loads a capture folder (`cameras.json`, `format/CAPTURE.md`) for the network:
+/// decodes every view's image and mask, estimates the head centre
+/// ([`head_centre`]) and prepares the views ([`NetCapture::new`]). Returns the
+/// capture's description too.
+pub fn load_capture_dir(
+    dir: impl AsRef<Path>,
+    net_from_world: DMat3,
+) -> Result<(NetCapture, Capture), NetError> {
+    let dir = dir.as_ref();
+    let capture = Capture::load(dir)?;
+    let mut images = Vec::with_capacity(capture.views.len());
+    let mut masks = Vec::with_capacity(capture.views.len());
+    for view in &capture.views {
+        let (rgb, mask) = load_view(dir, view)?;
+        images.push(rgb);
+        masks.push(mask);
+    }
+    let cameras = capture.cameras();
+    let centre = head_centre(&cameras).ok_or_else(|| {
+        NetError::file(
+            dir,
+            "the cameras' optical axes are (nearly) parallel: no head centre",
+        )
+    })?;
+    let prepared = NetCapture::new(&cameras, &images, &masks, centre, net_from_world)?;
+    Ok((prepared, capture))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn head_centre_is_where_axes_meet() {
+        let target = DVec3::new(0.1, -0.2, 0.05);
+        let cams: Vec<PinholeCamera> = [
+            DVec3::new(0.0, 0.0, 2.0),
+            DVec3::new(1.0, 0.3, 1.5),
+            DVec3::new(-1.0, -0.2, 1.7),
+        ]
+        .iter()
+        .map(|&eye| PinholeCamera::look_at(eye, target, DVec3::Y, 32, 32, 0.8))
+        .collect();
+        assert!(head_centre(&cams).unwrap().abs_diff_eq(target, 1e-9));
+        assert!(head_centre(&[cams[0], cams[0]]).is_none());
+    }
 
     #[test]
     fn default_frame_turns_y_up_into_z_up() {

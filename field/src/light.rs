@@ -122,6 +122,46 @@ pub fn latlong_to_net_light(map: &LatLong) -> Result<Vec<f32>, NetError> {
     Ok(net)
 }
 
+/// An 8 × 16 map in a light frame resampled into a `width × height` lat-long map in
+/// the world (`world_from_light`), each output texel the mean of 4 × 4 equal-area
+/// sub-samples of the (piecewise-constant) light map. Written at a resolution well
+/// above 8 × 16, projecting it back into the light frame
+/// (`project_envmap(map, world_from_light)`) recovers the light map up to the
+/// texels straddling its borders.
+pub fn light_map_in_world(
+    light: &LatLong,
+    world_from_light: DMat3,
+    width: usize,
+    height: usize,
+) -> Result<LatLong, NetError> {
+    const SUB: usize = 4;
+    let (width, height) = (width.max(1), height.max(1));
+    let light_from_world = world_from_light.transpose();
+    let mut texels = Vec::with_capacity(width * height);
+    for row in 0..height {
+        let (t0, t1) = nelf_format::conventions::row_theta_bounds(row, height);
+        let (u0, u1) = (t0.cos(), t1.cos());
+        for col in 0..width {
+            let (p0, p1) = nelf_format::conventions::col_phi_bounds(col, width);
+            let mut acc = [0.0f64; 3];
+            for a in 0..SUB {
+                let u = u0 + (u1 - u0) * (a as f64 + 0.5) / SUB as f64;
+                let theta = u.clamp(-1.0, 1.0).acos();
+                for b in 0..SUB {
+                    let phi = p0 + (p1 - p0) * (b as f64 + 0.5) / SUB as f64;
+                    let d = light_from_world * nelf_format::conventions::direction(theta, phi);
+                    let t = light.lookup(d);
+                    for (s, v) in acc.iter_mut().zip(t) {
+                        *s += f64::from(v);
+                    }
+                }
+            }
+            texels.push(acc.map(|s| (s / (SUB * SUB) as f64) as f32));
+        }
+    }
+    Ok(LatLong::new(width, height, texels)?)
+}
+
 /// Everything the light aggregation computes, in the fixtures' layouts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightAggregation {
@@ -278,6 +318,32 @@ mod tests {
         let map = net_light_to_latlong(&net).unwrap();
         assert_eq!(map.get(2, our_col(5))[1], net[ENV_TEXELS + 2 * ENV_W + 5]);
         assert_eq!(latlong_to_net_light(&map).unwrap(), net);
+    }
+
+    #[test]
+    fn world_map_projects_back_to_the_light_map() {
+        use nelf_format::conventions::project_envmap;
+        // A smooth light map, a tilted light frame: writing it in the world at 256 × 128
+        // and projecting back recovers it to a few percent and keeps its power.
+        let texels: Vec<[f32; 3]> = (0..ENV_TEXELS)
+            .map(|t| {
+                let (r, c) = ((t / ENV_W) as f32, (t % ENV_W) as f32);
+                [1.0 + 0.5 * (c * 0.4).sin(), 1.0 + 0.1 * r, 2.0 - 0.1 * r]
+            })
+            .collect();
+        let light = LatLong::new(ENV_W, ENV_H, texels).unwrap();
+        let world_from_light = DMat3::from_rotation_x(0.3) * DMat3::from_rotation_y(2.0) * CAM0_FROM_LIGHT;
+        let world = light_map_in_world(&light, world_from_light, 256, 128).unwrap();
+        let back = project_envmap(&world, world_from_light).unwrap();
+        for (a, b) in light.texels().iter().zip(back.texels()) {
+            for c in 0..3 {
+                assert!((a[c] - b[c]).abs() < 0.05 * a[c], "{a:?} vs {b:?}");
+            }
+        }
+        let (p0, p1) = (light.integral(), world.integral());
+        for c in 0..3 {
+            assert!((p0[c] - p1[c]).abs() < 2e-3 * p0[c], "{p0:?} vs {p1:?}");
+        }
     }
 
     #[test]

@@ -2,4 +2,5 @@
 
 pub mod capture;
 pub mod inspect;
+pub mod light;
 pub mod render;

@@ -1,0 +1,130 @@
+//! End-to-end test of `nelf light`: a small synthetic capture is written with
+//! `nelf capture synth`, its lighting estimated with the parity fixtures' weights
+//! (`../shared/nelf-oracle/fixture_seed0.safetensors`), and the world-frame map is
+//! checked against the raw light-frame estimate through the reported
+//! `world_from_light`; bad inputs fail with clear messages.
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
+use std::ffi::OsStr;
+use std::path::Path;
+use std::process::{Command, Output};
+
+use glam::DMat3;
+use nelf_format::conventions::{is_rotation, project_envmap};
+use nelf_scene::envmap::load_envmap;
+
+const WEIGHTS: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/nelf-oracle/fixture_seed0.safetensors"
+);
+
+fn nelf<S: AsRef<OsStr>>(args: &[S]) -> Output {
+    match Command::new(env!("CARGO_BIN_EXE_nelf")).args(args).output() {
+        Ok(out) => out,
+        Err(e) => panic!("cannot run nelf: {e}"),
+    }
+}
+
+fn succeed<S: AsRef<OsStr>>(args: &[S]) -> String {
+    let out = nelf(args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).unwrap()
+}
+
+#[test]
+fn light_writes_the_estimate_in_the_world_frame() {
+    if !Path::new(WEIGHTS).is_file() {
+        eprintln!("no weights at {WEIGHTS}: nelf light not checked");
+        return;
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let capture = dir.path().join("capture");
+    let cap = capture.to_str().unwrap();
+    succeed(&[
+        "capture",
+        "synth",
+        "-o",
+        cap,
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--bounces",
+        "0",
+        "--texel-samples",
+        "2",
+        "--indirect-samples",
+        "4",
+        "--targets",
+        "1",
+    ]);
+    let world = dir.path().join("light.exr");
+    let raw = dir.path().join("light_frame.exr");
+    let summary: serde_json::Value = serde_json::from_str(&succeed(&[
+        "light",
+        cap,
+        "--weights",
+        WEIGHTS,
+        "-o",
+        world.to_str().unwrap(),
+        "--width",
+        "128",
+        "--json",
+    ]))
+    .unwrap();
+    succeed(&[
+        "light",
+        cap,
+        "--weights",
+        WEIGHTS,
+        "-o",
+        raw.to_str().unwrap(),
+        "--light-frame",
+    ]);
+
+    let world_map = load_envmap(&world).unwrap();
+    let light_map = load_envmap(&raw).unwrap();
+    assert_eq!((world_map.width(), world_map.height()), (128, 64));
+    assert_eq!((light_map.width(), light_map.height()), (16, 8));
+    assert!(
+        light_map
+            .texels()
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite() && *v > 0.0)
+    );
+    let cols: Vec<f64> = summary["world_from_light"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    let world_from_light = DMat3::from_cols_slice(&cols);
+    assert!(is_rotation(world_from_light, 1e-9));
+    // Projecting the world-frame file back into the light frame gives the estimate.
+    let back = project_envmap(&world_map, world_from_light).unwrap();
+    let scale = light_map.texels().iter().flatten().fold(0.0f32, |a, b| a.max(*b));
+    for (a, b) in light_map.texels().iter().zip(back.texels()) {
+        for c in 0..3 {
+            assert!((a[c] - b[c]).abs() < 0.05 * scale, "{a:?} vs {b:?}");
+        }
+    }
+    let power = summary["power_rgb"].as_array().unwrap();
+    let want = world_map.integral();
+    for c in 0..3 {
+        assert!((power[c].as_f64().unwrap() - want[c]).abs() < 1e-3 * want[c]);
+    }
+
+    // Bad inputs: clear messages, no panic.
+    let out = nelf(&[
+        "light",
+        cap,
+        "--weights",
+        dir.path().join("missing.safetensors").to_str().unwrap(),
+    ]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("loading the weights"));
+    let out = nelf(&["light", dir.path().to_str().unwrap(), "--weights", WEIGHTS]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("loading the capture"));
+}
