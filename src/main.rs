@@ -23,6 +23,8 @@ enum Command {
     Light(cmd::light::LightArgs),
     /// Render a .nelf asset under an environment map (CPU reference renderer).
     Render(cmd::render::RenderArgs),
+    /// Open the interactive viewer (wgpu + egui): orbit, relight, rank, debug views.
+    View(cmd::view::ViewArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -32,5 +34,6 @@ fn main() -> anyhow::Result<()> {
         Command::Capture(args) => cmd::capture::run(&args),
         Command::Light(args) => cmd::light::run(&args),
         Command::Render(args) => cmd::render::run(&args),
+        Command::View(args) => cmd::view::run(&args),
     }
 }

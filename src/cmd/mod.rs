@@ -4,3 +4,4 @@ pub mod capture;
 pub mod inspect;
 pub mod light;
 pub mod render;
+pub mod view;

@@ -1,7 +1,8 @@
 //! `nelf render ASSET -o out.png|out.exr`: renders a `.nelf` asset under an environment
 //! map with the CPU reference renderer (`nelf_render::render_asset`: trilinear samples,
 //! front-to-back emission–absorption compositing, lighting projected once onto the PCA
-//! basis).
+//! basis). `--gpu` renders the same image with the GPU renderer (`nelf_viewer`), read
+//! back before tone mapping.
 //!
 //! The camera is one of `--camera CAM.json` (the fields of a `cameras.json` view, metres:
 //! `width`, `height`, `intrinsics {fx, fy, cx, cy}`, `world_to_camera {rotation (row-major),
@@ -72,6 +73,10 @@ pub struct RenderArgs {
     /// Stop a ray once its transmittance falls below this.
     #[arg(long, default_value_t = 1e-3)]
     pub min_transmittance: f32,
+    /// Render on the GPU (`nelf_viewer::GpuRenderer`, wgpu; Mesa's lavapipe on machines
+    /// without one) instead of the CPU reference; the same image to f16 precision.
+    #[arg(long)]
+    pub gpu: bool,
     /// Output image: .png (sRGB, 8-bit) or .exr (linear float).
     #[arg(short, long, default_value = "render.png")]
     pub out: PathBuf,
@@ -191,7 +196,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let load_seconds = start.elapsed().as_secs_f64();
 
     let start = Instant::now();
-    let image = render_cpu(&asset, &camera, &env, world_from_env, rank, settings)?;
+    let image = if args.gpu {
+        render_gpu(&asset, &camera, &env, world_from_env, rank, settings)?
+    } else {
+        render_cpu(&asset, &camera, &env, world_from_env, rank, settings)?
+    };
     let render_seconds = start.elapsed().as_secs_f64();
 
     match output {
@@ -213,7 +222,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         envmap: envmap_name.clone(),
         rank_used: rank.unwrap_or(asset.rank()),
         voxels: asset.voxel_count(),
-        device: "cpu",
+        device: if args.gpu { "gpu" } else { "cpu" },
         load_seconds,
         render_seconds,
     };
@@ -221,18 +230,19 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     std::fs::write(&record_path, serde_json::to_string_pretty(&record)? + "\n")
         .with_context(|| format!("cannot write {}", record_path.display()))?;
     println!(
-        "rendered {}×{} (rank {} of {}, {} voxels, lighting: {envmap_name}) in {render_seconds:.3} s on the CPU -> {}",
+        "rendered {}×{} (rank {} of {}, {} voxels, lighting: {envmap_name}) in {render_seconds:.3} s on the {} -> {}",
         image.width,
         image.height,
         record.rank_used,
         asset.rank(),
         asset.voxel_count(),
+        if args.gpu { "GPU" } else { "CPU" },
         args.out.display()
     );
     Ok(())
 }
 
-/// The CPU path (the reference renderer); a GPU path sits beside it.
+/// The CPU path (the reference renderer); [`render_gpu`] sits beside it.
 fn render_cpu(
     asset: &Asset,
     camera: &PinholeCamera,
@@ -242,6 +252,30 @@ fn render_cpu(
     settings: MarchSettings,
 ) -> anyhow::Result<Image> {
     Ok(render_asset(asset, camera, env, world_from_env, rank, &settings)?)
+}
+
+/// The GPU path (`nelf_viewer`): the same camera, lighting, rank and march settings,
+/// no jitter, read back as the same premultiplied linear image. The time includes
+/// creating the device and uploading the asset.
+fn render_gpu(
+    asset: &Asset,
+    camera: &PinholeCamera,
+    env: &LatLong,
+    world_from_env: DMat3,
+    rank: Option<usize>,
+    settings: MarchSettings,
+) -> anyhow::Result<Image> {
+    let mut gpu = nelf_viewer::GpuRenderer::new_headless()?;
+    gpu.load_asset(asset)?;
+    gpu.set_lighting(env, world_from_env)?;
+    gpu.set_rank(rank);
+    let view = nelf_viewer::ViewSettings {
+        march: settings,
+        jitter: false,
+        frame_index: 0,
+        view: nelf_viewer::MarchView::Shaded,
+    };
+    Ok(gpu.render(camera, &view)?)
 }
 
 /// Output formats, chosen by extension.
