@@ -19,6 +19,8 @@ enum Command {
     Inspect(cmd::inspect::InspectArgs),
     /// Make capture folders (synthetic captures rendered by the path tracer).
     Capture(cmd::capture::CaptureArgs),
+    /// Bake a capture or a mesh into a .nelf asset (visual hull, sparse bricks, PCA).
+    Bake(cmd::bake::BakeArgs),
     /// Estimate a capture's lighting with the NeLF network and write it as a lat-long EXR.
     Light(cmd::light::LightArgs),
     /// Render a .nelf asset under an environment map (CPU reference renderer).
@@ -32,6 +34,7 @@ fn main() -> anyhow::Result<()> {
     match cli.command {
         Command::Inspect(args) => cmd::inspect::run(&args),
         Command::Capture(args) => cmd::capture::run(&args),
+        Command::Bake(args) => cmd::bake::run(&args),
         Command::Light(args) => cmd::light::run(&args),
         Command::Render(args) => cmd::render::run(&args),
         Command::View(args) => cmd::view::run(&args),

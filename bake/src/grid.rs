@@ -11,7 +11,12 @@
 //! hull (NeLF never queries there), rounded to `f16` as the file stores it, and a
 //! brick is dropped when its largest density is below `σ_min = −ln(1 − α_min)/Δ`:
 //! a voxel of that density is less than `α_min` opaque across one voxel (`Δ` is the
-//! voxel size; `α_min` = 1 % by default).
+//! voxel size; `α_min` = 1 % by default). A dropped brick comes back as an
+//! **apron** when it holds a voxel 26-adjacent to a voxel with `σ > 0` of a kept
+//! brick: the renderer counts missing voxels as 0 in trilinear interpolation (SPEC),
+//! so without it a surface at a brick face would fade to black over its last half
+//! voxel. Apron bricks keep their (small or zero) density and get light transport
+//! where the band below reaches them.
 //!
 //! **Light-transport band.** Evaluating `T` (hundreds of path-traced samples per
 //! vector for the ground truth) is the expensive part, and most voxels never show:
@@ -25,10 +30,11 @@
 //! With `τ_max = 10` a ray reaching an excluded voxel has transmittance below
 //! `e⁻¹⁰ ≈ 4.5·10⁻⁵`, under the renderer's `10⁻³` cut-off.
 
+use std::collections::{BTreeSet, HashMap};
 use std::time::Instant;
 
 use glam::{DVec3, Vec3};
-use nelf_format::asset::{GridGeometry, local_voxel_coords};
+use nelf_format::asset::{GridGeometry, brick_order_key, local_voxel_coords};
 use nelf_format::encode_density;
 use nelf_format::spec::{BRICK_SIZE, BRICK_VOXELS};
 use nelf_render::BrickGrid;
@@ -195,6 +201,8 @@ pub struct DensityGrid {
     pub density: Vec<f32>,
     /// Candidate bricks evaluated.
     pub candidate_bricks: usize,
+    /// Bricks kept only as an apron around dense ones (module docs).
+    pub apron_bricks: usize,
     /// Threshold used, 1/m.
     pub sigma_min_per_m: f64,
 }
@@ -239,28 +247,70 @@ pub fn evaluate_density(
         bar.inc((out.len() / BRICK_VOXELS) as u64);
     }
     bar.finish_and_clear();
-    let rounded = encode_density(&density)?;
-    let mut kept_bricks = Vec::new();
-    let mut kept_density = Vec::new();
-    for (b, chunk) in rounded.chunks_exact(BRICK_VOXELS).enumerate() {
-        let max = chunk.iter().map(|d| d.to_f32()).fold(0.0f32, f32::max);
-        if max > 0.0 && f64::from(max) >= sigma_min {
-            kept_bricks.push(plan.bricks[b]);
-            kept_density.extend(chunk.iter().map(|d| d.to_f32()));
-        }
-    }
-    if kept_bricks.is_empty() {
+    let rounded: Vec<f32> = encode_density(&density)?.iter().map(|d| d.to_f32()).collect();
+    let dense_bricks: Vec<usize> = (0..plan.bricks.len())
+        .filter(|&b| {
+            let max = rounded[b * BRICK_VOXELS..(b + 1) * BRICK_VOXELS]
+                .iter()
+                .fold(0.0f32, |m, &d| m.max(d));
+            max > 0.0 && f64::from(max) >= sigma_min
+        })
+        .collect();
+    if dense_bricks.is_empty() {
         return Err(BakeError::Empty(format!(
             "every one of {} candidate bricks has density below {sigma_min:.3} 1/m",
             plan.bricks.len()
         )));
     }
+    let kept = with_apron(plan, &rounded, &dense_bricks);
+    let candidate_index: HashMap<[u16; 3], usize> =
+        plan.bricks.iter().enumerate().map(|(i, &b)| (b, i)).collect();
+    let mut kept_density = Vec::with_capacity(kept.len() * BRICK_VOXELS);
+    for b in &kept {
+        match candidate_index.get(b) {
+            Some(&i) => kept_density.extend_from_slice(&rounded[i * BRICK_VOXELS..(i + 1) * BRICK_VOXELS]),
+            None => kept_density.extend_from_slice(&[0.0; BRICK_VOXELS]),
+        }
+    }
     Ok(DensityGrid {
-        grid: BrickGrid::new(plan.geometry, kept_bricks)?,
+        apron_bricks: kept.len() - dense_bricks.len(),
+        grid: BrickGrid::new(plan.geometry, kept)?,
         density: kept_density,
         candidate_bricks: plan.bricks.len(),
         sigma_min_per_m: sigma_min,
     })
+}
+
+/// The dense bricks plus every brick of the grid holding a voxel 26-adjacent to a
+/// voxel with `σ > 0` of a dense brick, sorted by (z, y, x). A missing voxel counts
+/// as 0 in trilinear interpolation, so without these a surface lying at a brick's
+/// face would fade to black over its last half voxel.
+fn with_apron(plan: &GridPlan, density: &[f32], dense_bricks: &[usize]) -> Vec<[u16; 3]> {
+    let grid_bricks = plan.geometry.grid_bricks.map(i64::from);
+    let mut kept: BTreeSet<(u16, u16, u16)> = dense_bricks
+        .iter()
+        .map(|&b| brick_order_key(plan.bricks[b]))
+        .collect();
+    let mut apron = BTreeSet::new();
+    for &b in dense_bricks {
+        let coord = plan.bricks[b].map(i64::from);
+        for local in 0..BRICK_VOXELS {
+            let l = local_voxel_coords(local);
+            let on_face = l.iter().any(|&x| x == 0 || x == BRICK_SIZE - 1);
+            if !on_face || density[b * BRICK_VOXELS + local] <= 0.0 {
+                continue;
+            }
+            for (o, _) in neighbour_offsets() {
+                let g: [i64; 3] = std::array::from_fn(|a| coord[a] * BRICK_SIZE as i64 + l[a] as i64 + o[a]);
+                let nb = g.map(|v| v.div_euclid(BRICK_SIZE as i64));
+                if nb != coord && (0..3).all(|a| (0..grid_bricks[a]).contains(&nb[a])) {
+                    apron.insert((nb[2] as u16, nb[1] as u16, nb[0] as u16));
+                }
+            }
+        }
+    }
+    kept.append(&mut apron);
+    kept.into_iter().map(|(z, y, x)| [x, y, z]).collect()
 }
 
 /// The 26 neighbour offsets and their lengths (voxels).

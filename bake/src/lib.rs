@@ -31,4 +31,4 @@ pub use pipeline::{
     bake_capture, bake_field, bake_mesh, mesh_cameras, sidecar_path, write_bake,
 };
 pub use progress::Progress;
-pub use source::{GroundTruth, TraceOverrides};
+pub use source::{GroundTruth, InsetMeshField, ShellPlacement, TraceOverrides};

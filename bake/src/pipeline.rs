@@ -36,7 +36,7 @@ use crate::rank::{
     CandidateLoss, RankScene, box_downsample, candidate_loss, candidate_ranks, light_texels, reduced_camera,
     reference_renders, relative_error_vs_images, test_environments, unquantized_radiance,
 };
-use crate::source::{GroundTruth, TraceOverrides, describe_trace, mesh_field};
+use crate::source::{GroundTruth, ShellPlacement, TraceOverrides, describe_trace, mesh_field};
 
 /// Which outgoing direction the light transport is baked for (a baked vector has
 /// one; the viewer cannot change it).
@@ -93,9 +93,12 @@ pub struct BakeConfig {
     /// this (plus one voxel around), elsewhere the PCA mean.
     #[arg(long, default_value_t = 10.0)]
     pub max_optical_depth: f64,
-    /// Ground-truth field: width of the density shell around the surface, voxels.
+    /// Ground-truth field: width of the density shell at the surface, voxels.
     #[arg(long, default_value_t = 2.0)]
     pub shell_voxels: f32,
+    /// Ground-truth field: where the density shell sits (inside the surface, or centred on it).
+    #[arg(long, value_enum, default_value_t)]
+    pub shell_placement: ShellPlacement,
     /// Outgoing direction the light transport is baked for.
     #[arg(long, value_enum, default_value_t)]
     pub view_policy: ViewPolicyChoice,
@@ -140,6 +143,7 @@ impl Default for BakeConfig {
             min_brick_opacity: 0.01,
             max_optical_depth: 10.0,
             shell_voxels: 2.0,
+            shell_placement: ShellPlacement::Inside,
             view_policy: ViewPolicyChoice::AverageCameras,
             render_size: 128,
             step_voxels: 0.5,
@@ -250,8 +254,10 @@ pub struct BakeReport {
     pub hull_voxels: usize,
     /// Bricks evaluated for density.
     pub candidate_bricks: usize,
-    /// Bricks kept.
+    /// Bricks kept (apron bricks included).
     pub bricks: usize,
+    /// Bricks kept only as an apron around dense ones.
+    pub apron_bricks: usize,
     /// Voxels kept (bricks × 512).
     pub voxels: usize,
     /// Voxels whose light transport was evaluated.
@@ -441,7 +447,7 @@ pub fn bake_field(
         march,
         world_from_light,
     };
-    let (m0, reference_json, source_light) = match &job.reference {
+    let (m0, reference_json) = match &job.reference {
         Reference::Images {
             images,
             masks,
@@ -469,12 +475,12 @@ pub fn bake_field(
                 "relative_error": m0,
                 "snr_db": -10.0 * m0.log10(),
             });
-            (m0, json, Some(lighting.clone()))
+            (m0, json)
         }
         Reference::AssumedSnrDb(snr) => {
             let m0 = 10f64.powf(-snr / 10.0);
             let json = serde_json::json!({ "kind": "assumed-snr", "relative_error": m0, "snr_db": snr });
-            (m0, json, None)
+            (m0, json)
         }
     };
     if !(m0.is_finite() && m0 > 0.0) {
@@ -482,7 +488,7 @@ pub fn bake_field(
             "the unquantized grid's relative error against ground truth is {m0}; the rank cannot be chosen from it (force --rank)"
         )));
     }
-    let envs = test_environments(source_light.as_ref());
+    let envs = test_environments();
     let references = reference_renders(&scene, &envs, &lt_voxels, &lt, &model.mean)?;
     let ranks = match config.rank {
         Some(k) => vec![k],
@@ -523,6 +529,7 @@ pub fn bake_field(
         hull_voxels: job.plan.hull_voxels,
         candidate_bricks: dense.candidate_bricks,
         bricks: grid.bricks().len(),
+        apron_bricks: dense.apron_bricks,
         voxels,
         lt_voxels: lt_voxels.len(),
         rank,
@@ -545,6 +552,7 @@ pub fn bake_field(
             "hull_voxels": report.hull_voxels,
             "candidate_bricks": report.candidate_bricks,
             "bricks": report.bricks,
+            "apron_bricks": report.apron_bricks,
             "voxels": report.voxels,
             "lt_voxels": report.lt_voxels,
             "brick_density_threshold_per_m": dense.sigma_min_per_m,
@@ -598,7 +606,7 @@ pub fn bake_capture(
 
     let mesh = truth.mesh()?;
     let trace = config.trace.apply(truth.trace_settings());
-    let field = mesh_field(&mesh, trace, voxel, config.shell_voxels)?;
+    let field = mesh_field(&mesh, trace, voxel, config.shell_voxels, config.shell_placement)?;
     let centres: Vec<DVec3> = capture.cameras.iter().map(PinholeCamera::centre).collect();
     let view_policy = view_policy_for(config.view_policy, &centres)?;
     let reference = match capture.source_envmap_path() {
@@ -617,10 +625,10 @@ pub fn bake_capture(
         "head_centre_m": capture.head_centre_m.to_array(),
         "hull_box_m": [lo.to_array(), hi.to_array()],
         "ground_truth": truth.describe(),
-        "field": describe_trace(&trace, config.shell_voxels),
+        "field": describe_trace(&trace, config.shell_voxels, config.shell_placement),
     });
     let job = FieldBake {
-        field: &field,
+        field: field.as_ref(),
         plan,
         cameras: capture.cameras.clone(),
         view_policy,
@@ -666,7 +674,7 @@ pub fn bake_mesh(
     let (lo, hi) = mesh.bounds();
     let voxel = voxel_size_for((hi - lo).as_dvec3(), config.resolution, config.voxel_size_m)?;
     let trace = config.trace.apply(nelf_scene::tracer::TraceSettings::default());
-    let field = mesh_field(mesh, trace, voxel, config.shell_voxels)?;
+    let field = mesh_field(mesh, trace, voxel, config.shell_voxels, config.shell_placement)?;
     let (flo, fhi) = field.bounds();
     let plan = plan_all_bricks(geometry_for_box(flo.as_dvec3(), fhi.as_dvec3(), voxel)?);
     let hull_secs = t.elapsed().as_secs_f64();
@@ -677,10 +685,10 @@ pub fn bake_mesh(
         "kind": "mesh",
         "mesh": description,
         "triangles": mesh.triangles.len(),
-        "field": describe_trace(&trace, config.shell_voxels),
+        "field": describe_trace(&trace, config.shell_voxels, config.shell_placement),
     });
     let job = FieldBake {
-        field: &field,
+        field: field.as_ref(),
         plan,
         cameras,
         view_policy,

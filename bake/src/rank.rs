@@ -2,8 +2,8 @@
 //!
 //! The capture's own views (at reduced resolution) are rendered by the reference
 //! renderer (`nelf-render`) under a fixed set of test environments: a constant
-//! white map, four procedural maps (`nelf_scene::envgen`, seeds
-//! [`TEST_ENV_SEEDS`]) and, when known, the capture's own lighting. For each
+//! white map and four procedural maps (`nelf_scene::envgen`, [`TEST_ENVS`]: two
+//! outdoor with a sun, one indoor, one studio). For each
 //! environment `e`, `I⁰_e` is the render of the **unquantized** grid (each voxel
 //! shaded from its raw 384-vector) and `Iᴷ_e` that of the candidate (rank-`K` PCA,
 //! quantized coefficients, exactly what the file will hold). Summing over views,
@@ -29,41 +29,46 @@ use nelf_format::conventions::{LT_DIM, LatLong, PinholeCamera, project_envmap, s
 use nelf_render::{
     BrickGrid, Image, MarchSettings, project_light_texels, radiance_from_lt, render_volume, voxel_radiance,
 };
-use nelf_scene::envgen::{EnvGenParams, procedural_envmap};
+use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
 use serde::{Deserialize, Serialize};
 
 use crate::error::{BakeError, Result};
 
 /// Ranks tried, in increasing order.
 pub const RANK_CANDIDATES: [usize; 12] = [1, 2, 3, 4, 6, 8, 12, 16, 24, 32, 48, 64];
-/// Seeds of the procedural test environments.
-pub const TEST_ENV_SEEDS: [u64; 4] = [9001, 9002, 9003, 9004];
+/// Families and seeds of the procedural test environments.
+pub const TEST_ENVS: [(EnvFamily, u64); 4] = [
+    (EnvFamily::Outdoor, 9001),
+    (EnvFamily::Outdoor, 9002),
+    (EnvFamily::Indoor, 9003),
+    (EnvFamily::Studio, 9004),
+];
 
 /// One lighting the candidates are judged under.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TestEnv {
-    /// Name for the report (`constant`, `procedural-9001`, `source`).
+    /// Name for the report (`constant`, `outdoor-9001`, …).
     pub name: String,
     /// The map, lat-long in the world frame, any resolution.
     pub map: LatLong,
 }
 
-/// The fixed test environments, plus `source` (the capture's lighting) when given.
-pub fn test_environments(source: Option<&LatLong>) -> Vec<TestEnv> {
+/// The fixed test environments: a constant white map and one procedural map per
+/// `(family, seed)` of [`TEST_ENVS`] (two outdoor maps with a sun, an indoor room,
+/// a studio). The same for every scene, so ranks compare across scenes.
+pub fn test_environments() -> Vec<TestEnv> {
     let mut envs = vec![TestEnv {
         name: "constant".into(),
         map: LatLong::constant(16, 8, [1.0; 3]),
     }];
-    for seed in TEST_ENV_SEEDS {
+    for (family, seed) in TEST_ENVS {
+        let params = EnvGenParams {
+            family: Some(family),
+            ..EnvGenParams::default()
+        };
         envs.push(TestEnv {
-            name: format!("procedural-{seed}"),
-            map: procedural_envmap(seed, &EnvGenParams::default()),
-        });
-    }
-    if let Some(map) = source {
-        envs.push(TestEnv {
-            name: "source".into(),
-            map: map.clone(),
+            name: format!("{}-{seed}", format!("{family:?}").to_lowercase()),
+            map: procedural_envmap(seed, &params),
         });
     }
     envs

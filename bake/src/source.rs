@@ -8,10 +8,22 @@
 //! exact mesh and `trace_settings` the path tracer's settings) or loaded from a
 //! mesh file in the capture's world frame. The density's shell is `shell_voxels`
 //! voxels wide (the field's docs ask a baker for at least two).
+//!
+//! **Where the shell sits.** `MeshField`'s own profile centres the density ramp on
+//! the surface, `σ(d) = σ_max·clamp(½ − d/w, 0, 1)` (`d` signed distance, negative
+//! inside). Sampled on a grid and interpolated trilinearly, that density reaches
+//! optical depth 1 one to two voxels *outside* the mesh (the ramp is 50 optical
+//! depths steep), so a baked head renders visibly swollen. [`InsetMeshField`]
+//! (the default, [`ShellPlacement::Inside`]) puts the whole ramp inside,
+//! `σ(d) = σ_max·clamp(−d/w, 0, 1)` with `σ_max = 100/w`, which puts the rendered
+//! surface within about a third of a voxel of the mesh; its light transport is
+//! `MeshField`'s (the closest surface point's).
 
 use std::path::{Path, PathBuf};
 
-use nelf_scene::field::{DensityProfile, MeshField};
+use glam::{DMat3, Vec3};
+use nelf_format::conventions::LT_DIM;
+use nelf_scene::field::{DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy};
 use nelf_scene::mesh::Mesh;
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 use nelf_scene::synth::{SynthConfig, synth_mesh};
@@ -123,29 +135,123 @@ impl GroundTruth {
     }
 }
 
+/// Where the ground-truth density's shell sits relative to the mesh surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ShellPlacement {
+    /// The ramp lies inside the surface ([`InsetMeshField`]).
+    #[default]
+    Inside,
+    /// The ramp is centred on the surface (`MeshField`'s own profile).
+    Centred,
+}
+
+/// A mesh's ground-truth field whose density ramps from 0 at the surface to `σ_max`
+/// at depth `w` inside (module docs); light transport as [`MeshField`]'s.
+#[derive(Debug, Clone)]
+pub struct InsetMeshField {
+    inner: MeshField,
+    sigma_max_per_m: f32,
+    width_m: f32,
+}
+
+impl InsetMeshField {
+    /// The field of `inner`'s mesh with an inside ramp `width_m` wide reaching
+    /// `σ_max = 100 / width_m` (optical depth 50 across it, as `MeshField`'s).
+    pub fn new(inner: MeshField, width_m: f32) -> Result<Self> {
+        if !(width_m.is_finite() && width_m > 0.0) {
+            return Err(BakeError::Settings(format!(
+                "shell width {width_m} m must be positive"
+            )));
+        }
+        Ok(Self {
+            inner,
+            sigma_max_per_m: 100.0 / width_m,
+            width_m,
+        })
+    }
+
+    /// Density at `x`, 1/m.
+    pub fn density(&self, x: Vec3) -> f32 {
+        let bvh = self.inner.tracer().bvh();
+        let inside = || bvh.winding_number(x) >= 0.5;
+        match bvh.closest_point(x, self.width_m) {
+            Some(cp) if inside() => self.sigma_max_per_m * (cp.distance / self.width_m).clamp(0.0, 1.0),
+            None if inside() => self.sigma_max_per_m,
+            Some(_) | None => 0.0,
+        }
+    }
+}
+
+impl FieldSource for InsetMeshField {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        self.inner.evaluate(points, view, density, lt)?;
+        self.evaluate_density(points, density)
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        self.inner.bounds()
+    }
+
+    fn world_from_light(&self) -> DMat3 {
+        self.inner.world_from_light()
+    }
+
+    fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
+        use rayon::prelude::*;
+        if density.len() != points.len() {
+            return Err(FieldError::LengthMismatch {
+                points: points.len(),
+                density: density.len(),
+                lt: 0,
+                lt_needed: points.len() * LT_DIM,
+            });
+        }
+        if let Some(index) = points.iter().position(|p| !p.is_finite()) {
+            return Err(FieldError::NotFinite { index });
+        }
+        points
+            .par_iter()
+            .zip(density.par_iter_mut())
+            .for_each(|(x, d)| *d = self.density(*x));
+        Ok(())
+    }
+}
+
 /// The ground-truth field of `mesh` for a grid of `voxel_size_m`: a density shell
-/// `shell_voxels` voxels wide, light transport by `trace`.
+/// `shell_voxels` voxels wide placed by `placement`, light transport by `trace`.
 pub fn mesh_field(
     mesh: &Mesh,
     trace: TraceSettings,
     voxel_size_m: f64,
     shell_voxels: f32,
-) -> Result<MeshField> {
+    placement: ShellPlacement,
+) -> Result<Box<dyn FieldSource>> {
     let width = shell_voxels * voxel_size_m as f32;
     if !(width.is_finite() && width > 0.0) {
         return Err(BakeError::Settings(format!(
             "--shell-voxels {shell_voxels} must be positive"
         )));
     }
-    Ok(MeshField::new(
-        mesh,
-        trace,
-        DensityProfile::with_shell_width(width),
-    )?)
+    let field = MeshField::new(mesh, trace, DensityProfile::with_shell_width(width))?;
+    Ok(match placement {
+        ShellPlacement::Centred => Box::new(field),
+        ShellPlacement::Inside => Box::new(InsetMeshField::new(field, width)?),
+    })
 }
 
 /// Description of a ground-truth field for the metadata.
-pub fn describe_trace(trace: &TraceSettings, shell_voxels: f32) -> serde_json::Value {
+pub fn describe_trace(
+    trace: &TraceSettings,
+    shell_voxels: f32,
+    placement: ShellPlacement,
+) -> serde_json::Value {
     serde_json::json!({
         "kind": "ground-truth-mesh-field",
         "bounces": trace.bounces,
@@ -155,5 +261,6 @@ pub fn describe_trace(trace: &TraceSettings, shell_voxels: f32) -> serde_json::V
         "specular_weight": trace.specular.map(|s| s.weight),
         "seed": trace.seed,
         "shell_voxels": shell_voxels,
+        "shell_placement": placement,
     })
 }

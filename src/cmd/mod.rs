@@ -1,5 +1,6 @@
 //! One module per subcommand: options (clap) and a `run` that calls the libraries.
 
+pub mod bake;
 pub mod capture;
 pub mod inspect;
 pub mod light;
