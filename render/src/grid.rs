@@ -147,6 +147,7 @@ impl BrickGrid {
     }
 
     /// Index in [`BrickGrid::bricks`] of the brick at brick coordinates `b`, if stored.
+    #[inline]
     pub fn brick_index(&self, b: [i64; 3]) -> Option<usize> {
         let n = self.geometry.grid_bricks;
         if (0..3).any(|a| b[a] < 0 || b[a] >= i64::from(n[a])) {
@@ -164,6 +165,21 @@ impl BrickGrid {
                     .binary_search_by_key(&key, |&c| brick_order_key(c))
                     .ok()
             }
+        }
+    }
+
+    /// [`BrickGrid::brick_index`] for coordinates already known to be inside the grid.
+    #[inline]
+    fn brick_index_in_grid(&self, b: [i64; 3]) -> Option<usize> {
+        debug_assert!((0..3).all(|a| b[a] >= 0 && b[a] < i64::from(self.geometry.grid_bricks[a])));
+        match &self.lookup {
+            BrickLookup::Dense(table) => {
+                let n = self.geometry.grid_bricks;
+                let cell = b[0] as usize + n[0] as usize * (b[1] as usize + n[1] as usize * b[2] as usize);
+                let index = table[cell];
+                (index != EMPTY).then_some(index as usize)
+            }
+            BrickLookup::Sorted => self.brick_index(b),
         }
     }
 
@@ -197,39 +213,100 @@ impl BrickGrid {
 
     /// Continuous voxel coordinates `u = (p − bbox_min)/voxel_size − 0.5`, base corner and
     /// `f32` fractions; `None` when not finite or absurdly far away.
+    #[inline]
     fn base_and_fraction(&self, p: DVec3) -> Option<([i64; 3], [f32; 3])> {
-        let u = (p - self.bbox_min) * self.inverse_voxel_size - 0.5;
-        let base = u.floor();
-        // Outside ±2⁵³ voxels nothing can be found; this also rejects NaN and ±∞.
-        if !base.is_finite() || base.abs().max_element() >= 9.0e15 {
-            return None;
+        /// Beyond ±2⁵³ voxels nothing can be found; the comparisons also reject NaN and ±∞.
+        const LIMIT: f64 = 9.0e15;
+        let ux = (p.x - self.bbox_min.x) * self.inverse_voxel_size - 0.5;
+        let uy = (p.y - self.bbox_min.y) * self.inverse_voxel_size - 0.5;
+        let uz = (p.z - self.bbox_min.z) * self.inverse_voxel_size - 0.5;
+        if ux.abs() < LIMIT && uy.abs() < LIMIT && uz.abs() < LIMIT {
+            let (bx, by, bz) = (floor_i64(ux), floor_i64(uy), floor_i64(uz));
+            let f = [
+                (ux - bx as f64) as f32,
+                (uy - by as f64) as f32,
+                (uz - bz as f64) as f32,
+            ];
+            Some(([bx, by, bz], f))
+        } else {
+            None
         }
-        let f = (u - base).as_vec3();
-        Some(([base.x as i64, base.y as i64, base.z as i64], f.to_array()))
     }
 
     /// Trilinear lookup with the fast path used by the marcher: when all 8 corners are in
-    /// one brick it is found once (and reported as [`Lookup::EmptyBrick`] when missing).
+    /// one brick it is found once (and reported as [`Lookup::EmptyBrick`] when missing);
+    /// otherwise each distinct brick among the corners is looked up once. Same corners,
+    /// order and weights as [`BrickGrid::trilinear_general`].
+    #[inline]
     pub(crate) fn lookup_trilinear(&self, p: DVec3, out: &mut [(usize, f32); 8]) -> Lookup {
         let Some((b, f)) = self.base_and_fraction(p) else {
             return Lookup::Corners(0);
         };
+        // b ≥ 0 is checked first, so the shifts and masks below act on non-negative values.
         let last = BRICK_SIZE as i64 - 1;
-        let one_brick = (0..3).all(|a| b[a] >= 0 && b[a] + 1 < self.grid_voxels[a] && b[a] % 8 != last);
+        let one_brick = (0..3).all(|a| b[a] >= 0 && b[a] + 1 < self.grid_voxels[a] && b[a] & last != last);
         if !one_brick {
-            return Lookup::Corners(self.general_corners(b, f, out));
+            return Lookup::Corners(self.straddling_corners(b, f, out));
         }
-        let brick = b.map(|v| v / BRICK_SIZE as i64);
-        let Some(index) = self.brick_index(brick) else {
+        let brick = b.map(|v| v >> 3);
+        let Some(index) = self.brick_index_in_grid(brick) else {
             return Lookup::EmptyBrick(brick);
         };
-        let l = b.map(|v| (v % BRICK_SIZE as i64) as usize);
+        let l = b.map(|v| (v & last) as usize);
         let first = index * BRICK_VOXELS + local_voxel_index(l[0], l[1], l[2]);
         let w = corner_weights(f);
         for (slot, (offset, weight)) in out.iter_mut().zip(CORNER_OFFSETS.iter().zip(w)) {
             *slot = (first + offset, weight);
         }
         Lookup::Corners(8)
+    }
+
+    /// Corners of a cell that crosses a brick border or the grid's edge: each distinct
+    /// brick among the corners is looked up once.
+    fn straddling_corners(&self, b: [i64; 3], f: [f32; 3], out: &mut [(usize, f32); 8]) -> usize {
+        let w = corner_weights(f);
+        let g = self.grid_voxels;
+        // Per axis and side d ∈ {0, 1}: inside the grid, brick coordinate, local coordinate
+        // (shift and mask are floor division and remainder by 8, negatives included).
+        let side = |a: usize, d: i64| {
+            let c = b[a] + d;
+            (c >= 0 && c < g[a], c >> 3, (c & 7) as usize)
+        };
+        let axes = [
+            [side(0, 0), side(0, 1)],
+            [side(1, 0), side(1, 1)],
+            [side(2, 0), side(2, 1)],
+        ];
+        // Bit a of `shared` is set when both sides of axis a are in the same brick.
+        let shared = (0..3).fold(0usize, |m, a| {
+            m | (usize::from(axes[a][0].1 == axes[a][1].1) << a)
+        });
+        let mut brick_of = [None; 8];
+        let mut n = 0;
+        for (corner, &weight) in w.iter().enumerate() {
+            let (x, y, z) = (
+                axes[0][corner & 1],
+                axes[1][(corner >> 1) & 1],
+                axes[2][corner >> 2],
+            );
+            if !(x.0 && y.0 && z.0) {
+                continue;
+            }
+            // The corner with the shared axes' bits cleared lies in the same brick and was seen
+            // first (clearing bits only lowers the number); look up only new bricks.
+            let canonical = corner & !shared;
+            let index = if canonical == corner {
+                self.brick_index_in_grid([x.1, y.1, z.1])
+            } else {
+                brick_of[canonical]
+            };
+            brick_of[corner] = index;
+            if let Some(index) = index {
+                out[n] = (index * BRICK_VOXELS + local_voxel_index(x.2, y.2, z.2), weight);
+                n += 1;
+            }
+        }
+        n
     }
 
     /// Trilinear weights looking up every corner on its own (the slow, obviously correct path).
@@ -264,6 +341,13 @@ impl BrickGrid {
             self.bbox_min + (lo + (BRICK_SIZE as f64 - 0.5)) * size,
         )
     }
+}
+
+/// `⌊x⌋` for finite `|x| < 2⁶³` without a libm call.
+#[inline]
+fn floor_i64(x: f64) -> i64 {
+    let truncated = x as i64;
+    truncated - i64::from((truncated as f64) > x)
 }
 
 /// The 8 trilinear weights, `dx` fastest, each `(wx · wy) · wz` in `f32`.

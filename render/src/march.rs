@@ -18,9 +18,8 @@
 //! and separately ([`crate::grid`]: the same 8 weights, missing voxels 0, weights not
 //! renormalised).
 //!
-//! **Compositing** (front to back, `f32`): `α_i = 1 − exp(−σ_i Δ)` (computed as
-//! `−expm1(−σ_i Δ)`), `w_i = T_i α_i`, `rgb += w_i c_i`, `T_{i+1} = T_i (1 − α_i)`,
-//! `T_0 = 1`. A sample with `σ_i = 0` changes nothing (its radiance is not even
+//! **Compositing** (front to back, `f32`): `s_i = exp(−σ_i Δ)`, `α_i = 1 − s_i`,
+//! `w_i = T_i α_i`, `rgb += w_i c_i`, `T_{i+1} = T_i s_i`, `T_0 = 1`. A sample with `σ_i = 0` changes nothing (its radiance is not even
 //! interpolated). **Early termination**: right after a sample leaves
 //! `T < min_transmittance` the ray stops. The pixel is premultiplied over black:
 //! `rgb = Σ w_i c_i`, `alpha = 1 − T_end`. For constant radiance `c` this is
@@ -138,6 +137,8 @@ pub struct MarchStats {
     pub samples_evaluated: u64,
     /// Samples of the lattice jumped over by empty-space skipping.
     pub samples_skipped: u64,
+    /// Evaluated samples with `σ > 0` (composited).
+    pub samples_composited: u64,
 }
 
 impl std::ops::Add for MarchStats {
@@ -146,6 +147,7 @@ impl std::ops::Add for MarchStats {
         Self {
             samples_evaluated: self.samples_evaluated + other.samples_evaluated,
             samples_skipped: self.samples_skipped + other.samples_skipped,
+            samples_composited: self.samples_composited + other.samples_composited,
         }
     }
 }
@@ -159,18 +161,38 @@ enum Skipping {
     Off,
 }
 
+/// Per-voxel density as the marcher reads it: plain `σ`, or `[σ, r, g, b]` interleaved so
+/// that one sample's density and radiance share cache lines.
+trait DensityAt: Sync {
+    fn density_at(&self, voxel: usize) -> f32;
+}
+
+impl DensityAt for [f32] {
+    #[inline]
+    fn density_at(&self, voxel: usize) -> f32 {
+        self[voxel]
+    }
+}
+
+impl DensityAt for [[f32; 4]] {
+    #[inline]
+    fn density_at(&self, voxel: usize) -> f32 {
+        self[voxel][0]
+    }
+}
+
 /// One ray marcher over a grid and its densities.
-struct Marcher<'a> {
+struct Marcher<'a, D: DensityAt + ?Sized> {
     grid: &'a BrickGrid,
-    density: &'a [f32],
+    density: &'a D,
     step_m: f64,
     step_m_f32: f32,
     min_transmittance: f32,
     skipping: Skipping,
 }
 
-impl<'a> Marcher<'a> {
-    fn new(grid: &'a BrickGrid, density: &'a [f32], settings: MarchSettings, skipping: Skipping) -> Self {
+impl<'a, D: DensityAt + ?Sized> Marcher<'a, D> {
+    fn new(grid: &'a BrickGrid, density: &'a D, settings: MarchSettings, skipping: Skipping) -> Self {
         let step_m = settings.step_m(grid);
         Self {
             grid,
@@ -229,11 +251,15 @@ impl<'a> Marcher<'a> {
             };
             stats.samples_evaluated += 1;
             i += 1;
-            let sigma: f32 = corners[..n].iter().map(|&(v, w)| w * self.density[v]).sum();
+            let sigma: f32 = corners[..n]
+                .iter()
+                .map(|&(v, w)| w * self.density.density_at(v))
+                .sum();
             if sigma > 0.0 {
-                let alpha = -(-sigma * self.step_m_f32).exp_m1();
-                visit(transmittance * alpha, &corners[..n]);
-                transmittance *= 1.0 - alpha;
+                stats.samples_composited += 1;
+                let survive = (-sigma * self.step_m_f32).exp();
+                visit(transmittance * (1.0 - survive), &corners[..n]);
+                transmittance *= survive;
                 if transmittance < self.min_transmittance {
                     break;
                 }
@@ -337,7 +363,12 @@ fn render_volume_with(
             found: radiance.len(),
         });
     }
-    let marcher = Marcher::new(grid, density, *settings, skipping);
+    let voxels: Vec<[f32; 4]> = density
+        .iter()
+        .zip(radiance)
+        .map(|(&s, c)| [s, c[0], c[1], c[2]])
+        .collect();
+    let marcher = Marcher::new(grid, voxels.as_slice(), *settings, skipping);
     let mut image = Image::new(camera.width, camera.height);
     let width = camera.width as usize;
     let stats = image
@@ -353,9 +384,9 @@ fn render_volume_with(
                 let t_end = marcher.march(origin, dir, &mut stats, |w, corners| {
                     let mut c = [0.0f32; 3];
                     for &(v, cw) in corners {
-                        let r = radiance[v];
+                        let r = voxels[v];
                         for ch in 0..3 {
-                            c[ch] += cw * r[ch];
+                            c[ch] += cw * r[ch + 1];
                         }
                     }
                     for ch in 0..3 {
@@ -378,7 +409,8 @@ const VISIBILITY_BANDS: usize = 8;
 /// How much each voxel shows in `camera`'s image: **adds** to `out[v]` (one entry per
 /// voxel) `Σ_pixels Σ_i w_i · trilinear_weight_i(v)` — compositing weight times trilinear
 /// weight of every sample (module docs). Call once per camera on the same buffer to
-/// accumulate views; zero it first for one view. Deterministic.
+/// accumulate views; zero it first for one view. Deterministic (rows are split into 8
+/// fixed bands accumulated separately, which takes 8 × 4 bytes of scratch per voxel).
 pub fn visibility_weights(
     grid: &BrickGrid,
     density: &[f32],
