@@ -15,6 +15,8 @@ struct Cli {
 
 #[derive(Debug, Subcommand)]
 enum Command {
+    /// The main job on a built-in default: synthetic head capture → bake → relit turntable → ground-truth comparison.
+    Demo(cmd::demo::DemoArgs),
     /// Print a .nelf file's header, sections, sizes and metadata.
     Inspect(cmd::inspect::InspectArgs),
     /// Make capture folders (synthetic captures rendered by the path tracer).
@@ -32,6 +34,7 @@ enum Command {
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
     match cli.command {
+        Command::Demo(args) => cmd::demo::run(&args),
         Command::Inspect(args) => cmd::inspect::run(&args),
         Command::Capture(args) => cmd::capture::run(&args),
         Command::Bake(args) => cmd::bake::run(&args),

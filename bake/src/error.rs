@@ -155,6 +155,9 @@ pub enum BakeError {
     /// The reference renderer failed.
     #[error(transparent)]
     Render(#[from] RenderError),
+    /// An image metric could not be computed (sizes differ, image too small).
+    #[error(transparent)]
+    Metric(#[from] nelf_scene::metrics::MetricError),
     /// A mesh, map or image could not be read.
     #[error(transparent)]
     Scene(#[from] SceneError),

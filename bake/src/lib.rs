@@ -13,9 +13,13 @@
 //! 5. **PCA** ([`pca`]) weighted by visibility in the capture's views, the **rank**
 //!    chosen per scene by rendered-image loss ([`rank`]), quantized and written
 //!    ([`pipeline`]).
+//! 6. **Judging and showing** a bake: [`eval`] scores renders against ground truth;
+//!    [`demo`] runs the whole pipeline on a built-in procedural head (`nelf demo`).
 
 pub mod capture_in;
+pub mod demo;
 pub mod error;
+pub mod eval;
 pub mod grid;
 pub mod hull;
 pub mod pca;

@@ -2,6 +2,7 @@
 
 pub mod bake;
 pub mod capture;
+pub mod demo;
 pub mod inspect;
 pub mod light;
 pub mod render;
