@@ -7,7 +7,9 @@
 //! untruncated) light-transport vectors: PSNR = 10 log10(peak² / MSE) over all pixels and
 //! channels, peak = the reference's largest value.
 //!
-//! `cargo run --release -p nelf-render --example render_bench [-- --voxels N --size S --repeats R]`
+//! `cargo run --release -p nelf-render --example render_bench [-- --voxels N --size S --repeats R
+//! --write-assets DIR]`; with `--write-assets` the two assets are also written as
+//! `DIR/synthetic_k8.nelf` and `DIR/synthetic_k16.nelf` (for timing `nelf render`).
 
 use std::time::Instant;
 
@@ -26,6 +28,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut voxels = 200_000usize;
     let mut size = 512u32;
     let mut repeats = 3usize;
+    let mut write_dir: Option<std::path::PathBuf> = None;
     let args: Vec<String> = std::env::args().skip(1).collect();
     for pair in args.chunks(2) {
         let value = pair.get(1).ok_or("missing value")?;
@@ -33,6 +36,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             "--voxels" => voxels = value.parse()?,
             "--size" => size = value.parse()?,
             "--repeats" => repeats = value.parse()?,
+            "--write-assets" => write_dir = Some(value.into()),
             other => return Err(format!("unknown option {other}").into()),
         }
     }
@@ -68,6 +72,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for rank in [8usize, 16] {
         let asset = field.asset(rank, CoefficientEncoding::U8Affine)?;
+        if let Some(dir) = &write_dir {
+            std::fs::create_dir_all(dir)?;
+            let path = dir.join(format!("synthetic_k{rank}.nelf"));
+            nelf_format::write_asset(&path, &asset, &nelf_format::WriteOptions::default())?;
+        }
         let grid = BrickGrid::from_asset(&asset)?;
         let density = asset_density(&asset);
         let reference = render_volume(&grid, &density, &exact_radiance, &camera, &settings)?;

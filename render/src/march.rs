@@ -19,8 +19,8 @@
 //! renormalised).
 //!
 //! **Compositing** (front to back, `f32`): `s_i = exp(−σ_i Δ)`, `α_i = 1 − s_i`,
-//! `w_i = T_i α_i`, `rgb += w_i c_i`, `T_{i+1} = T_i s_i`, `T_0 = 1`. A sample with `σ_i = 0` changes nothing (its radiance is not even
-//! interpolated). **Early termination**: right after a sample leaves
+//! `w_i = T_i α_i`, `rgb += w_i c_i`, `T_{i+1} = T_i s_i`, `T_0 = 1`. A sample with
+//! `σ_i = 0` changes nothing (its radiance is not even interpolated). **Early termination**: right after a sample leaves
 //! `T < min_transmittance` the ray stops. The pixel is premultiplied over black:
 //! `rgb = Σ w_i c_i`, `alpha = 1 − T_end`. For constant radiance `c` this is
 //! `c · (1 − exp(−Σ σ_i Δ))`, the discretised `c (1 − e^{−∫σ})`.
@@ -32,7 +32,9 @@
 //! resumes at lattice index `max(i + 1, ⌈(t_out − t_entry)/Δ − 0.5⌉ − 1)`: samples stay on
 //! the lattice `t_entry + (i + 0.5)Δ` and only samples inside the core box are skipped
 //! (resuming one sample early absorbs rounding of `t_out`). The result equals marching
-//! every sample with independent per-corner lookups, bit for bit (tested).
+//! every sample with independent per-corner lookups ([`render_volume_unskipped`]), bit for
+//! bit (tested). A GPU mirror may skip differently (or not at all): only the lattice and
+//! the per-sample arithmetic above define the image.
 //!
 //! **Visibility weights** (for PCA fitting): voxel `v` of the grid receives
 //! `Σ_pixels Σ_i w_i · trilinear_weight_i(v)`, i.e. the derivative of the sum of the
