@@ -158,6 +158,12 @@ pub enum BakeError {
     /// An image metric could not be computed (sizes differ, image too small).
     #[error(transparent)]
     Metric(#[from] nelf_scene::metrics::MetricError),
+    /// The ground-truth path tracer could not render a reference view.
+    #[error(transparent)]
+    GroundTruthRender(#[from] nelf_scene::render::RenderError),
+    /// The ground-truth path tracer could not be set up.
+    #[error(transparent)]
+    Trace(#[from] nelf_scene::tracer::TraceError),
     /// A mesh, map or image could not be read.
     #[error(transparent)]
     Scene(#[from] SceneError),

@@ -4,6 +4,8 @@
 //! renderer at the target view under the target lighting, reaches a PSNR floor
 //! against the capture's target image.
 
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
 use glam::DMat3;
 use indicatif::ProgressBar;
 use nelf_bake::{

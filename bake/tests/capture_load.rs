@@ -2,6 +2,8 @@
 //! the right cameras, linear images and masks; every broken input is an error
 //! naming the file.
 
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
 mod common;
 
 use std::path::Path;

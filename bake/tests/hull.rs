@@ -2,6 +2,8 @@
 //! and is within a stated volume factor of the analytic five-view hull, computed
 //! independently by Monte Carlo with exact projections.
 
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
 mod common;
 
 use common::{SPHERE_CENTRE, SPHERE_RADIUS, five_cameras, in_analytic_hull, sphere_mask};

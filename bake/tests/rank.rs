@@ -2,12 +2,14 @@
 //! three fixed directions with pseudo-random coefficients per point) is baked with
 //! K = 3, ranks 1 and 2 failing the loss target.
 
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
 mod common;
 
 use common::{SPHERE_CENTRE, SPHERE_RADIUS, five_cameras};
 use glam::Vec3;
 use nelf_bake::grid::{geometry_for_box, plan_all_bricks};
-use nelf_bake::{BakeConfig, FieldBake, Progress, Reference, bake_field};
+use nelf_bake::{BakeConfig, FieldBake, Progress, Reference, StageTimings, bake_field};
 use nelf_format::conventions::LT_DIM;
 use nelf_scene::field::{FieldError, FieldSource, ViewPolicy, check_batch};
 use nelf_scene::tracer::mix64;
@@ -98,7 +100,7 @@ fn exactly_rank_three_field_bakes_with_k_three() {
         render_size: 48,
         ..BakeConfig::default()
     };
-    let out = bake_field(&job, &config, &Progress::hidden(), 0.0).unwrap();
+    let out = bake_field(&job, &config, &Progress::hidden(), StageTimings::default()).unwrap();
     let r = &out.report;
     let losses: Vec<(usize, f64)> = r.candidates.iter().map(|c| (c.rank, c.loss_db)).collect();
     eprintln!("losses {losses:?}, energy {}", r.energy_kept);

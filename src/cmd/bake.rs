@@ -172,8 +172,15 @@ fn finish(output: &mut BakeOutput, config: &BakeConfig, args: &OutputArgs) -> an
         -10.0 * r.reference_relative_error.log10()
     );
     println!(
-        "  seconds: hull {:.2}, density {:.2}, weights {:.2}, light {:.2}, pca {:.2}, rank {:.2}, write {:.2}",
-        t.hull_secs, t.density_secs, t.weights_secs, t.lt_secs, t.pca_secs, t.rank_secs, t.write_secs
+        "  seconds: hull {:.2}, reference {:.2}, density {:.2}, weights {:.2}, light {:.2}, pca {:.2}, rank {:.2}, write {:.2}",
+        t.hull_secs,
+        t.reference_secs,
+        t.density_secs,
+        t.weights_secs,
+        t.lt_secs,
+        t.pca_secs,
+        t.rank_secs,
+        t.write_secs
     );
     println!("  settings and report: {}", sidecar_path(&args.out).display());
     Ok(())

@@ -1,0 +1,126 @@
+//! End-to-end test of `nelf bake`: a small closed mesh is baked by the command
+//! into an asset that reads back with the chosen rank, beside its `.bake.json`;
+//! a folder with no capture makes `nelf bake capture` fail naming the folder.
+
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
+use std::fmt::Write as _;
+use std::process::Command;
+
+use nelf_format::read_asset;
+
+fn nelf(args: &[&std::ffi::OsStr]) -> std::process::Output {
+    match Command::new(env!("CARGO_BIN_EXE_nelf")).args(args).output() {
+        Ok(out) => out,
+        Err(e) => panic!("cannot run nelf: {e}"),
+    }
+}
+
+/// A closed sphere-like mesh (a subdivided cube pushed onto a sphere of radius
+/// 0.1 m, outward-facing), as OFF text.
+fn sphere_off() -> String {
+    let mut vertices: Vec<[f64; 3]> = Vec::new();
+    let mut faces: Vec<[usize; 3]> = Vec::new();
+    let n = 6usize;
+    // Six faces of a cube, each an n × n grid, projected onto the sphere.
+    let axes = [
+        (0, 1, 2, 1.0),
+        (0, 1, 2, -1.0),
+        (1, 2, 0, 1.0),
+        (1, 2, 0, -1.0),
+        (2, 0, 1, 1.0),
+        (2, 0, 1, -1.0),
+    ];
+    for &(u, v, w, sign) in &axes {
+        let base = vertices.len();
+        for i in 0..=n {
+            for j in 0..=n {
+                let mut p = [0.0; 3];
+                p[u] = -1.0 + 2.0 * i as f64 / n as f64;
+                p[v] = -1.0 + 2.0 * j as f64 / n as f64;
+                p[w] = sign;
+                let len = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                vertices.push(p.map(|x| 0.1 * x / len));
+            }
+        }
+        for i in 0..n {
+            for j in 0..n {
+                let a = base + i * (n + 1) + j;
+                let (b, c, d) = (a + n + 1, a + 1, a + n + 2);
+                // (u, v, w) is a cyclic order, so (+u) × (+v) = +w: counter-clockwise
+                // seen from outside on the +w face, reversed on the −w face.
+                if sign > 0.0 {
+                    faces.push([a, b, c]);
+                    faces.push([c, b, d]);
+                } else {
+                    faces.push([a, c, b]);
+                    faces.push([c, d, b]);
+                }
+            }
+        }
+    }
+    let mut text = format!("OFF\n{} {} 0\n", vertices.len(), faces.len());
+    for p in &vertices {
+        writeln!(text, "{} {} {}", p[0], p[1], p[2]).unwrap();
+    }
+    for f in &faces {
+        writeln!(text, "3 {} {} {}", f[0], f[1], f[2]).unwrap();
+    }
+    text
+}
+
+#[test]
+fn bake_mesh_writes_an_asset_and_bad_captures_fail() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("ball.off");
+    std::fs::write(&mesh, sphere_off()).unwrap();
+    let out_path = dir.path().join("ball.nelf");
+    let strings = [
+        "bake",
+        "mesh",
+        mesh.to_str().unwrap(),
+        "-o",
+        out_path.to_str().unwrap(),
+        "--height-m",
+        "0",
+        "--resolution",
+        "24",
+        "--render-size",
+        "32",
+        "--bounces",
+        "0",
+        "--texel-samples",
+        "1",
+        "--indirect-samples",
+        "0",
+        "--quiet",
+    ];
+    let args: Vec<&std::ffi::OsStr> = strings.iter().map(std::convert::AsRef::as_ref).collect();
+    let out = nelf(&args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("PCA rank K = "), "{text}");
+    let asset = read_asset(&out_path).unwrap();
+    assert!(asset.rank() >= 1 && !asset.bricks.is_empty());
+    assert_eq!(asset.metadata["generator"], "nelf bake");
+    let sidecar: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("ball.bake.json")).unwrap()).unwrap();
+    assert_eq!(sidecar["report"]["rank"].as_u64(), Some(asset.rank() as u64));
+    assert_eq!(sidecar["config"]["resolution"], 24);
+
+    let empty = dir.path().join("empty");
+    std::fs::create_dir(&empty).unwrap();
+    let out = nelf(&[
+        "bake".as_ref(),
+        "capture".as_ref(),
+        empty.as_os_str(),
+        "-o".as_ref(),
+        out_path.as_os_str(),
+    ]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        err.contains("no capture found") && err.contains(empty.to_str().unwrap()),
+        "{err}"
+    );
+}
