@@ -22,8 +22,9 @@
 //! `w_i = T_i α_i`, `rgb += w_i c_i`, `T_{i+1} = T_i s_i`, `T_0 = 1`. A sample with
 //! `σ_i = 0` changes nothing (its radiance is not even interpolated). **Early
 //! termination**: right after a sample leaves `T < min_transmittance` the ray stops.
-//! The pixel is premultiplied over black: `rgb = Σ w_i c_i`, `alpha = 1 − T_end`. For constant radiance `c` this is
-//! `c · (1 − exp(−Σ σ_i Δ))`, the discretised `c (1 − e^{−∫σ})`.
+//! The pixel is premultiplied over black: `rgb = Σ w_i c_i`, `alpha = 1 − T_end`. For
+//! constant radiance `c` this is `c · (1 − exp(−Σ σ_i Δ))`, the discretised
+//! `c (1 − e^{−∫σ})`.
 //!
 //! **Empty-space skipping** never changes the image. When a sample's 8 trilinear corners
 //! all lie in one missing brick, the value is 0 on that brick's *core box* (the brick box
