@@ -11,10 +11,10 @@
 //!   network, 32–63 the fine one.
 
 use candle_core::{Module, Tensor};
-use candle_nn::{GroupNorm, VarBuilder};
+use candle_nn::VarBuilder;
 
 use crate::error::NetError;
-use crate::layers::{NormActConv, ResConvBlock, group_norm, softplus};
+use crate::layers::{GroupNormLayer, NormActConv, ResConvBlock, softplus};
 
 /// Channels of the encoder stages.
 const ENCODER_CHANNELS: [usize; 5] = [3, 32, 64, 128, 256];
@@ -48,7 +48,7 @@ pub struct EncoderOutput {
 pub struct ImageEncoder {
     resblocks: Vec<ResConvBlock>,
     lightpred: NormActConv,
-    lightpred_final: GroupNorm,
+    lightpred_final: GroupNormLayer,
     upconvs: Vec<NormActConv>,
     catconvs: Vec<NormActConv>,
 }
@@ -66,7 +66,8 @@ impl ImageEncoder {
             })
             .collect::<Result<Vec<_>, _>>()?;
         let lightpred = NormActConv::new(256, LIGHT_FEATURE_CHANNELS, 3, 1, &vb.pp("lightpred"))?;
-        let lightpred_final = group_norm(LIGHT_FEATURE_CHANNELS, &vb.pp("lightpred_final").pp("norm"))?;
+        let lightpred_final =
+            GroupNormLayer::new(LIGHT_FEATURE_CHANNELS, &vb.pp("lightpred_final").pp("norm"))?;
         let up = [(256, 128), (128, 64), (64, 32)];
         let upconvs = up
             .iter()
@@ -105,7 +106,7 @@ impl ImageEncoder {
             enc.push(x.clone());
         }
         let lightpred_conv = self.lightpred.forward(&x)?;
-        let light_feature = softplus(&self.lightpred_final.forward(&lightpred_conv)?)?;
+        let light_feature = softplus(&self.lightpred_final.forward_act(&lightpred_conv, None)?)?;
         let mut upconvs = Vec::with_capacity(3);
         let mut catconvs = Vec::with_capacity(3);
         for i in 0..3 {

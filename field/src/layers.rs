@@ -13,8 +13,9 @@
 //!   `max(x, 0) + log1p(e^{−|x|})` with an accurate `log1p`.
 
 use candle_core::{Module, Tensor};
-use candle_nn::{Conv2d, Conv2dConfig, GroupNorm, Linear, VarBuilder};
+use candle_nn::{Conv2d, Conv2dConfig, GroupNorm, VarBuilder};
 
+use crate::cpu;
 use crate::error::NetError;
 
 /// `log(1 + y)` for `y ≥ 0`, accurate to a few ulps (Goldberg's trick:
@@ -29,10 +30,19 @@ fn log1p_nonneg(y: &Tensor) -> candle_core::Result<Tensor> {
     exact.where_cond(y, &ratio)
 }
 
-/// PyTorch's `softplus(x) = log(1 + eˣ)` (β = 1), evaluated stably for every `x`.
+/// PyTorch's `softplus(x) = log(1 + eˣ)` (β = 1, threshold 20), evaluated stably for
+/// every `x` (a fused kernel on the CPU).
 pub fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
+    if cpu::fused_for(x) {
+        return cpu::softplus(x);
+    }
     let tail = log1p_nonneg(&x.abs()?.neg()?.exp()?)?;
     x.relu()? + tail
+}
+
+/// Host copy of a 1-D parameter.
+fn host(t: &Tensor) -> Result<Vec<f32>, NetError> {
+    Ok(t.flatten_all()?.to_vec1::<f32>()?)
 }
 
 /// Parametric `ReLU` with one slope per channel; the channel is dimension 1, as in
@@ -40,19 +50,30 @@ pub fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
 #[derive(Debug, Clone)]
 pub struct PRelu {
     weight: Tensor,
+    slopes: Vec<f32>,
 }
 
 impl PRelu {
     /// Loads `weight` (`[channels]`).
     pub fn new(channels: usize, vb: &VarBuilder) -> Result<Self, NetError> {
+        let weight = vb.get(channels, "weight")?;
         Ok(Self {
-            weight: vb.get(channels, "weight")?,
+            slopes: host(&weight)?,
+            weight,
         })
+    }
+
+    /// The slopes, one per channel.
+    pub fn slopes(&self) -> &[f32] {
+        &self.slopes
     }
 }
 
 impl Module for PRelu {
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        if cpu::fused_for(x) && x.rank() == 2 {
+            return cpu::bias_prelu_rows(x, None, Some(&self.slopes), None);
+        }
         let mut shape = vec![1usize; x.rank()];
         if x.rank() >= 2 {
             shape[1] = self.weight.elem_count();
@@ -62,10 +83,65 @@ impl Module for PRelu {
     }
 }
 
+/// A fully connected layer (`weight` `[out, in]`, optional `bias`) on `(rows, in)`.
+#[derive(Debug, Clone)]
+pub struct Dense {
+    weight_t: Tensor,
+    bias: Option<Tensor>,
+    bias_host: Option<Vec<f32>>,
+}
+
+impl Dense {
+    /// Loads `weight` and, if `with_bias`, `bias`.
+    pub fn new(in_dim: usize, out_dim: usize, with_bias: bool, vb: &VarBuilder) -> Result<Self, NetError> {
+        let weight = vb.get((out_dim, in_dim), "weight")?;
+        let bias = if with_bias {
+            Some(vb.get(out_dim, "bias")?)
+        } else {
+            None
+        };
+        Ok(Self {
+            weight_t: weight.t()?.contiguous()?,
+            bias_host: bias.as_ref().map(host).transpose()?,
+            bias,
+        })
+    }
+
+    /// `x·Wᵀ + b`, then `PReLU(slopes)` if given, then `+ residual` if given.
+    pub fn forward_fused(
+        &self,
+        x: &Tensor,
+        slopes: Option<&PRelu>,
+        residual: Option<&Tensor>,
+    ) -> candle_core::Result<Tensor> {
+        let y = x.matmul(&self.weight_t)?;
+        if cpu::fused_for(&y) {
+            return cpu::bias_prelu_rows(&y, self.bias_host.as_deref(), slopes.map(PRelu::slopes), residual);
+        }
+        let mut y = match &self.bias {
+            Some(b) => y.broadcast_add(b)?,
+            None => y,
+        };
+        if let Some(act) = slopes {
+            y = act.forward(&y)?;
+        }
+        match residual {
+            Some(r) => y + r,
+            None => Ok(y),
+        }
+    }
+}
+
+impl Module for Dense {
+    fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        self.forward_fused(x, None, None)
+    }
+}
+
 /// `Linear, (PReLU, Linear)…` through the widths `dims`, parameters under `layers.{i}`.
 #[derive(Debug, Clone)]
 pub struct Mlp {
-    linears: Vec<Linear>,
+    linears: Vec<Dense>,
     activations: Vec<PRelu>,
 }
 
@@ -82,7 +158,7 @@ impl Mlp {
             if i > 0 {
                 activations.push(PRelu::new(pair[0], &layers.pp(2 * i - 1))?);
             }
-            linears.push(candle_nn::linear(pair[0], pair[1], layers.pp(2 * i))?);
+            linears.push(Dense::new(pair[0], pair[1], true, &layers.pp(2 * i))?);
         }
         Ok(Self { linears, activations })
     }
@@ -91,9 +167,9 @@ impl Mlp {
 impl Module for Mlp {
     /// `x`: `(rows, dims[0])`.
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        let mut h = self.linears[0].forward(x)?;
-        for (act, lin) in self.activations.iter().zip(&self.linears[1..]) {
-            h = lin.forward(&act.forward(&h)?)?;
+        let mut h = x.clone();
+        for (i, lin) in self.linears.iter().enumerate() {
+            h = lin.forward_fused(&h, self.activations.get(i), None)?;
         }
         Ok(h)
     }
@@ -103,20 +179,22 @@ impl Module for Mlp {
 #[derive(Debug, Clone)]
 struct ResBlock {
     prelu_0: PRelu,
-    fc_0: Linear,
+    fc_0: Dense,
     prelu_1: PRelu,
-    fc_1: Linear,
-    shortcut: Option<Linear>,
+    fc_1: Dense,
+    shortcut: Option<Dense>,
 }
 
 impl Module for ResBlock {
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        let h = self.fc_0.forward(&self.prelu_0.forward(x)?)?;
-        let h = self.fc_1.forward(&self.prelu_1.forward(&h)?)?;
-        match &self.shortcut {
-            Some(s) => s.forward(x)? + h,
-            None => x + h,
-        }
+        let h = self
+            .fc_0
+            .forward_fused(&self.prelu_0.forward(x)?, Some(&self.prelu_1), None)?;
+        let skip = match &self.shortcut {
+            Some(s) => s.forward(x)?,
+            None => x.clone(),
+        };
+        self.fc_1.forward_fused(&h, None, Some(&skip))
     }
 }
 
@@ -125,7 +203,7 @@ impl Module for ResBlock {
 /// `out ≠ hidden`). No final activation.
 #[derive(Debug, Clone)]
 pub struct ResMlp {
-    input_layer: Linear,
+    input_layer: Dense,
     blocks: Vec<ResBlock>,
 }
 
@@ -141,20 +219,20 @@ impl ResMlp {
         if blocks == 0 {
             return Err(NetError::input("a residual MLP needs at least one block"));
         }
-        let input_layer = candle_nn::linear(in_dim, hidden, vb.pp("input_layer"))?;
+        let input_layer = Dense::new(in_dim, hidden, true, &vb.pp("input_layer"))?;
         let list = (0..blocks)
             .map(|i| {
                 let b = vb.pp("blocks").pp(i);
                 let out = if i + 1 == blocks { out_dim } else { hidden };
                 Ok(ResBlock {
                     prelu_0: PRelu::new(hidden, &b.pp("prelu_0"))?,
-                    fc_0: candle_nn::linear(hidden, hidden, b.pp("fc_0"))?,
+                    fc_0: Dense::new(hidden, hidden, true, &b.pp("fc_0"))?,
                     prelu_1: PRelu::new(hidden, &b.pp("prelu_1"))?,
-                    fc_1: candle_nn::linear(hidden, out, b.pp("fc_1"))?,
+                    fc_1: Dense::new(hidden, out, true, &b.pp("fc_1"))?,
                     shortcut: if out == hidden {
                         None
                     } else {
-                        Some(candle_nn::linear_no_bias(hidden, out, b.pp("shortcut"))?)
+                        Some(Dense::new(hidden, out, false, &b.pp("shortcut"))?)
                     },
                 })
             })
@@ -177,21 +255,117 @@ impl Module for ResMlp {
 }
 
 /// `GroupNorm` with `min(32, C)` groups and ε = 1e-5, parameters `weight`, `bias`.
-pub fn group_norm(channels: usize, vb: &VarBuilder) -> Result<GroupNorm, NetError> {
-    Ok(candle_nn::group_norm(
-        channels.min(32),
-        channels,
-        1e-5,
-        vb.clone(),
-    )?)
+#[derive(Debug, Clone)]
+pub struct GroupNormLayer {
+    norm: GroupNorm,
+    groups: usize,
+    gamma: Vec<f32>,
+    beta: Vec<f32>,
+}
+
+/// The `GroupNorm` ε.
+const GROUP_NORM_EPS: f64 = 1e-5;
+
+impl GroupNormLayer {
+    /// Loads `weight` and `bias` for `channels`.
+    pub fn new(channels: usize, vb: &VarBuilder) -> Result<Self, NetError> {
+        let groups = channels.min(32);
+        let norm = candle_nn::group_norm(groups, channels, GROUP_NORM_EPS, vb.clone())?;
+        Ok(Self {
+            norm,
+            groups,
+            gamma: host(&vb.get(channels, "weight")?)?,
+            beta: host(&vb.get(channels, "bias")?)?,
+        })
+    }
+
+    /// Normalises `x` `(B, C, H, W)`, then applies `act` if given.
+    pub fn forward_act(&self, x: &Tensor, act: Option<&PRelu>) -> candle_core::Result<Tensor> {
+        if cpu::fused_for(x) {
+            return cpu::group_norm_prelu(
+                x,
+                self.groups,
+                GROUP_NORM_EPS,
+                &self.gamma,
+                &self.beta,
+                act.map(PRelu::slopes),
+            );
+        }
+        let y = self.norm.forward(x)?;
+        match act {
+            Some(a) => a.forward(&y),
+            None => Ok(y),
+        }
+    }
+}
+
+/// A convolution with a square kernel, zero padding `(k − 1)/2` unless given.
+#[derive(Debug, Clone)]
+pub struct ConvLayer {
+    conv: Conv2d,
+    weight_flat: Tensor,
+    bias: Vec<f32>,
+    kernel: usize,
+    stride: usize,
+    padding: usize,
+}
+
+impl ConvLayer {
+    /// Loads `weight` `[out, in, k, k]` and `bias` `[out]`.
+    pub fn new(
+        in_ch: usize,
+        out_ch: usize,
+        kernel: usize,
+        stride: usize,
+        padding: usize,
+        vb: &VarBuilder,
+    ) -> Result<Self, NetError> {
+        let config = Conv2dConfig {
+            padding,
+            stride,
+            ..Conv2dConfig::default()
+        };
+        let conv = candle_nn::conv2d(in_ch, out_ch, kernel, config, vb.clone())?;
+        Ok(Self {
+            weight_flat: conv
+                .weight()
+                .reshape((out_ch, in_ch * kernel * kernel))?
+                .contiguous()?,
+            bias: conv
+                .bias()
+                .map(host)
+                .transpose()?
+                .unwrap_or_else(|| vec![0.0; out_ch]),
+            conv,
+            kernel,
+            stride,
+            padding,
+        })
+    }
+}
+
+impl Module for ConvLayer {
+    fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
+        if cpu::fused_for(x) {
+            return cpu::conv2d(
+                x,
+                &self.weight_flat,
+                &self.bias,
+                self.kernel,
+                self.stride,
+                self.padding,
+            );
+        }
+        self.conv.forward(x)
+    }
 }
 
 /// `GroupNorm → PReLU → Conv2d` (`norm`, `act`, `conv`).
 #[derive(Debug, Clone)]
 pub struct NormActConv {
-    norm: GroupNorm,
+    norm: GroupNormLayer,
     act: PRelu,
-    conv: Conv2d,
+    conv: ConvLayer,
 }
 
 impl NormActConv {
@@ -203,22 +377,17 @@ impl NormActConv {
         stride: usize,
         vb: &VarBuilder,
     ) -> Result<Self, NetError> {
-        let config = Conv2dConfig {
-            padding: (kernel - 1) / 2,
-            stride,
-            ..Conv2dConfig::default()
-        };
         Ok(Self {
-            norm: group_norm(in_ch, &vb.pp("norm"))?,
+            norm: GroupNormLayer::new(in_ch, &vb.pp("norm"))?,
             act: PRelu::new(in_ch, &vb.pp("act"))?,
-            conv: candle_nn::conv2d(in_ch, out_ch, kernel, config, vb.pp("conv"))?,
+            conv: ConvLayer::new(in_ch, out_ch, kernel, stride, (kernel - 1) / 2, &vb.pp("conv"))?,
         })
     }
 }
 
 impl Module for NormActConv {
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        self.conv.forward(&self.act.forward(&self.norm.forward(x)?)?)
+        self.conv.forward(&self.norm.forward_act(x, Some(&self.act))?)
     }
 }
 
@@ -226,7 +395,7 @@ impl Module for NormActConv {
 /// halving the resolution.
 #[derive(Debug, Clone)]
 pub struct ResConvBlock {
-    shortcut: Conv2d,
+    shortcut: ConvLayer,
     normactconv0: NormActConv,
     normactconv1: NormActConv,
 }
@@ -234,12 +403,8 @@ pub struct ResConvBlock {
 impl ResConvBlock {
     /// `in_ch → out_ch` at half the input resolution.
     pub fn new(in_ch: usize, out_ch: usize, vb: &VarBuilder) -> Result<Self, NetError> {
-        let shortcut_config = Conv2dConfig {
-            stride: 2,
-            ..Conv2dConfig::default()
-        };
         Ok(Self {
-            shortcut: candle_nn::conv2d(in_ch, out_ch, 1, shortcut_config, vb.pp("shortcut"))?,
+            shortcut: ConvLayer::new(in_ch, out_ch, 1, 2, 0, &vb.pp("shortcut"))?,
             normactconv0: NormActConv::new(in_ch, out_ch, 3, 2, &vb.pp("normactconv0"))?,
             normactconv1: NormActConv::new(out_ch, out_ch, 3, 1, &vb.pp("normactconv1"))?,
         })

@@ -15,6 +15,7 @@
 //! Runs in `f32` on the CPU; the `cuda` feature enables candle's CUDA backend.
 
 pub mod capture;
+pub mod cpu;
 pub mod encoder;
 pub mod error;
 pub mod geometry;
