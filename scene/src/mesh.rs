@@ -90,20 +90,30 @@ impl Mesh {
         let n = self.positions.len();
         for (i, p) in self.positions.iter().enumerate() {
             if !p.is_finite() {
-                return Err(MeshError::NotFinite { what: "position", index: i });
+                return Err(MeshError::NotFinite {
+                    what: "position",
+                    index: i,
+                });
             }
         }
         for (t, tri) in self.triangles.iter().enumerate() {
             for &index in tri {
                 if index as usize >= n {
-                    return Err(MeshError::IndexOutOfRange { triangle: t, index, vertices: n });
+                    return Err(MeshError::IndexOutOfRange {
+                        triangle: t,
+                        index,
+                        vertices: n,
+                    });
                 }
             }
         }
         match &self.albedo {
             Albedo::Uniform(c) => {
                 if !c.iter().all(|v| v.is_finite()) {
-                    return Err(MeshError::NotFinite { what: "albedo", index: 0 });
+                    return Err(MeshError::NotFinite {
+                        what: "albedo",
+                        index: 0,
+                    });
                 }
             }
             Albedo::PerVertex(colours) => {
@@ -140,11 +150,10 @@ impl Mesh {
 
     /// Axis-aligned bounds `(min, max)`.
     pub fn bounds(&self) -> (Vec3, Vec3) {
-        self.positions
-            .iter()
-            .fold((Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)), |(lo, hi), &p| {
-                (lo.min(p), hi.max(p))
-            })
+        self.positions.iter().fold(
+            (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+            |(lo, hi), &p| (lo.min(p), hi.max(p)),
+        )
     }
 
     /// The three corners of triangle `t`.
@@ -212,6 +221,9 @@ mod tests {
         assert!((hi.y - lo.y - 0.2).abs() < 1e-6);
         assert!((0.5 * (lo + hi)).abs_diff_eq(Vec3::Y, 1e-6));
         m.triangles.push([0, 1, 9]);
-        assert!(matches!(m.validate(), Err(MeshError::IndexOutOfRange { index: 9, .. })));
+        assert!(matches!(
+            m.validate(),
+            Err(MeshError::IndexOutOfRange { index: 9, .. })
+        ));
     }
 }
