@@ -1,36 +1,25 @@
 //! Measures a baked asset against its capture (not a test): renders the asset with
 //! the reference renderer at every source view under the capture's lighting and at
 //! every held-aside target view under that target's lighting, at full resolution,
-//! and prints PSNR and SSIM against the capture's images (both over black; data
-//! range = the reference image's largest value).
+//! and prints PSNR, SSIM and render seconds against the capture's images
+//! ([`nelf_bake::eval::score_view`]: both over black, data range = the reference
+//! image's largest value), then the means over source and over target views.
 //!
-//! `cargo run --release -p nelf-bake --example bake_eval -- ASSET CAPTURE_DIR [--out DIR]`
+//! `cargo run --release -p nelf-bake --example bake_eval -- ASSET CAPTURE_DIR [--out DIR] [--json]`
 //!
-//! With `--out`, sRGB previews of each render and its reference are written there.
+//! With `--out`, sRGB previews of each render and its reference are written there;
+//! with `--json`, the rows are printed as one JSON object instead of a table.
 
 use std::path::{Path, PathBuf};
 
-use glam::DMat3;
+use nelf_bake::eval::{ViewScore, data_range, read_linear_rgb, score_view};
 use nelf_bake::{CaptureLoadOptions, load_capture};
 use nelf_format::conventions::{LatLong, PinholeCamera};
 use nelf_format::read_asset;
-use nelf_render::{MarchSettings, render_asset};
 use nelf_scene::envmap::load_envmap;
 use nelf_scene::image_io::write_png_srgb;
-use nelf_scene::metrics::{psnr, ssim};
 
 type Error = Box<dyn std::error::Error>;
-
-fn load_linear(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>), Error> {
-    let img = image::open(path)?.to_rgb32f();
-    Ok((img.width(), img.height(), img.pixels().map(|p| p.0).collect()))
-}
-
-struct Row {
-    name: String,
-    psnr: f64,
-    ssim: f64,
-}
 
 fn measure(
     asset: &nelf_format::Asset,
@@ -39,59 +28,42 @@ fn measure(
     reference: &[[f32; 3]],
     name: &str,
     out: Option<&Path>,
-) -> Result<Row, Error> {
-    let image = render_asset(
-        asset,
-        camera,
-        env,
-        DMat3::IDENTITY,
-        None,
-        &MarchSettings::default(),
-    )?;
-    let range = reference
-        .iter()
-        .flatten()
-        .fold(0.0f32, |m, &v| m.max(v))
-        .max(1e-6);
-    let p = psnr(&image.rgb, reference, f64::from(range))?;
-    let s = ssim(
-        &image.rgb,
-        reference,
-        camera.width,
-        camera.height,
-        f64::from(range),
-    )?;
+) -> Result<ViewScore, Error> {
+    let (score, image) = score_view(asset, camera, env, reference, name)?;
     if let Some(dir) = out {
-        let stops = (0.5 / range).log2();
-        write_png_srgb(
-            dir.join(format!("{name}_render.png")),
-            camera.width,
-            camera.height,
-            &image.rgb,
-            stops,
-        )?;
-        write_png_srgb(
-            dir.join(format!("{name}_truth.png")),
-            camera.width,
-            camera.height,
-            reference,
-            stops,
-        )?;
+        let stops = (0.5 / data_range(reference)).log2();
+        for (suffix, rgb) in [("render", &image.rgb[..]), ("truth", reference)] {
+            write_png_srgb(
+                dir.join(format!("{name}_{suffix}.png")),
+                camera.width,
+                camera.height,
+                rgb,
+                stops,
+            )?;
+        }
     }
-    Ok(Row {
-        name: name.to_string(),
-        psnr: p,
-        ssim: s,
+    Ok(score)
+}
+
+fn mean(scores: &[ViewScore]) -> Option<(f64, f64, f64)> {
+    let n = scores.len() as f64;
+    (!scores.is_empty()).then(|| {
+        (
+            scores.iter().map(|s| s.psnr_db).sum::<f64>() / n,
+            scores.iter().map(|s| s.ssim).sum::<f64>() / n,
+            scores.iter().map(|s| s.render_secs).sum::<f64>() / n,
+        )
     })
 }
 
 fn main() -> Result<(), Error> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     if args.len() < 2 {
-        return Err("usage: bake_eval ASSET CAPTURE_DIR [--out DIR]".into());
+        return Err("usage: bake_eval ASSET CAPTURE_DIR [--out DIR] [--json]".into());
     }
     let asset = read_asset(Path::new(&args[0]))?;
     let dir = PathBuf::from(&args[1]);
+    let json = args.iter().any(|a| a == "--json");
     let out = args
         .iter()
         .position(|a| a == "--out")
@@ -101,24 +73,44 @@ fn main() -> Result<(), Error> {
         std::fs::create_dir_all(o)?;
     }
     let capture = load_capture(&dir, &CaptureLoadOptions::default())?;
-    let mut rows = Vec::new();
+    let mut sources = Vec::new();
     if let Some(path) = capture.source_envmap_path() {
         let env = load_envmap(&path)?;
         for ((name, cam), img) in capture.names.iter().zip(&capture.cameras).zip(&capture.images) {
-            rows.push(measure(&asset, cam, &env, img, name, out.as_deref())?);
+            sources.push(measure(&asset, cam, &env, img, name, out.as_deref())?);
         }
     }
+    let mut targets = Vec::new();
     if let Some(desc) = capture.description() {
         for t in &desc.targets {
             let env = load_envmap(t.envmap_path(&dir))?;
-            let (_, _, img) = load_linear(&t.image_path(&dir))?;
-            rows.push(measure(&asset, &t.camera, &env, &img, &t.name, out.as_deref())?);
+            let (_, _, img) = read_linear_rgb(&t.image_path(&dir))?;
+            targets.push(measure(&asset, &t.camera, &env, &img, &t.name, out.as_deref())?);
         }
     }
-    println!("| view | PSNR (dB) | SSIM |");
-    println!("| --- | --- | --- |");
-    for r in &rows {
-        println!("| {} | {:.2} | {:.4} |", r.name, r.psnr, r.ssim);
+    if json {
+        let summary = |s: &[ViewScore]| {
+            mean(s).map(|(p, q, r)| serde_json::json!({"psnr_db": p, "ssim": q, "render_secs": r}))
+        };
+        let value = serde_json::json!({
+            "sources": sources, "targets": targets,
+            "mean_sources": summary(&sources), "mean_targets": summary(&targets),
+        });
+        println!("{}", serde_json::to_string_pretty(&value)?);
+        return Ok(());
+    }
+    println!("| view | PSNR (dB) | SSIM | render (s) |");
+    println!("| --- | --- | --- | --- |");
+    for r in sources.iter().chain(&targets) {
+        println!(
+            "| {} | {:.2} | {:.4} | {:.3} |",
+            r.name, r.psnr_db, r.ssim, r.render_secs
+        );
+    }
+    for (label, rows) in [("mean of sources", &sources), ("mean of targets", &targets)] {
+        if let Some((p, s, t)) = mean(rows) {
+            println!("| {label} | {p:.2} | {s:.4} | {t:.3} |");
+        }
     }
     Ok(())
 }
