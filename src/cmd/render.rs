@@ -20,6 +20,13 @@
 //! `.exr` output is the linear premultiplied radiance as rendered (exposure not applied).
 //! The options, the resolved camera and the timings are saved beside the image as
 //! `<out>.render.json`.
+//!
+//! `--field CAPTURE_DIR --weights W.safetensors` renders straight from the NeLF
+//! network over a capture instead of an asset (`nelf_field`: coarse + fine
+//! hierarchical sampling inside the head sphere, visual-hull pruning): slow, and the
+//! reference a bake of that capture must match. The lighting is projected into the
+//! network's light frame; `--estimated-light` uses the network's own estimate of the
+//! capture's lighting; orbits circle the visual hull's box.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -35,8 +42,23 @@ use serde::{Deserialize, Serialize};
 /// Options of `nelf render`.
 #[derive(Debug, Clone, clap::Args, Serialize, Deserialize)]
 pub struct RenderArgs {
-    /// The .nelf asset.
-    pub asset: PathBuf,
+    /// The .nelf asset (not with --field).
+    #[arg(required_unless_present = "field")]
+    pub asset: Option<PathBuf>,
+    /// Render straight from the NeLF network over this capture folder instead of an
+    /// asset (slow: the reference a bake must match). Needs --weights.
+    #[arg(long, value_name = "CAPTURE_DIR", requires = "weights", conflicts_with_all = ["asset", "gpu", "rank"])]
+    pub field: Option<PathBuf>,
+    /// --field: the network's weights (safetensors, official checkpoint key names).
+    #[arg(long, requires = "field")]
+    pub weights: Option<PathBuf>,
+    /// --field: light with the network's own estimate of the capture's lighting
+    /// (`nelf light`) instead of --envmap / the capture's map / constant white.
+    #[arg(long, requires = "field", conflicts_with = "envmap")]
+    pub estimated_light: bool,
+    /// --field: random ray samples from this seed instead of stratified ones.
+    #[arg(long, requires = "field")]
+    pub field_seed: Option<u64>,
     /// Camera file: a cameras.json view object (metres) or a previous `.render.json`.
     #[arg(long, group = "view")]
     pub camera: Option<PathBuf>,
@@ -168,8 +190,15 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         min_transmittance: args.min_transmittance,
     };
     settings.validate()?;
+    if let Some(capture) = &args.field {
+        return run_field(args, capture, output);
+    }
     let start = Instant::now();
-    let asset = read_asset(&args.asset).with_context(|| format!("cannot read {}", args.asset.display()))?;
+    let asset_path = args
+        .asset
+        .as_ref()
+        .context("an asset (or --field CAPTURE) is required")?;
+    let asset = read_asset(asset_path).with_context(|| format!("cannot read {}", asset_path.display()))?;
     let rank = match args.rank {
         Some(k) if k == 0 || k > asset.rank() => {
             bail!(
@@ -180,7 +209,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         }
         other => other,
     };
-    let (camera, capture_envmap) = resolve_camera(args, &asset)?;
+    let asset_box = (
+        DVec3::from_array(asset.grid.bbox_min_m),
+        DVec3::from_array(asset.grid.bbox_max_m()),
+    );
+    let (camera, capture_envmap) = resolve_camera(args, asset_box)?;
     let (env, envmap_name) = match args.envmap.as_ref().or(capture_envmap.as_ref()) {
         Some(path) => (
             nelf_scene::envmap::load_envmap(path)
@@ -278,6 +311,100 @@ fn render_gpu(
     Ok(gpu.render(camera, &view)?)
 }
 
+/// `--field CAPTURE --weights W`: renders every pixel straight from the NeLF network
+/// (`nelf_field::render::render_image`: coarse + fine hierarchical sampling, rays
+/// through pixel centres, bounded by the head sphere) under the lighting projected
+/// into the network's light frame. Orbits circle the field's hull box.
+fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyhow::Result<()> {
+    use nelf_field::capture::{default_net_from_world, load_capture_dir};
+    use nelf_field::render::{ImageSettings, Sampling, render_image};
+    use nelf_scene::field::FieldSource;
+
+    let start = Instant::now();
+    let weights = args.weights.as_ref().context("--field needs --weights")?;
+    let (capture, _) = load_capture_dir(capture_dir, default_net_from_world())
+        .with_context(|| format!("loading the capture {}", capture_dir.display()))?;
+    let model = nelf_field::Model::load(
+        weights,
+        nelf_field::NelfConfig::default(),
+        &candle_core::Device::Cpu,
+    )
+    .with_context(|| format!("loading the weights {}", weights.display()))?;
+    let field = nelf_field::NelfField::new(model, &capture).context("encoding the capture")?;
+    let (lo, hi) = field.bounds();
+    let (camera, capture_envmap) = resolve_camera(args, (lo.as_dvec3(), hi.as_dvec3()))?;
+    let world_from_light = field.world_from_light();
+    let (light, light_name) = if args.estimated_light {
+        (
+            field.source_light()?,
+            "the network's estimate of the capture's lighting".to_string(),
+        )
+    } else {
+        let (env, name) = match args.envmap.as_ref().or(capture_envmap.as_ref()) {
+            Some(path) => (
+                nelf_scene::envmap::load_envmap(path)
+                    .with_context(|| format!("cannot load environment map {}", path.display()))?,
+                path.display().to_string(),
+            ),
+            None => (
+                LatLong::constant(ENV_W, ENV_H, [1.0; 3]),
+                "constant white (radiance 1)".to_string(),
+            ),
+        };
+        let world_from_env = rotation_y(args.rotate_deg.to_radians());
+        (
+            nelf_format::conventions::project_envmap(&env, world_from_env.transpose() * world_from_light)?,
+            name,
+        )
+    };
+    let net_light = nelf_field::light::latlong_to_net_light(&light)?;
+    let load_seconds = start.elapsed().as_secs_f64();
+
+    let start = Instant::now();
+    let settings = ImageSettings {
+        head_centre: capture.head_centre_net(),
+        sampling: args.field_seed.map_or(Sampling::Stratified, Sampling::Random),
+        ..ImageSettings::default()
+    };
+    let progress = indicatif::ProgressBar::new(0);
+    let image = render_image(
+        field.model(),
+        field.encoded(),
+        &capture.net_camera(&camera),
+        &net_light,
+        &settings,
+        Some(&progress),
+    )?;
+    progress.finish_and_clear();
+    let render_seconds = start.elapsed().as_secs_f64();
+    let (width, height) = (image.width as u32, image.height as u32);
+    match output {
+        OutputKind::Png => {
+            nelf_scene::image_io::write_png_srgb(&args.out, width, height, &image.rgb, args.exposure)
+        }
+        OutputKind::Exr => nelf_scene::image_io::write_exr_rgb(&args.out, width, height, &image.rgb),
+    }
+    .with_context(|| format!("cannot write {}", args.out.display()))?;
+    let record = serde_json::json!({
+        "config": args,
+        "camera": CameraJson::from_camera(&camera),
+        "envmap": light_name,
+        "device": "nelf-network (cpu)",
+        "world_from_light": world_from_light.to_cols_array(),
+        "load_seconds": load_seconds,
+        "render_seconds": render_seconds,
+    });
+    let record_path = sidecar_path(&args.out);
+    std::fs::write(&record_path, serde_json::to_string_pretty(&record)? + "\n")
+        .with_context(|| format!("cannot write {}", record_path.display()))?;
+    println!(
+        "rendered {width}×{height} from the NeLF network over {} (lighting: {light_name}) in {render_seconds:.1} s -> {}",
+        capture_dir.display(),
+        args.out.display()
+    );
+    Ok(())
+}
+
 /// Output formats, chosen by extension.
 #[derive(Debug, Clone, Copy)]
 enum OutputKind {
@@ -309,7 +436,10 @@ fn sidecar_path(out: &Path) -> PathBuf {
 
 /// The camera from `--camera`, `--view-of` or `--orbit` (default `--orbit 0,0`), and the
 /// lighting a capture view comes with, if any.
-fn resolve_camera(args: &RenderArgs, asset: &Asset) -> anyhow::Result<(PinholeCamera, Option<PathBuf>)> {
+fn resolve_camera(
+    args: &RenderArgs,
+    scene_box: (DVec3, DVec3),
+) -> anyhow::Result<(PinholeCamera, Option<PathBuf>)> {
     let (camera, envmap) = if let Some(path) = &args.camera {
         (resized(load_camera_file(path)?, args)?, None)
     } else if let Some(spec) = &args.view_of {
@@ -327,7 +457,7 @@ fn resolve_camera(args: &RenderArgs, asset: &Asset) -> anyhow::Result<(PinholeCa
         }
     } else {
         (
-            orbit_camera(args.orbit.as_deref().unwrap_or("0,0"), args, asset)?,
+            orbit_camera(args.orbit.as_deref().unwrap_or("0,0"), args, scene_box)?,
             None,
         )
     };
@@ -378,8 +508,9 @@ fn resized(camera: PinholeCamera, args: &RenderArgs) -> anyhow::Result<PinholeCa
     })
 }
 
-/// `--orbit AZ,EL[,DIST]` around the asset's box centre, +y up.
-fn orbit_camera(spec: &str, args: &RenderArgs, asset: &Asset) -> anyhow::Result<PinholeCamera> {
+/// `--orbit AZ,EL[,DIST]` around the centre of `scene_box` (the asset's box, or the
+/// field's hull box), +y up.
+fn orbit_camera(spec: &str, args: &RenderArgs, scene_box: (DVec3, DVec3)) -> anyhow::Result<PinholeCamera> {
     let numbers = spec
         .split(',')
         .map(|s| s.trim().parse::<f64>())
@@ -401,8 +532,7 @@ fn orbit_camera(spec: &str, args: &RenderArgs, asset: &Asset) -> anyhow::Result<
         bail!("--fov-deg {} must be in (0, 179)", args.fov_deg);
     }
     let fov_x = args.fov_deg.to_radians();
-    let lo = DVec3::from_array(asset.grid.bbox_min_m);
-    let hi = DVec3::from_array(asset.grid.bbox_max_m());
+    let (lo, hi) = scene_box;
     let centre = 0.5 * (lo + hi);
     let distance = match distance {
         Some(d) if d.is_finite() && d > 0.0 => d,
