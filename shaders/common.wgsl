@@ -1,10 +1,11 @@
 // common.wgsl — helpers shared by every pass (imported with `#import "common.wgsl"`,
 // see viewer/src/shaders.rs; never copied).
 //
-// * Brick atlas addressing: bricks live in slots of 10³ texels (8³ voxels + a
-//   1-voxel apron on every side); slot index = brick index + … packed with power-of-two
-//   slot counts along x and y, so slot coordinates are bit operations.
-// * Indirection grid: one u32 per brick cell, 0 = no brick, else brick index + 1.
+// * Brick atlas addressing: bricks (and halo cells) live in slots of 10³ texels (8³
+//   voxels + a 1-voxel apron on every side), packed with power-of-two slot counts along
+//   x and y, so slot coordinates are bit operations.
+// * Indirection grid: one u32 per brick cell: a present brick's or a halo cell's slot,
+//   or a far cell's distance to the nearest present brick (see `FAR_FLAG`).
 // * Ray–box slab test, hashing for jitter, ACES (Narkowicz 2015 fit) tone mapping,
 //   and the sRGB transfer function (IEC 61966-2-1).
 
@@ -28,13 +29,39 @@ fn slot_coords(index: u32, packing: SlotPacking) -> vec3<i32> {
     return vec3<i32>(vec3<u32>(x, y, z));
 }
 
-// Indirection entry of brick cell `cell`: 0 outside the grid or for a missing brick,
-// else brick index + 1.
+// Indirection entries (viewer/src/atlas.rs, `Indirection`, builds them), one per brick cell:
+// * present brick: brick index + 1 (its slot is its index);
+// * halo cell (missing, next to a present brick): HALO_FLAG | clear-face mask << 24 |
+//   slot + 1 — its slot holds zeros and, in the apron, the neighbours' border voxels;
+//   mask bit 2a (2a + 1): no present brick on the −a (+a) side;
+// * far cell: FAR_FLAG | Chebyshev distance (≥ 2, in bricks) to the nearest present brick.
+// 0 stands for outside the grid.
+const FAR_FLAG: u32 = 0x80000000u;
+const HALO_FLAG: u32 = 0x40000000u;
+const SLOT_BITS: u32 = 0xffffffu;
+const HALO_MASK_SHIFT: u32 = 24u;
+
+// Indirection entry of brick cell `cell`; 0 outside the grid.
 fn brick_entry(indirection: texture_3d<u32>, cell: vec3<i32>, grid_bricks: vec3<i32>) -> u32 {
     if any(cell < vec3<i32>(0)) || any(cell >= grid_bricks) {
         return 0u;
     }
     return textureLoad(indirection, cell, 0).x;
+}
+
+// Whether an indirection entry is a present brick (its voxels are stored).
+fn is_present(entry: u32) -> bool {
+    return entry != 0u && (entry & (FAR_FLAG | HALO_FLAG)) == 0u;
+}
+
+// Whether an indirection entry has an atlas slot (a present brick or a halo cell).
+fn has_slot(entry: u32) -> bool {
+    return entry != 0u && (entry & FAR_FLAG) == 0u;
+}
+
+// The atlas slot of an entry with one.
+fn slot_of(entry: u32) -> u32 {
+    return (entry & SLOT_BITS) - 1u;
 }
 
 // Reciprocal of a ray direction with zero components replaced by tiny ones of the

@@ -10,11 +10,16 @@
 // premultiplied rgb over black and alpha = 1 − T_end.
 //
 // Positions are in lattice coordinates u = (p − bbox_min)/voxel_size − 0.5 (voxel centres
-// at integers); t stays in metres. Empty-space skipping, as in the reference: when all
-// 8 trilinear corners of a sample lie in one missing brick, every sample inside that
-// brick's core box [8b, 8b + 7] is 0, so the march resumes at lattice index
-// max(i + 1, ⌈(t_out − t_entry)/Δ − o⌉ − 1). Corners straddling bricks use any present
-// brick among those the corners touch: its slot's apron holds all 8 corners.
+// at integers); t stays in metres. The march walks brick cells (boxes [8b − 0.5,
+// 8b + 7.5]³), looking a cell up once per run of samples in it:
+// * a present brick or a halo cell (a missing brick next to a present one) has an atlas
+//   slot holding every trilinear corner of every sample in its box — one texture fetch
+//   per sample, no per-corner lookups; in a halo cell the box where all values are 0
+//   (its core, widened on sides with no present brick) is jumped over;
+// * a far cell (nearest present brick d ≥ 2 cells away) starts a jump over the whole
+//   block of cells within d − 2, which is all 0.
+// Jumps resume at the first lattice sample past the box, so the samples taken are the
+// reference's, minus some whose value is exactly 0.
 
 #import "common.wgsl"
 
@@ -36,13 +41,15 @@ struct MarchParams {
     grid_bricks: vec4<i32>,
     // Image width, height; frame index (jitter seed); flags: bit 0 jitter.
     image: vec4<u32>,
-    // x: view (0 shaded, 1 density maximum, 2 alpha); y, z: slot packing x_bits, y_bits; w: unused.
+    // x: view (0 shaded, 1 density maximum, 2 alpha, 3 cost: samples, loop steps and
+    // lattice samples in rgb); y, z: slot packing x_bits, y_bits; w: unused.
     view: vec4<u32>,
     // x: density view scale (1 / σ shown as white); yzw: unused.
     scales: vec4<f32>,
 }
 
-// Counts for benchmarks: [0] trilinear atlas samples taken, [1] lattice steps visited.
+// Counts for benchmarks: trilinear atlas samples taken, and loop iterations (samples
+// plus jumps).
 struct Counters {
     samples: atomic<u32>,
     steps: atomic<u32>,
@@ -61,43 +68,29 @@ override COUNT_SAMPLES: bool = false;
 const VIEW_SHADED: u32 = 0u;
 const VIEW_DENSITY: u32 = 1u;
 const VIEW_ALPHA: u32 = 2u;
+const VIEW_COST: u32 = 3u;
 
-// Trilinear (σ-in-alpha, radiance-in-rgb) value at lattice point u, or 0 where no brick is
-// near; `skip_brick` receives the missing brick (w = 1) whose core box holds u.
-fn sample_volume(u: vec3<f32>, packing: SlotPacking, skip_brick: ptr<function, vec4<i32>>) -> vec4<f32> {
-    let base = vec3<i32>(floor(u));
-    let cell = base >> vec3<u32>(3u);
-    let grid = params.grid_bricks.xyz;
-    var chosen = cell;
-    var entry = brick_entry(indirection, cell, grid);
-    if entry == 0u {
-        let edge = (base & vec3<i32>(7)) == vec3<i32>(7);
-        if !any(edge) {
-            *skip_brick = vec4<i32>(cell, 1);
-            return vec4<f32>(0.0);
-        }
-        // Corners reach into the next brick along the `edge` axes: find one present.
-        let reach = vec3<i32>(edge);
-        for (var c = 1; c < 8; c++) {
-            let offset = vec3<i32>(c & 1, (c >> 1u) & 1, (c >> 2u) & 1);
-            if any(offset > reach) {
-                continue;
-            }
-            let e = brick_entry(indirection, cell + offset, grid);
-            if e != 0u {
-                entry = e;
-                chosen = cell + offset;
-                break;
-            }
-        }
-        if entry == 0u {
-            return vec4<f32>(0.0);
-        }
+// Compositing state of one ray.
+struct Accum {
+    rgb: vec3<f32>,
+    transmittance: f32,
+    max_sigma: f32,
+}
+
+// Composites one sample (σ in alpha); true once the ray may stop (T < min_transmittance).
+fn composite(acc: ptr<function, Accum>, value: vec4<f32>, step: f32, view: u32, min_transmittance: f32) -> bool {
+    let sigma = value.a;
+    if sigma <= 0.0 {
+        return false;
     }
-    let slot = slot_coords(entry - 1u, packing);
-    // Texel centres of the slot sit at slot·10 + (local voxel + 1) + 0.5.
-    let texel = vec3<f32>(slot * SLOT) + (u - vec3<f32>(chosen * BRICK)) + vec3<f32>(1.5);
-    return textureSampleLevel(atlas, atlas_sampler, texel * params.atlas_inv_size.xyz, 0.0);
+    (*acc).max_sigma = max((*acc).max_sigma, sigma);
+    if view == VIEW_DENSITY {
+        return false;
+    }
+    let alpha = one_minus_exp_neg(sigma * step);
+    (*acc).rgb += ((*acc).transmittance * alpha) * value.rgb;
+    (*acc).transmittance *= 1.0 - alpha;
+    return (*acc).transmittance < min_transmittance;
 }
 
 @compute @workgroup_size(8, 8, 1)
@@ -107,6 +100,7 @@ fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
         return;
     }
     let packing = SlotPacking(params.view.y, params.view.z);
+    let grid = params.grid_bricks.xyz;
     // Ray through the pixel centre (OpenCV pinhole), unit length in metres.
     let k = params.intrinsics;
     let d_cam = vec3<f32>((f32(gid.x) + 0.5 - k.z) / k.x, (f32(gid.y) + 0.5 - k.w) / k.y, 1.0);
@@ -130,49 +124,81 @@ fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let view = params.view.x;
     let min_transmittance = params.atlas_inv_size.w;
-    var transmittance = 1.0;
-    var rgb = vec3<f32>(0.0);
-    var max_sigma = 0.0;
+    let inv_atlas = params.atlas_inv_size.xyz;
+    var acc = Accum(vec3<f32>(0.0), 1.0, 0.0);
     var samples = 0u;
     var steps = 0u;
+    // The brick cell of the previous sample and what the indirection says about it, so
+    // consecutive samples in one cell cost no lookup (one flat loop: SIMD lanes stay in
+    // step, each iteration takes one sample or one jump).
+    var cached_cell = vec3<i32>(-2147483647);
+    var entry = 0u;
+    var shift = vec3<f32>(0.0);
+    var zero_lo = vec3<f32>(1.0);
+    var zero_hi = vec3<f32>(0.0);
     var i = 0;
     while i < count {
         let t = t_entry + (f32(i) + offset) * step;
-        var skip_brick = vec4<i32>(0);
-        let value = sample_volume(o + t * du, packing, &skip_brick);
+        let u = o + t * du;
         steps += 1u;
-        if skip_brick.w == 1 {
-            let lo = vec3<f32>(skip_brick.xyz * BRICK);
-            let t_out = ray_box(o, inv_du, lo, lo + vec3<f32>(f32(BRICK - 1))).y;
-            let resume = min(ceil((t_out - t_entry) / step - offset) - 1.0, f32(count));
-            i = max(i + 1, i32(resume));
+        // The brick cell whose box [8b − 0.5, 8b + 7.5]³ holds the sample.
+        let cell = vec3<i32>(floor((u + vec3<f32>(0.5)) * 0.125));
+        if any(cell != cached_cell) {
+            cached_cell = cell;
+            entry = brick_entry(indirection, cell, grid);
+            // The box around this sample where every value is 0 (empty when none):
+            let base = vec3<f32>(cell * BRICK);
+            zero_lo = vec3<f32>(1.0);
+            zero_hi = vec3<f32>(0.0);
+            if has_slot(entry) {
+                shift = vec3<f32>(slot_coords(slot_of(entry), packing) * SLOT - cell * BRICK) + vec3<f32>(1.5);
+                if (entry & HALO_FLAG) != 0u {
+                    // a halo cell: its core [8b, 8b + 7]³, widened to the cell's box on
+                    // sides with no present brick;
+                    let mask = entry >> HALO_MASK_SHIFT;
+                    let clear_low = vec3<bool>((mask & 1u) != 0u, (mask & 4u) != 0u, (mask & 16u) != 0u);
+                    let clear_high = vec3<bool>((mask & 2u) != 0u, (mask & 8u) != 0u, (mask & 32u) != 0u);
+                    zero_lo = base - select(vec3<f32>(0.0), vec3<f32>(0.5), clear_low);
+                    zero_hi = base + select(vec3<f32>(7.0), vec3<f32>(7.5), clear_high);
+                }
+            } else if entry != 0u {
+                // a far cell (no present brick within d − 1 cells): the block of cells
+                // within d − 2 of it (their corners reach one cell out).
+                let r = f32(i32(entry & ~FAR_FLAG) - 2) * f32(BRICK);
+                zero_lo = base - vec3<f32>(r + 0.5);
+                zero_hi = base + vec3<f32>(r + f32(BRICK) - 0.5);
+            }
+        }
+        if all(u >= zero_lo) && all(u <= zero_hi) {
+            // Jump to the first lattice sample past the zero box.
+            let t_exit = ray_box(o, inv_du, zero_lo, zero_hi).y;
+            i = max(i + 1, i32(min(ceil((t_exit - t_entry) / step - offset), f32(count))));
             continue;
         }
-        samples += 1u;
         i += 1;
-        let sigma = value.a;
-        if sigma > 0.0 {
-            max_sigma = max(max_sigma, sigma);
-            if view == VIEW_DENSITY {
-                continue;
-            }
-            let alpha = one_minus_exp_neg(sigma * step);
-            rgb += (transmittance * alpha) * value.rgb;
-            transmittance *= 1.0 - alpha;
-            if transmittance < min_transmittance {
-                break;
-            }
+        if !has_slot(entry) {
+            // Outside the grid (rounding at the box's faces): nothing there.
+            continue;
+        }
+        // The slot holds every corner of a sample in its cell's box (the apron reaches
+        // half a voxel beyond the box).
+        let value = textureSampleLevel(atlas, atlas_sampler, (u + shift) * inv_atlas, 0.0);
+        samples += 1u;
+        if composite(&acc, value, step, view, min_transmittance) {
+            break;
         }
     }
     if COUNT_SAMPLES {
         atomicAdd(&counters.samples, samples);
         atomicAdd(&counters.steps, steps);
     }
-    var out = vec4<f32>(rgb, 1.0 - transmittance);
+    var out = vec4<f32>(acc.rgb, 1.0 - acc.transmittance);
     if view == VIEW_DENSITY {
-        out = vec4<f32>(vec3<f32>(max_sigma * params.scales.x), 1.0);
+        out = vec4<f32>(vec3<f32>(acc.max_sigma * params.scales.x), 1.0);
     } else if view == VIEW_ALPHA {
-        out = vec4<f32>(vec3<f32>(1.0 - transmittance), 1.0);
+        out = vec4<f32>(vec3<f32>(1.0 - acc.transmittance), 1.0);
+    } else if view == VIEW_COST {
+        out = vec4<f32>(f32(samples), f32(steps), f32(count), 1.0);
     }
     textureStore(output, vec2<i32>(gid.xy), out);
 }

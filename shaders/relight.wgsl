@@ -7,17 +7,22 @@
 // and for f16 coefficients light_mean = P_mean, light[k] = P_k, q_k = c_k. Shading is
 // linear in T = mean + Σ c_k B_k, so this equals shading every sample (DESIGN.md).
 //
-// One invocation per atlas texel: texel (slot s, local l ∈ [−1, 8]³) holds the voxel at
-// global voxel coordinates 8·brick(s) + l — its own brick's voxel inside, a neighbour's
-// in the apron, 0 where that neighbour brick is missing (the CPU reference counts
-// missing voxels as 0), so hardware trilinear filtering inside a slot equals the
-// reference's trilinear across brick borders. rgb = radiance, a = density σ (1/m).
+// Two entry points, dispatched one after the other:
+// * `shade`: one invocation per stored voxel: its K-term dot product, with its density,
+//   into `voxels` (rgb = radiance, a = σ in 1/m);
+// * `fill`: one invocation per atlas texel: texel (slot s, local l ∈ [−1, 8]³) copies the
+//   voxel at global voxel coordinates 8·cell(s) + l — its own brick's voxel inside, a
+//   neighbour's in the apron, 0 where that brick is missing (the CPU reference counts
+//   missing voxels as 0; a halo slot's cell is missing, so only its apron is non-zero),
+//   so hardware trilinear filtering inside a slot equals the reference's trilinear
+//   across brick borders. Shading each voxel once, not once per texel that shows it,
+//   halves the dot products (aprons and halos repeat voxels).
 
 #import "common.wgsl"
 
 // Mirrors `RelightParams` in viewer/src/shaders.rs.
 struct RelightParams {
-    // x_bits, y_bits of the slot packing; slot (= brick) count; components used (rank).
+    // x_bits, y_bits of the slot packing; slot count (bricks + halos); components used (rank).
     atlas: vec4<u32>,
     // Grid extent in bricks (xyz); w: coefficient encoding, 1 = 8-bit affine, 2 = f16.
     grid_bricks: vec4<i32>,
@@ -25,19 +30,27 @@ struct RelightParams {
     words: vec4<u32>,
     // Folded mean radiance (rgb).
     light_mean: vec4<f32>,
+    // x: stored voxels; y: invocations per row of the `shade` dispatch (x · 64).
+    dispatch: vec4<u32>,
 }
 
 @group(0) @binding(0) var<uniform> params: RelightParams;
-// Folded per-component radiance (rgb in xyz), one entry per component used.
-@group(0) @binding(1) var<storage, read> light: array<vec4<f32>>;
+// Largest rank (LT_DIM = 384 lighting numbers per channel bound the PCA rank).
+const MAX_RANK: u32 = 384u;
+
+// Folded per-component radiance (rgb in xyz); entries from the rank used up to the next
+// multiple of 4 are 0, so whole words of codes can be applied.
+@group(0) @binding(1) var<uniform> light: array<vec4<f32>, MAX_RANK>;
 // Coefficients, voxel-major, `words.y` words per voxel: 4 codes (u8) or 2 halves (f16) per word.
 @group(0) @binding(2) var<storage, read> coefficients: array<u32>;
 // Density σ (1/m) as f16, two voxels per word.
 @group(0) @binding(3) var<storage, read> density: array<u32>;
-// Brick coordinates per brick: (x | y << 16, z).
-@group(0) @binding(4) var<storage, read> bricks: array<vec2<u32>>;
+// Brick-cell coordinates per slot (present bricks, then halo cells): (x | y << 16, z).
+@group(0) @binding(4) var<storage, read> slot_cells: array<vec2<u32>>;
 @group(0) @binding(5) var indirection: texture_3d<u32>;
 @group(0) @binding(6) var atlas: texture_storage_3d<rgba16float, write>;
+// Shaded voxels (rgb radiance, σ), written by `shade`, read by `fill`.
+@group(0) @binding(7) var<storage, read_write> voxels: array<vec4<f32>>;
 
 // IEEE binary16 bits (low 16 bits of `bits`) to f32, exactly, for finite values (the
 // reader has rejected non-finite ones); written out so no f16 capability is needed.
@@ -58,21 +71,47 @@ fn half_of(word: u32, index: u32) -> f32 {
     return half_to_f32((word >> (16u * (index & 1u))) & 0xffffu);
 }
 
-fn coefficient(voxel: u32, k: u32) -> f32 {
+// Σ_k q_k · light[k] over the components used, a word (4 codes or 2 halves) at a time.
+fn shade_voxel(voxel: u32) -> vec3<f32> {
     let base = voxel * params.words.y;
+    let used = params.atlas.w;
+    var rgb = params.light_mean.xyz;
     if params.grid_bricks.w == 1 {
-        let word = coefficients[base + (k >> 2u)];
-        return f32((word >> (8u * (k & 3u))) & 0xffu);
+        for (var q = 0u; q < (used + 3u) / 4u; q++) {
+            let word = coefficients[base + q];
+            let k = 4u * q;
+            rgb += f32(word & 0xffu) * light[k].xyz + f32((word >> 8u) & 0xffu) * light[k + 1u].xyz
+                + f32((word >> 16u) & 0xffu) * light[k + 2u].xyz + f32(word >> 24u) * light[k + 3u].xyz;
+        }
+    } else {
+        for (var q = 0u; q < (used + 1u) / 2u; q++) {
+            let word = coefficients[base + q];
+            let k = 2u * q;
+            rgb += half_of(word, 0u) * light[k].xyz + half_of(word, 1u) * light[k + 1u].xyz;
+        }
     }
-    return half_of(coefficients[base + (k >> 1u)], k);
+    return rgb;
 }
 
 fn voxel_density(voxel: u32) -> f32 {
     return half_of(density[voxel >> 1u], voxel);
 }
 
+@compute @workgroup_size(64, 1, 1)
+fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let v = gid.x + gid.y * params.dispatch.y;
+    if gid.x >= params.dispatch.y || v >= params.dispatch.x {
+        return;
+    }
+    var rgb = shade_voxel(v);
+    if params.words.z == 1u {
+        rgb = abs(rgb);
+    }
+    voxels[v] = vec4<f32>(rgb, voxel_density(v));
+}
+
 @compute @workgroup_size(4, 4, 4)
-fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn fill(@builtin(global_invocation_id) gid: vec3<u32>) {
     let texel = vec3<i32>(gid);
     let slot = texel / SLOT;
     let packing = SlotPacking(params.atlas.x, params.atlas.y);
@@ -80,24 +119,16 @@ fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
     if slot.x >= (1 << packing.x_bits) || slot.y >= (1 << packing.y_bits) || slot_index >= params.atlas.z {
         return;
     }
-    let packed = bricks[slot_index];
-    let brick = vec3<i32>(vec3<u32>(packed.x & 0xffffu, packed.x >> 16u, packed.y));
+    let packed = slot_cells[slot_index];
+    let cell_of_slot = vec3<i32>(vec3<u32>(packed.x & 0xffffu, packed.x >> 16u, packed.y));
     // Global voxel coordinates of this texel, then the brick that holds it.
-    let voxel = brick * BRICK + (texel - slot * SLOT) - vec3<i32>(1);
+    let voxel = cell_of_slot * BRICK + (texel - slot * SLOT) - vec3<i32>(1);
     let cell = voxel >> vec3<u32>(3u);
     let entry = brick_entry(indirection, cell, params.grid_bricks.xyz);
     var value = vec4<f32>(0.0);
-    if entry != 0u {
+    if is_present(entry) {
         let local = voxel - cell * BRICK;
-        let v = (entry - 1u) * 512u + u32(local.x + BRICK * (local.y + BRICK * local.z));
-        var rgb = params.light_mean.xyz;
-        for (var k = 0u; k < params.atlas.w; k++) {
-            rgb += coefficient(v, k) * light[k].xyz;
-        }
-        if params.words.z == 1u {
-            rgb = abs(rgb);
-        }
-        value = vec4<f32>(rgb, voxel_density(v));
+        value = voxels[(entry - 1u) * 512u + u32(local.x + BRICK * (local.y + BRICK * local.z))];
     }
     textureStore(atlas, texel, value);
 }

@@ -625,8 +625,11 @@ impl ViewerApp {
 
     fn request_screenshot(&mut self, ctx: &egui::Context, path: Option<PathBuf>) {
         let sender = self.screenshots.sender.clone();
+        let waker = ctx.clone();
         ctx.request_screenshot(move |image| {
             let _ = sender.send((path, image));
+            // The screenshot arrives after the frame: wake the app to save it.
+            waker.request_repaint();
         });
         ctx.request_repaint();
     }

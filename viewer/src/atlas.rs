@@ -8,9 +8,12 @@
 //!   Slot `s` (= brick index `s`, file order) sits at slot coordinates
 //!   `(s mod 2^x_bits, (s >> x_bits) mod 2^y_bits, s >> (x_bits + y_bits))`: powers of two
 //!   along x and y make the shaders' slot addressing bit operations.
-//! * **Indirection grid**: one `u32` per brick cell of the grid (x fastest), 0 for a
-//!   missing brick, else brick index + 1; it drives empty-space skipping and the apron
-//!   build.
+//! * **Halo slots**: every missing brick next to a present one gets a slot too (zeros,
+//!   with the neighbours' border voxels in its apron), so a sample anywhere within one
+//!   cell of a present brick is one texture fetch — the march needs no per-corner lookups.
+//! * **Indirection grid** ([`Indirection`]): one `u32` per brick cell: the slot of a
+//!   present brick or halo cell, or a far cell's distance to the nearest present brick;
+//!   it drives the apron build and empty-space skipping.
 //! * **Coefficients** stay as stored (8-bit codes or f16 halves), packed into `u32`
 //!   words, `⌈K/4⌉` or `⌈K/2⌉` words per voxel; the dequantisation is folded into the
 //!   projected lighting ([`fold_light`]).
@@ -95,8 +98,51 @@ impl AtlasLayout {
     }
 }
 
-/// The indirection grid: `grid_bricks` cells, x fastest, 0 = missing, else brick index + 1.
-pub fn indirection_grid(grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Result<Vec<u32>, ViewerError> {
+/// Flag of an indirection entry for a missing brick far from every present one (the low
+/// 31 bits then hold the Chebyshev distance, in bricks, to the nearest present brick, ≥ 2).
+pub const FAR_FLAG: u32 = 0x8000_0000;
+/// Flag of an indirection entry for a halo slot (a missing brick next to a present one).
+pub const HALO_FLAG: u32 = 0x4000_0000;
+/// Position of a halo entry's 6-bit clear-face mask (bit `2a`: no present brick on the
+/// −a side, bit `2a + 1`: none on the +a side).
+pub const HALO_MASK_SHIFT: u32 = 24;
+/// Mask of a slot entry's slot index + 1.
+pub const SLOT_BITS: u32 = (1 << HALO_MASK_SHIFT) - 1;
+
+/// The indirection grid and the atlas slots it points to.
+///
+/// Every brick cell of the grid (x fastest) has one `u32` entry:
+/// * a **present** brick: its index + 1 (its slot is its index, file order);
+/// * a **halo** cell — missing, but one of its 26 neighbours is present: [`HALO_FLAG`] |
+///   clear-face mask << [`HALO_MASK_SHIFT`] | (slot + 1). Halo slots follow the bricks'.
+///   Their voxels are 0 and their aprons hold the neighbours' border voxels, so every
+///   trilinear sample in a halo cell's box is one texture sample; the mask bounds the
+///   box where all values are 0 (no present brick on that side), which the march jumps;
+/// * a **far** cell — no present brick within one cell: [`FAR_FLAG`] | its Chebyshev
+///   distance `d ≥ 2` to the nearest present brick (capped at 2³¹ − 1): every value in
+///   the cells within `d − 2` of it is 0, so the march jumps over that whole block.
+///
+/// Distances come from a breadth-first search over the 26-neighbourhood (whose step
+/// count is the Chebyshev distance).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct Indirection {
+    /// One entry per brick cell, x fastest.
+    pub entries: Vec<u32>,
+    /// Brick-cell coordinates of every slot: the present bricks (in file order), then the
+    /// halo cells.
+    pub slot_cells: Vec<[u32; 3]>,
+}
+
+impl Indirection {
+    /// Halo slots (after the bricks').
+    pub fn halo_count(&self, bricks: usize) -> usize {
+        self.slot_cells.len() - bricks
+    }
+}
+
+/// Builds the indirection grid and slot list of a brick set (see [`Indirection`]).
+pub fn indirection_grid(grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Result<Indirection, ViewerError> {
+    const UNSEEN: u32 = u32::MAX;
     let cells = grid_bricks.iter().map(|&n| u64::from(n)).product::<u64>();
     if cells > MAX_INDIRECTION_CELLS {
         return Err(ViewerError::TooLarge(format!(
@@ -104,26 +150,96 @@ pub fn indirection_grid(grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Result<Ve
              {MAX_INDIRECTION_CELLS}"
         )));
     }
-    let mut table = vec![0u32; cells as usize];
-    let [nx, ny, _] = grid_bricks.map(|n| n as usize);
+    let [nx, ny, nz] = grid_bricks.map(|n| n as usize);
+    let mut distance = vec![UNSEEN; cells as usize];
+    let mut entries = vec![0u32; cells as usize];
+    let mut slot_cells = Vec::with_capacity(2 * bricks.len());
+    let mut frontier = Vec::with_capacity(bricks.len());
     for (index, b) in bricks.iter().enumerate() {
         if (0..3).any(|a| u32::from(b[a]) >= grid_bricks[a]) {
-            return Err(ViewerError::TooLarge(format!(
+            return Err(ViewerError::BadSetting(format!(
                 "brick {index} at {b:?} lies outside the grid {grid_bricks:?}"
             )));
         }
         let [x, y, z] = b.map(usize::from);
-        table[x + nx * (y + ny * z)] = index as u32 + 1;
+        let cell = x + nx * (y + ny * z);
+        entries[cell] = index as u32 + 1;
+        distance[cell] = 0;
+        frontier.push(cell);
+        slot_cells.push(b.map(u32::from));
     }
-    Ok(table)
+    if bricks.len() as u64 >= u64::from(SLOT_BITS) {
+        return Err(ViewerError::TooLarge(format!(
+            "{} bricks exceed the viewer's {SLOT_BITS} slots",
+            bricks.len()
+        )));
+    }
+    let coords = |cell: usize| [cell % nx, (cell / nx) % ny, cell / (nx * ny)];
+    let mut d = 0u32;
+    while !frontier.is_empty() {
+        d += 1;
+        let mut next = Vec::new();
+        for &cell in &frontier {
+            let [x, y, z] = coords(cell);
+            for dz in z.saturating_sub(1)..=(z + 1).min(nz - 1) {
+                for dy in y.saturating_sub(1)..=(y + 1).min(ny - 1) {
+                    for dx in x.saturating_sub(1)..=(x + 1).min(nx - 1) {
+                        let neighbour = dx + nx * (dy + ny * dz);
+                        if distance[neighbour] == UNSEEN {
+                            distance[neighbour] = d;
+                            next.push(neighbour);
+                        }
+                    }
+                }
+            }
+        }
+        frontier = next;
+    }
+    let present = |c: [i64; 3]| {
+        (0..3).all(|a| c[a] >= 0 && c[a] < i64::from(grid_bricks[a]))
+            && distance[c[0] as usize + nx * (c[1] as usize + ny * c[2] as usize)] == 0
+    };
+    for cell in 0..entries.len() {
+        match distance[cell] {
+            0 => {}
+            1 => {
+                let slot = slot_cells.len() as u32;
+                if slot >= SLOT_BITS {
+                    return Err(ViewerError::TooLarge(format!(
+                        "more than {SLOT_BITS} atlas slots"
+                    )));
+                }
+                let c = coords(cell).map(|v| v as i64);
+                let mut mask = 0u32;
+                for axis in 0..3 {
+                    for (side, step) in [(0u32, -1i64), (1, 1)] {
+                        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+                        let clear = (-1..=1).all(|i| {
+                            (-1..=1).all(|j| {
+                                let mut n = c;
+                                n[axis] += step;
+                                n[u] += i;
+                                n[v] += j;
+                                !present(n)
+                            })
+                        });
+                        if clear {
+                            mask |= 1 << (2 * axis as u32 + side);
+                        }
+                    }
+                }
+                entries[cell] = HALO_FLAG | (mask << HALO_MASK_SHIFT) | (slot + 1);
+                slot_cells.push(coords(cell).map(|v| v as u32));
+            }
+            far => entries[cell] = FAR_FLAG | far.min(!FAR_FLAG),
+        }
+    }
+    Ok(Indirection { entries, slot_cells })
 }
 
-/// Brick coordinates packed for the relight pass: `(x | y << 16, z)`.
-pub fn packed_bricks(bricks: &[[u16; 3]]) -> Vec<[u32; 2]> {
-    bricks
-        .iter()
-        .map(|b| [u32::from(b[0]) | (u32::from(b[1]) << 16), u32::from(b[2])])
-        .collect()
+/// Slot cells packed for the relight pass: `(x | y << 16, z)`.
+pub fn packed_cells(cells: &[[u32; 3]]) -> Vec<[u32; 2]> {
+    cells.iter().map(|c| [c[0] | (c[1] << 16), c[2]]).collect()
 }
 
 /// Coefficients as the relight pass reads them.
@@ -297,6 +413,8 @@ pub struct GpuMemory {
     pub density_bytes: u64,
     /// Indirection grid.
     pub indirection_bytes: u64,
+    /// Shaded voxels (`rgb`, σ as f32), the relight pass's intermediate.
+    pub shaded_bytes: u64,
     /// Brick coordinates and the lighting buffer.
     pub other_bytes: u64,
 }
@@ -351,15 +469,63 @@ mod tests {
     }
 
     #[test]
-    fn indirection_marks_bricks_and_refuses_huge_grids() {
-        let table = indirection_grid([2, 3, 4], &[[1, 0, 0], [0, 2, 3]]).unwrap();
-        assert_eq!(table.len(), 24);
-        assert_eq!(table[1], 1);
-        assert_eq!(table[2 * (2 + 3 * 3)], 2);
-        assert_eq!(table.iter().filter(|&&v| v != 0).count(), 2);
+    fn indirection_marks_bricks_halos_and_distances() {
+        let grid = [7u32, 5, 6];
+        let bricks = [[1u16, 1, 1], [5, 3, 4]];
+        let ind = indirection_grid(grid, &bricks).unwrap();
+        assert_eq!(ind.entries.len(), 7 * 5 * 6);
+        assert_eq!(&ind.slot_cells[..2], &[[1, 1, 1], [5, 3, 4]]);
+        let mut halos = 0;
+        for z in 0..6i32 {
+            for y in 0..5i32 {
+                for x in 0..7i32 {
+                    let entry = ind.entries[(x + 7 * (y + 5 * z)) as usize];
+                    let chebyshev = |b: &[u16; 3]| {
+                        (x - i32::from(b[0]))
+                            .abs()
+                            .max((y - i32::from(b[1])).abs())
+                            .max((z - i32::from(b[2])).abs())
+                    };
+                    let want = bricks.iter().map(chebyshev).min().unwrap() as u32;
+                    match want {
+                        0 => assert!(entry == 1 || entry == 2, "({x}, {y}, {z}): {entry:#x}"),
+                        1 => {
+                            halos += 1;
+                            assert_eq!(entry & (FAR_FLAG | HALO_FLAG), HALO_FLAG);
+                            let slot = (entry & SLOT_BITS) - 1;
+                            assert_eq!(ind.slot_cells[slot as usize], [x as u32, y as u32, z as u32]);
+                            // Clear faces: no present brick one step out on that side.
+                            let mask = (entry >> HALO_MASK_SHIFT) & 63;
+                            for axis in 0..3 {
+                                for (side, step) in [(0, -1), (1, 1)] {
+                                    let blocked = bricks.iter().any(|b| {
+                                        let c = [x, y, z];
+                                        let bc = b.map(i32::from);
+                                        bc[axis] == c[axis] + step
+                                            && (0..3)
+                                                .filter(|&o| o != axis)
+                                                .all(|o| (bc[o] - c[o]).abs() <= 1)
+                                    });
+                                    assert_eq!(
+                                        mask >> (2 * axis + side) & 1 == 1,
+                                        !blocked,
+                                        "({x}, {y}, {z}) axis {axis}"
+                                    );
+                                }
+                            }
+                        }
+                        _ => assert_eq!(entry, FAR_FLAG | want, "({x}, {y}, {z})"),
+                    }
+                }
+            }
+        }
+        assert_eq!(ind.halo_count(2), halos);
+        assert_eq!(halos, 26 + 26);
+        let none = indirection_grid([2, 2, 2], &[]).unwrap();
+        assert!(none.entries.iter().all(|&e| e == FAR_FLAG | !FAR_FLAG));
         assert!(indirection_grid([65536, 65536, 2], &[]).is_err());
         assert!(indirection_grid([2, 2, 2], &[[5, 0, 0]]).is_err());
-        assert_eq!(packed_bricks(&[[3, 65535, 7]]), vec![[3 | (65535 << 16), 7]]);
+        assert_eq!(packed_cells(&[[3, 65535, 7]]), vec![[3 | (65535 << 16), 7]]);
     }
 
     #[test]

@@ -11,7 +11,7 @@
 //! shading every sample; a frame without a lighting change costs only the march.
 
 use glam::DMat3;
-use nelf_format::conventions::{LatLong, PinholeCamera};
+use nelf_format::conventions::{LT_DIM, LatLong, PinholeCamera};
 use nelf_format::spec::BRICK_SIZE;
 use nelf_format::{Asset, GridGeometry, PcaModel};
 use nelf_render::{Image, MarchSettings, ProjectedLight, project_light};
@@ -19,7 +19,7 @@ use wgpu::util::DeviceExt as _;
 
 use crate::atlas::{
     AtlasLayout, Dequantization, GpuMemory, RelightView, fold_light, indirection_grid, pack_coefficients,
-    pack_density, packed_bricks,
+    pack_density, packed_cells,
 };
 use crate::error::ViewerError;
 use crate::shaders::{
@@ -39,6 +39,10 @@ pub enum MarchView {
     },
     /// Final alpha `1 − T_end`, grey.
     Alpha,
+    /// Cost per pixel: `rgb` = (trilinear samples taken, loop iterations, lattice samples
+    /// between box entry and exit); alpha 1. Raw counts, for benchmarks and the app's
+    /// heat map (the display pass scales them by [`DisplaySettings`]'s exposure).
+    Cost,
 }
 
 /// Per-frame march settings.
@@ -100,8 +104,10 @@ pub struct DisplayImage {
 /// What loading an asset produced.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AssetInfo {
-    /// Bricks (= atlas slots in use).
+    /// Bricks (their atlas slots come first).
     pub bricks: usize,
+    /// Halo slots: missing bricks next to present ones (zeros plus aprons).
+    pub halo_slots: usize,
     /// PCA rank `K`.
     pub rank: usize,
     /// Atlas size in texels.
@@ -115,7 +121,8 @@ pub struct AssetInfo {
 /// Compute and render pipelines, created once per device.
 struct Pipelines {
     relight_layout: wgpu::BindGroupLayout,
-    relight: wgpu::ComputePipeline,
+    shade: wgpu::ComputePipeline,
+    fill: wgpu::ComputePipeline,
     march_layout: wgpu::BindGroupLayout,
     march: wgpu::ComputePipeline,
     march_counting: wgpu::ComputePipeline,
@@ -141,6 +148,7 @@ struct GpuAsset {
     relight_params: wgpu::Buffer,
     light: wgpu::Buffer,
     relight_bind_group: wgpu::BindGroup,
+    voxel_count: usize,
     info: AssetInfo,
 }
 
@@ -275,12 +283,13 @@ impl Pipelines {
             label: Some("relight"),
             entries: &[
                 uniform_entry(0, S::COMPUTE),
-                storage_entry(1, true, S::COMPUTE),
+                uniform_entry(1, S::COMPUTE),
                 storage_entry(2, true, S::COMPUTE),
                 storage_entry(3, true, S::COMPUTE),
                 storage_entry(4, true, S::COMPUTE),
                 texture_entry(5, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
                 storage_texture_entry(6, wgpu::TextureFormat::Rgba16Float, D::D3),
+                storage_entry(7, false, S::COMPUTE),
             ],
         });
         let march_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -338,7 +347,8 @@ impl Pipelines {
         let relight_module = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
         let march_module = shader_module(device, "march.wgsl", MARCH_WGSL)?;
         let display_module = shader_module(device, "display.wgsl", DISPLAY_WGSL)?;
-        let relight = compute(&relight_layout, &relight_module, "relight", &[]);
+        let shade = compute(&relight_layout, &relight_module, "shade", &[]);
+        let fill = compute(&relight_layout, &relight_module, "fill", &[]);
         let march = compute(&march_layout, &march_module, "march", &[]);
         let march_counting = compute(&march_layout, &march_module, "march", &[("COUNT_SAMPLES", 1.0)]);
         let display_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
@@ -358,7 +368,8 @@ impl Pipelines {
         });
         Ok(Self {
             relight_layout,
-            relight,
+            shade,
+            fill,
             march_layout,
             march,
             march_counting,
@@ -497,6 +508,11 @@ impl GpuRenderer {
         &self.device
     }
 
+    /// The queue.
+    pub fn queue(&self) -> &wgpu::Queue {
+        &self.queue
+    }
+
     /// The loaded asset's description.
     pub fn asset_info(&self) -> Option<AssetInfo> {
         self.asset.as_ref().map(|a| a.info)
@@ -516,7 +532,6 @@ impl GpuRenderer {
     pub fn load_asset(&mut self, asset: &Asset) -> Result<AssetInfo, ViewerError> {
         asset.validate()?;
         let limits = self.device.limits();
-        let layout = AtlasLayout::for_bricks(asset.bricks.len(), limits.max_texture_dimension_3d)?;
         let grid_bricks = asset.grid.grid_bricks;
         if grid_bricks.iter().any(|&n| n > limits.max_texture_dimension_3d) {
             return Err(ViewerError::TooLarge(format!(
@@ -525,13 +540,16 @@ impl GpuRenderer {
             )));
         }
         let indirection = indirection_grid(grid_bricks, &asset.bricks)?;
+        let layout = AtlasLayout::for_bricks(indirection.slot_cells.len(), limits.max_texture_dimension_3d)?;
         let coefficients = pack_coefficients(&asset.coefficients);
         let density = pack_density(&asset.density);
-        let bricks = packed_bricks(&asset.bricks);
+        let slot_cells = packed_cells(&indirection.slot_cells);
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let voxel_count = asset.voxel_count();
         for (what, bytes) in [
             ("coefficients", coefficients.words.len() as u64 * 4),
             ("densities", density.len() as u64 * 4),
+            ("shaded voxels", voxel_count as u64 * 16),
         ] {
             if bytes > max_binding {
                 return Err(ViewerError::TooLarge(format!(
@@ -556,12 +574,18 @@ impl GpuRenderer {
         };
         let coefficient_buffer = storage("coefficients", bytemuck::cast_slice(&coefficients.words));
         let density_buffer = storage("density", bytemuck::cast_slice(&density));
-        let brick_buffer = storage("bricks", bytemuck::cast_slice(&bricks));
+        let brick_buffer = storage("slot cells", bytemuck::cast_slice(&slot_cells));
         let rank = asset.rank();
+        let shaded = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("shaded voxels"),
+            size: (voxel_count.max(1) * 16) as u64,
+            usage: wgpu::BufferUsages::STORAGE,
+            mapped_at_creation: false,
+        });
         let light = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("light"),
-            size: (rank.max(1) * 16) as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST,
+            size: (LT_DIM * 16) as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
         let relight_params = self.device.create_buffer(&wgpu::BufferDescriptor {
@@ -587,7 +611,7 @@ impl GpuRenderer {
                 view_formats: &[],
             },
             wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(&indirection),
+            bytemuck::cast_slice(&indirection.entries),
         );
         let texels = layout.texels();
         let atlas = self.device.create_texture(&wgpu::TextureDescriptor {
@@ -640,18 +664,24 @@ impl GpuRenderer {
                     binding: 6,
                     resource: wgpu::BindingResource::TextureView(&atlas_view),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: shaded.as_entire_binding(),
+                },
             ],
         });
         let memory = GpuMemory {
             atlas_bytes: u64::from(texels[0]) * u64::from(texels[1]) * u64::from(texels[2]) * 8,
             coefficient_bytes: coefficient_buffer.size(),
             density_bytes: density_buffer.size(),
-            indirection_bytes: indirection.len() as u64 * 4,
+            indirection_bytes: indirection.entries.len() as u64 * 4,
+            shaded_bytes: shaded.size(),
             other_bytes: brick_buffer.size() + light.size() + relight_params.size(),
         };
         let max_density_per_m = asset.density.iter().map(|d| d.to_f32()).fold(0.0f32, f32::max);
         let info = AssetInfo {
             bricks: asset.bricks.len(),
+            halo_slots: indirection.halo_count(asset.bricks.len()),
             rank,
             atlas_texels: texels,
             memory,
@@ -671,6 +701,7 @@ impl GpuRenderer {
             relight_params,
             light,
             relight_bind_group,
+            voxel_count,
             info,
         });
         // Bind groups of the old atlas are stale.
@@ -744,11 +775,18 @@ impl GpuRenderer {
             rank,
             self.relight_view,
         );
-        if !folded.components.is_empty() {
-            self.queue
-                .write_buffer(&asset.light, 0, bytemuck::cast_slice(&folded.components));
-        }
+        // Zeros up to the next multiple of 4: the shader applies whole words of codes.
+        let mut components = folded.components.clone();
+        components.resize(
+            folded.components.len().next_multiple_of(4).clamp(4, LT_DIM),
+            [0.0; 4],
+        );
+        self.queue
+            .write_buffer(&asset.light, 0, bytemuck::cast_slice(&components));
         let g = asset.grid.grid_bricks;
+        // `shade`: 64 voxels per workgroup, rows of at most 32768 workgroups.
+        let groups = (asset.voxel_count as u32).div_ceil(64).max(1);
+        let shade_groups = [groups.min(32_768), groups.div_ceil(32_768)];
         let params = RelightParams {
             atlas: [
                 asset.layout.x_bits,
@@ -764,6 +802,7 @@ impl GpuRenderer {
                 0,
             ],
             light_mean: [folded.mean_rgb[0], folded.mean_rgb[1], folded.mean_rgb[2], 0.0],
+            dispatch: [asset.voxel_count as u32, shade_groups[0] * 64, 0, 0],
         };
         self.queue
             .write_buffer(&asset.relight_params, 0, bytemuck::bytes_of(&params));
@@ -772,8 +811,10 @@ impl GpuRenderer {
             label: Some("relight"),
             timestamp_writes: None,
         });
-        pass.set_pipeline(&self.pipelines.relight);
         pass.set_bind_group(0, &asset.relight_bind_group, &[]);
+        pass.set_pipeline(&self.pipelines.shade);
+        pass.dispatch_workgroups(shade_groups[0], shade_groups[1], 1);
+        pass.set_pipeline(&self.pipelines.fill);
         pass.dispatch_workgroups(
             texels[0].div_ceil(4),
             texels[1].div_ceil(4),
@@ -897,6 +938,7 @@ impl GpuRenderer {
             MarchView::Shaded => (0, 0.0),
             MarchView::Density { sigma_white_per_m } => (1, 1.0 / sigma_white_per_m.max(1e-12)),
             MarchView::Alpha => (2, 0.0),
+            MarchView::Cost => (3, 0.0),
         };
         Ok(MarchParams {
             world_from_camera_x: row(0),

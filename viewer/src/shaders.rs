@@ -17,7 +17,7 @@ use std::collections::HashSet;
 
 /// Shared helpers: atlas addressing, ray–box, hashing, tone mapping, sRGB.
 pub const COMMON_WGSL: &str = include_str!("../../shaders/common.wgsl");
-/// The relight pass (compute).
+/// The relight pass (compute: `shade` per voxel, then `fill` per atlas texel).
 pub const RELIGHT_WGSL: &str = include_str!("../../shaders/relight.wgsl");
 /// The ray-march pass (compute).
 pub const MARCH_WGSL: &str = include_str!("../../shaders/march.wgsl");
@@ -134,6 +134,8 @@ pub struct RelightParams {
     pub words: [u32; 4],
     /// Folded mean radiance (rgb), unused.
     pub light_mean: [f32; 4],
+    /// Stored voxels, invocations per row of the `shade` dispatch, unused ×2.
+    pub dispatch: [u32; 4],
 }
 
 /// Uniform of the march pass (`MarchParams` in `march.wgsl`).
@@ -249,7 +251,11 @@ mod tests {
     #[test]
     fn rust_mirrors_match_wgsl_layouts() {
         let relight = module("relight.wgsl", RELIGHT_WGSL);
-        assert_mirror!(relight, RelightParams, [atlas, grid_bricks, words, light_mean]);
+        assert_mirror!(
+            relight,
+            RelightParams,
+            [atlas, grid_bricks, words, light_mean, dispatch]
+        );
         let march = module("march.wgsl", MARCH_WGSL);
         assert_mirror!(
             march,

@@ -1,0 +1,374 @@
+//! Frame-time benchmark of the GPU renderer (a benchmark, not a test; PLATFORM.md: on a
+//! machine without a GPU this is Mesa's lavapipe, so figures are CPU-bound and noisy —
+//! compare ratios taken in one run).
+//!
+//! ```text
+//! cargo run --release -p nelf-viewer --example bench -- [ASSET.nelf ...] [--reps N]
+//! ```
+//!
+//! Without assets it builds a synthetic portrait-sized asset (`nelf_format::synthetic`,
+//! ≈ 300 k voxels, K = 12, 8-bit coefficients). For each asset it prints, as markdown:
+//! GPU memory, relight-pass ms, frame ms at 512² and 1920×1080 with relighting every
+//! frame and without (the march alone over the precomputed RGBA atlas) and their ratio,
+//! jitter on and off, trilinear samples per frame and per second, and — as the ceiling
+//! of a texture march on this device — the bare dense march of PLATFORM.md (128³
+//! RGBA16F, 512² rays × 128 steps, every ray taking all its steps) measured in the same
+//! run; plus how close the GPU image is to the CPU reference (PSNR at 256²) and the CPU
+//! reference's own time for that frame.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use glam::{DMat3, DVec3};
+use nelf_format::conventions::{LatLong, PinholeCamera, direction, rotation_y};
+use nelf_format::synthetic::SyntheticField;
+use nelf_format::{Asset, CoefficientEncoding, WriteOptions, read_asset, write_asset};
+use nelf_render::{Image, MarchSettings, render_asset};
+use nelf_viewer::shaders::{DENSE_MARCH_WGSL, DenseParams, preprocess};
+use nelf_viewer::{GpuRenderer, MarchView, ViewSettings};
+use wgpu::util::DeviceExt as _;
+
+type BoxError = Box<dyn std::error::Error>;
+
+/// Median of `reps` timings of `f` after two warm-up calls, in milliseconds.
+fn median_ms(reps: usize, mut f: impl FnMut() -> Result<(), BoxError>) -> Result<f64, BoxError> {
+    for _ in 0..2 {
+        f()?;
+    }
+    let mut times: Vec<Duration> = Vec::with_capacity(reps);
+    for _ in 0..reps {
+        let start = Instant::now();
+        f()?;
+        times.push(start.elapsed());
+    }
+    times.sort();
+    Ok(times[times.len() / 2].as_secs_f64() * 1e3)
+}
+
+/// A sky with a warm key light from the front right and a cool fill, 64 × 32.
+fn sky() -> Result<LatLong, BoxError> {
+    let key = DVec3::new(0.5, 0.45, 0.74).normalize();
+    let mut texels = Vec::with_capacity(64 * 32);
+    for row in 0..32 {
+        for col in 0..64 {
+            let theta = (f64::from(row) + 0.5) / 32.0 * std::f64::consts::PI;
+            let phi = (f64::from(col) + 0.5) / 64.0 * std::f64::consts::TAU - std::f64::consts::PI;
+            let d = direction(theta, phi);
+            let spot = (6.0 * (d.dot(key) - 1.0)).exp();
+            let up = 0.5 + 0.5 * d.y;
+            texels.push([
+                (0.2 + 0.3 * up + 5.0 * spot) as f32,
+                (0.25 + 0.3 * up + 4.0 * spot) as f32,
+                (0.35 + 0.35 * up + 3.0 * spot) as f32,
+            ]);
+        }
+    }
+    Ok(LatLong::new(64, 32, texels)?)
+}
+
+/// A portrait framing: the asset's box seen from the front (+z), slightly from the
+/// right and above, with its bounding sphere filling the narrower field of view.
+fn portrait_camera(asset: &Asset, width: u32, height: u32) -> PinholeCamera {
+    let lo = DVec3::from_array(asset.grid.bbox_min_m);
+    let hi = DVec3::from_array(asset.grid.bbox_max_m());
+    let centre = 0.5 * (lo + hi);
+    let fov_x = 30f64.to_radians();
+    let fov_y = 2.0 * ((0.5 * fov_x).tan() * f64::from(height) / f64::from(width)).atan();
+    let distance = 0.5 * (hi - lo).length() / (0.5 * fov_x.min(fov_y)).sin();
+    let (az, el) = (20f64.to_radians(), 10f64.to_radians());
+    let eye = centre + distance * DVec3::new(el.cos() * az.sin(), el.sin(), el.cos() * az.cos());
+    PinholeCamera::look_at(eye, centre, DVec3::Y, width, height, fov_x)
+}
+
+fn psnr(reference: &Image, test: &Image) -> f64 {
+    let peak = reference.rgb.iter().flatten().fold(0.0f32, |m, &v| m.max(v));
+    let mut sum = 0.0f64;
+    for (a, b) in reference.rgb.iter().zip(&test.rgb) {
+        for c in 0..3 {
+            sum += (f64::from(a[c]) - f64::from(b[c])).powi(2);
+        }
+    }
+    let mse = sum / (3 * reference.rgb.len()) as f64;
+    10.0 * (f64::from(peak).powi(2) / mse.max(1e-30)).log10()
+}
+
+/// The bare dense march of PLATFORM.md on `gpu`'s device: ms per frame and samples.
+fn dense_baseline(gpu: &GpuRenderer, reps: usize) -> Result<(f64, u64), BoxError> {
+    let device = gpu.device();
+    let queue = gpu.queue();
+    let (size, steps, n) = (512u32, 128u32, 128u32);
+    // A smooth, partly transparent volume (values do not matter to the speed).
+    let mut texels = Vec::with_capacity((n * n * n * 4) as usize);
+    for z in 0..n {
+        for y in 0..n {
+            for x in 0..n {
+                let v = ((x ^ y ^ z) & 15) as f32 / 15.0;
+                for c in [v, 1.0 - v, 0.5, 2.0 * v] {
+                    texels.push(half::f16::from_f32(c));
+                }
+            }
+        }
+    }
+    let volume = device.create_texture_with_data(
+        queue,
+        &wgpu::TextureDescriptor {
+            label: Some("dense volume"),
+            size: wgpu::Extent3d {
+                width: n,
+                height: n,
+                depth_or_array_layers: n,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+            view_formats: &[],
+        },
+        wgpu::util::TextureDataOrder::LayerMajor,
+        bytemuck::cast_slice(&texels),
+    );
+    let output = device.create_texture(&wgpu::TextureDescriptor {
+        label: Some("dense output"),
+        size: wgpu::Extent3d {
+            width: size,
+            height: size,
+            depth_or_array_layers: 1,
+        },
+        mip_level_count: 1,
+        sample_count: 1,
+        dimension: wgpu::TextureDimension::D2,
+        format: wgpu::TextureFormat::Rgba32Float,
+        usage: wgpu::TextureUsages::STORAGE_BINDING,
+        view_formats: &[],
+    });
+    let params = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("dense params"),
+        contents: bytemuck::bytes_of(&DenseParams {
+            image: [size, size, steps, 0],
+        }),
+        usage: wgpu::BufferUsages::UNIFORM,
+    });
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("dense_march.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(preprocess("dense_march.wgsl", DENSE_MARCH_WGSL)?.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("dense march"),
+        layout: None,
+        module: &module,
+        entry_point: Some("dense_march"),
+        compilation_options: wgpu::PipelineCompilationOptions::default(),
+        cache: None,
+    });
+    let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+        mag_filter: wgpu::FilterMode::Linear,
+        min_filter: wgpu::FilterMode::Linear,
+        ..Default::default()
+    });
+    let volume_view = volume.create_view(&wgpu::TextureViewDescriptor::default());
+    let output_view = output.create_view(&wgpu::TextureViewDescriptor::default());
+    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("dense"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: params.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(&volume_view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::Sampler(&sampler),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::TextureView(&output_view),
+            },
+        ],
+    });
+    let ms = median_ms(reps, || {
+        let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+        {
+            let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+            pass.set_pipeline(&pipeline);
+            pass.set_bind_group(0, &bind_group, &[]);
+            pass.dispatch_workgroups(size.div_ceil(8), size.div_ceil(8), 1);
+        }
+        queue.submit([encoder.finish()]);
+        device.poll(wgpu::PollType::wait_indefinitely())?;
+        Ok(())
+    })?;
+    Ok((ms, u64::from(size) * u64::from(size) * u64::from(steps)))
+}
+
+fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) -> Result<(), BoxError> {
+    let start = Instant::now();
+    let info = gpu.load_asset(asset)?;
+    let upload_ms = start.elapsed().as_secs_f64() * 1e3;
+    let env = sky()?;
+    gpu.set_lighting(&env, DMat3::IDENTITY)?;
+    let m = info.memory;
+    println!("\n### {name}\n");
+    println!(
+        "{} bricks + {} halo slots, {} voxels, K = {}, atlas {}×{}×{} texels; upload {upload_ms:.0} ms",
+        info.bricks,
+        info.halo_slots,
+        info.bricks * 512,
+        info.rank,
+        info.atlas_texels[0],
+        info.atlas_texels[1],
+        info.atlas_texels[2]
+    );
+    let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
+    println!(
+        "GPU memory: {:.2} MiB total = atlas {:.2} + coefficients {:.2} + density {:.2} + shaded voxels {:.2} + indirection {:.3} + other {:.3}\n",
+        mib(m.total()),
+        mib(m.atlas_bytes),
+        mib(m.coefficient_bytes),
+        mib(m.density_bytes),
+        mib(m.shaded_bytes),
+        mib(m.indirection_bytes),
+        mib(m.other_bytes)
+    );
+    let relight_ms = median_ms(reps, || Ok(gpu.relight_blocking()?))?;
+    println!("relight pass: {relight_ms:.2} ms (K = {})\n", info.rank);
+
+    println!(
+        "| frame | march only (ms) | relight + march (ms) | ratio | jitter on (ms) | samples/frame | M samples/s | steps/frame |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    for (w, h) in [(512u32, 512u32), (1920, 1080)] {
+        let camera = portrait_camera(asset, w, h);
+        let settings = ViewSettings {
+            march: MarchSettings::default(),
+            jitter: false,
+            frame_index: 0,
+            view: MarchView::Shaded,
+        };
+        let march_ms = median_ms(reps, || Ok(gpu.frame_blocking(&camera, &settings)?))?;
+        let both_ms = median_ms(reps, || {
+            gpu.invalidate_lighting();
+            Ok(gpu.frame_blocking(&camera, &settings)?)
+        })?;
+        let mut frame = 0u32;
+        let jitter_ms = median_ms(reps, || {
+            frame += 1;
+            let jittered = ViewSettings {
+                jitter: true,
+                frame_index: frame,
+                ..settings
+            };
+            Ok(gpu.frame_blocking(&camera, &jittered)?)
+        })?;
+        let counters = gpu.count_samples(&camera, &settings)?;
+        // SIMD efficiency: lavapipe runs 8 invocations (a row of 8 pixels of a workgroup)
+        // in lock step, so a group costs its slowest ray.
+        let cost = gpu.render(
+            &camera,
+            &ViewSettings {
+                view: MarchView::Cost,
+                ..settings
+            },
+        )?;
+        let (mut useful, mut paid) = (0.0f64, 0.0f64);
+        for row in 0..h as usize {
+            for group in cost.rgb[row * w as usize..(row + 1) * w as usize].chunks(8) {
+                useful += group.iter().map(|c| f64::from(c[0])).sum::<f64>();
+                paid += 8.0 * group.iter().map(|c| f64::from(c[0])).fold(0.0, f64::max);
+            }
+        }
+        let in_box = cost.rgb.iter().filter(|c| c[1] > 0.0).count();
+        let generic: f64 = cost.rgb.iter().map(|c| f64::from(c[1])).sum();
+        let samples: f64 = cost.rgb.iter().map(|c| f64::from(c[0])).sum();
+        let lattice: f64 = cost.rgb.iter().map(|c| f64::from(c[2])).sum();
+        eprintln!(
+            "{w}×{h}: {in_box} rays enter the box ({:.0} %), per such ray: {:.1} samples, {:.1} loop steps, {:.1} lattice samples",
+            100.0 * in_box as f64 / cost.rgb.len() as f64,
+            samples / in_box.max(1) as f64,
+            generic / in_box.max(1) as f64,
+            lattice / in_box.max(1) as f64
+        );
+        eprintln!(
+            "{w}×{h}: lane efficiency {:.2} (samples taken / 8 × slowest per group of 8)",
+            useful / paid.max(1.0)
+        );
+        println!(
+            "| {w}×{h} | {march_ms:.1} ({:.1} fps) | {both_ms:.1} | {:.3} | {jitter_ms:.1} | {} | {:.0} | {} |",
+            1e3 / march_ms,
+            both_ms / march_ms,
+            counters.samples,
+            f64::from(counters.samples) / (march_ms * 1e-3) / 1e6,
+            counters.steps
+        );
+    }
+    // Accuracy beside speed: the GPU frame against the CPU reference at 256².
+    let camera = portrait_camera(asset, 256, 256);
+    let settings = ViewSettings::default();
+    let got = gpu.render(&camera, &settings)?;
+    let start = Instant::now();
+    let want = render_asset(
+        asset,
+        &camera,
+        &env,
+        DMat3::IDENTITY,
+        None,
+        &MarchSettings::default(),
+    )?;
+    let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
+    let gpu_ms = median_ms(reps.min(5), || Ok(gpu.frame_blocking(&camera, &settings)?))?;
+    println!(
+        "\nGPU vs CPU reference at 256²: PSNR {:.1} dB; CPU reference {cpu_ms:.0} ms (relight + march, rayon), GPU march {gpu_ms:.1} ms",
+        psnr(&want, &got)
+    );
+    // A relight after a rotation costs the projection on the CPU plus the pass.
+    let rotate_ms = median_ms(reps, || {
+        gpu.set_light_rotation(rotation_y(0.3))?;
+        Ok(gpu.relight_blocking()?)
+    })?;
+    println!("rotation change (project_light on the CPU + relight pass): {rotate_ms:.2} ms");
+    Ok(())
+}
+
+fn main() -> Result<(), BoxError> {
+    let mut paths: Vec<PathBuf> = Vec::new();
+    let mut reps = 9usize;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        if a == "--reps" {
+            reps = args.next().ok_or("--reps needs a number")?.parse()?;
+        } else {
+            paths.push(PathBuf::from(a));
+        }
+    }
+    let mut gpu = GpuRenderer::new_headless()?;
+    if let Some(info) = gpu.adapter_info() {
+        println!(
+            "adapter: {} ({:?}, {:?})",
+            info.name, info.backend, info.device_type
+        );
+    }
+    let (dense_ms, dense_samples) = dense_baseline(&gpu, reps)?;
+    println!(
+        "bare dense march (PLATFORM.md): 512² × 128 steps, 128³ RGBA16F: {dense_ms:.1} ms = {:.0} M trilinear samples/s",
+        dense_samples as f64 / (dense_ms * 1e-3) / 1e6
+    );
+    if paths.is_empty() {
+        let start = Instant::now();
+        let asset = SyntheticField::new(300_000, 7).asset(12, CoefficientEncoding::U8Affine)?;
+        let dir = std::env::temp_dir().join("nelf-viewer-bench");
+        std::fs::create_dir_all(&dir)?;
+        let path = dir.join("synthetic-300k-k12.nelf");
+        write_asset(&path, &asset, &WriteOptions::default())?;
+        eprintln!("synthetic asset built in {:.1} s", start.elapsed().as_secs_f64());
+        paths.push(path);
+    }
+    for path in &paths {
+        let asset = read_asset(path)?;
+        bench_asset(&mut gpu, &path.display().to_string(), &asset, reps)?;
+    }
+    Ok(())
+}
