@@ -292,6 +292,15 @@ fn field_source_contract() {
             "{s} vs 1000 × {d}"
         );
     }
+    // An average of one direction twice is that direction.
+    let (twice, twice_lt) = evaluate(
+        &field,
+        &points,
+        &ViewPolicy::AverageTowardPoints(vec![eye.as_vec3(), eye.as_vec3()]),
+    );
+    let (_, single_lt) = evaluate(&field, &points, &ViewPolicy::TowardPoint(eye.as_vec3()));
+    assert_close(&twice, &single, 1e-6, "averaged density");
+    assert_close(&twice_lt, &single_lt, 1e-6, "averaged light transport");
     // Batching does not matter; evaluate_density matches evaluate's density.
     let whole = NelfField::new(model, &capture).unwrap();
     let (d2, t2) = evaluate(&whole, &points, &view);
