@@ -269,6 +269,68 @@ pub fn conv2d(
     Tensor::from_vec(out, (b, c_out, h_out, w_out), &Device::Cpu)
 }
 
+/// Per view, the dot product of each channel's 128 light-transport values with a
+/// weight per (channel, texel): `lt` `(N, V, 3·P)`, `weights` `(3·P)` → `(N, V, 3)`.
+pub fn channel_dots(lt: &Tensor, weights: &[f32]) -> candle_core::Result<Tensor> {
+    let (n, v, d) = lt.dims3()?;
+    if d != weights.len() || d % 3 != 0 {
+        candle_core::bail!("channel_dots: {d} values per view, {} weights", weights.len());
+    }
+    let texels = d / 3;
+    let out = with_data(lt, |data| {
+        let mut o = vec![0.0f32; n * v * 3];
+        o.par_chunks_mut(3).zip(data.par_chunks(d)).for_each(|(o, row)| {
+            for (c, oc) in o.iter_mut().enumerate() {
+                let range = c * texels..(c + 1) * texels;
+                *oc = row[range.clone()]
+                    .iter()
+                    .zip(&weights[range])
+                    .map(|(a, b)| a * b)
+                    .sum();
+            }
+        });
+        o
+    })?;
+    Tensor::from_vec(out, (n, v, 3), &Device::Cpu)
+}
+
+/// `T[n, c·P + p] = Σ_v per_view[n, v, c] · lt[n, v, c·P + p] · omega[p]`:
+/// `lt` `(N, V, 3·P)`, `per_view` `(N, V, 3)`, `omega` `(P)` → `(N, 3·P)`.
+pub fn blend_light_transport(lt: &Tensor, per_view: &Tensor, omega: &[f32]) -> candle_core::Result<Tensor> {
+    let (n, v, d) = lt.dims3()?;
+    let texels = omega.len();
+    if d != 3 * texels || per_view.dims() != [n, v, 3] {
+        candle_core::bail!(
+            "blend_light_transport: lt {:?}, per-view weights {:?}, {texels} texels",
+            lt.dims(),
+            per_view.dims()
+        );
+    }
+    let weights = with_data(per_view, <[f32]>::to_vec)?;
+    let out = with_data(lt, |data| {
+        let mut o = vec![0.0f32; n * d];
+        o.par_chunks_mut(d).enumerate().for_each(|(i, out)| {
+            for view in 0..v {
+                let row = &data[(i * v + view) * d..(i * v + view + 1) * d];
+                for c in 0..3 {
+                    let w = weights[(i * v + view) * 3 + c];
+                    let range = c * texels..(c + 1) * texels;
+                    for (o, x) in out[range.clone()].iter_mut().zip(&row[range]) {
+                        *o += w * x;
+                    }
+                }
+            }
+            for chunk in out.chunks_mut(texels) {
+                for (o, w) in chunk.iter_mut().zip(omega) {
+                    *o *= w;
+                }
+            }
+        });
+        o
+    })?;
+    Tensor::from_vec(out, (n, d), &Device::Cpu)
+}
+
 #[cfg(test)]
 mod tests {
     use candle_core::Module;
@@ -362,6 +424,45 @@ mod tests {
         assert!(max_diff(&got, &want) < 1e-5);
         let plain = group_norm_prelu(&x, 3, 1e-5, &gamma, &beta, None).unwrap();
         assert!(max_diff(&plain, &y) < 1e-5);
+    }
+
+    #[test]
+    fn blends_and_dots_match_tensor_ops() {
+        let (n, v, p) = (4usize, 3usize, 5usize);
+        let lt = ramp(&[n, v, 3 * p], 0.2).abs().unwrap();
+        let per_view = ramp(&[n, v, 3], 0.9);
+        let omega: Vec<f32> = (0..p).map(|i| 0.1 + 0.05 * i as f32).collect();
+        let got = blend_light_transport(&lt, &per_view, &omega).unwrap();
+        let omega_t = Tensor::new(omega.as_slice(), &Device::Cpu)
+            .unwrap()
+            .reshape((1, 1, p))
+            .unwrap();
+        let want = lt
+            .reshape((n, v, 3, p))
+            .unwrap()
+            .broadcast_mul(&per_view.unsqueeze(3).unwrap())
+            .unwrap()
+            .sum(1)
+            .unwrap()
+            .broadcast_mul(&omega_t)
+            .unwrap()
+            .reshape((n, 3 * p))
+            .unwrap();
+        assert!(max_diff(&got, &want) < 1e-5);
+        let weights: Vec<f32> = (0..3 * p).map(|i| 0.3 - 0.02 * i as f32).collect();
+        let dots = channel_dots(&lt, &weights).unwrap();
+        let w = Tensor::new(weights.as_slice(), &Device::Cpu)
+            .unwrap()
+            .reshape((1, 1, 3, p))
+            .unwrap();
+        let want = lt
+            .reshape((n, v, 3, p))
+            .unwrap()
+            .broadcast_mul(&w)
+            .unwrap()
+            .sum(3)
+            .unwrap();
+        assert!(max_diff(&dots, &want) < 1e-5);
     }
 
     #[test]

@@ -43,6 +43,34 @@ impl Default for NelfConfig {
     }
 }
 
+impl NelfConfig {
+    /// The defaults with a batch size suited to `device`: 2048 points on the CPU
+    /// (cache-sized), 65536 on a GPU.
+    pub fn for_device(device: &Device) -> Self {
+        Self {
+            batch_points: if device.is_cpu() { 2048 } else { 65_536 },
+            ..Self::default()
+        }
+    }
+}
+
+/// The device the network should run on: CUDA device 0 when built with the `cuda`
+/// feature and a GPU is present, else the CPU.
+pub fn default_device() -> Device {
+    Device::cuda_if_available(0).unwrap_or(Device::Cpu)
+}
+
+/// A short name of `device` for reports: `cpu`, `cuda` or `metal`.
+pub fn device_name(device: &Device) -> &'static str {
+    if device.is_cpu() {
+        "cpu"
+    } else if device.is_cuda() {
+        "cuda"
+    } else {
+        "metal"
+    }
+}
+
 /// The NeLF model.
 #[derive(Debug, Clone)]
 pub struct Model {

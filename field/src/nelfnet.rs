@@ -264,9 +264,15 @@ impl NelfNet {
     /// Colours under `irradiance` (`(3, 128)`, network layout, `L·Ω`).
     pub fn shade(trace: &NelfNetTrace, source_rgb: &Tensor, irradiance: &Tensor) -> Result<Shaded, NetError> {
         let (n, v, _) = source_rgb.dims3()?;
-        let lt = trace.lt_scale.reshape((n, v, 3, ENV_TEXELS))?;
-        let irradiance = irradiance.reshape((1, 1, 3, ENV_TEXELS))?;
-        let rgb_perview = (lt.broadcast_mul(&irradiance)?.sum(D::Minus1)? * source_rgb)?;
+        let dots = if crate::cpu::fused_for(&trace.lt_scale) {
+            let weights = irradiance.flatten_all()?.to_vec1::<f32>()?;
+            crate::cpu::channel_dots(&trace.lt_scale, &weights)?
+        } else {
+            let lt = trace.lt_scale.reshape((n, v, 3, ENV_TEXELS))?;
+            let irradiance = irradiance.reshape((1, 1, 3, ENV_TEXELS))?;
+            lt.broadcast_mul(&irradiance)?.sum(D::Minus1)?
+        };
+        let rgb_perview = (dots * source_rgb)?;
         let rgb = rgb_perview.broadcast_mul(&trace.blend_softmax)?.sum(1)?;
         Ok(Shaded { rgb_perview, rgb })
     }
@@ -279,9 +285,17 @@ impl NelfNet {
         solid_angle: &Tensor,
     ) -> Result<Tensor, NetError> {
         let (n, v, _) = source_rgb.dims3()?;
+        let per_view = source_rgb.broadcast_mul(&trace.blend_softmax)?;
+        if crate::cpu::fused_for(&trace.lt_scale) {
+            let omega = solid_angle.flatten_all()?.to_vec1::<f32>()?;
+            return Ok(crate::cpu::blend_light_transport(
+                &trace.lt_scale,
+                &per_view,
+                &omega,
+            )?);
+        }
         let lt = trace.lt_scale.reshape((n, v, 3, ENV_TEXELS))?;
-        let per_view = source_rgb.broadcast_mul(&trace.blend_softmax)?.unsqueeze(3)?;
-        let t = lt.broadcast_mul(&per_view)?.sum(1)?;
+        let t = lt.broadcast_mul(&per_view.unsqueeze(3)?)?.sum(1)?;
         let omega = solid_angle.reshape((1, 1, ENV_TEXELS))?;
         Ok(t.broadcast_mul(&omega)?.reshape((n, LT_DIM))?)
     }

@@ -16,7 +16,6 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use candle_core::Device;
 use nelf_field::capture::{default_net_from_world, load_capture_dir};
 use nelf_field::light::{light_map_in_world, net_light_to_latlong};
 use nelf_field::{Model, NelfConfig};
@@ -49,7 +48,8 @@ pub fn run(args: &LightArgs) -> anyhow::Result<()> {
     let start = Instant::now();
     let (capture, _) = load_capture_dir(&args.capture, default_net_from_world())
         .with_context(|| format!("loading the capture {}", args.capture.display()))?;
-    let model = Model::load(&args.weights, NelfConfig::default(), &Device::Cpu)
+    let device = nelf_field::default_device();
+    let model = Model::load(&args.weights, NelfConfig::for_device(&device), &device)
         .with_context(|| format!("loading the weights {}", args.weights.display()))?;
     let encoded = model.encode(&capture.views).context("running the encoder")?;
     let light = net_light_to_latlong(&encoded.light().source_light)?;
@@ -75,6 +75,7 @@ pub fn run(args: &LightArgs) -> anyhow::Result<()> {
             "views": capture.cameras.len(),
             "image_size": [capture.views.width, capture.views.height],
             "seconds": start.elapsed().as_secs_f64(),
+            "device": nelf_field::device_name(&device),
         });
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {

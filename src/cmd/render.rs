@@ -307,6 +307,7 @@ fn render_gpu(
         jitter: false,
         frame_index: 0,
         view: nelf_viewer::MarchView::Shaded,
+        pass: nelf_viewer::MarchPass::default(),
     };
     Ok(gpu.render(camera, &view)?)
 }
@@ -324,12 +325,9 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
     let weights = args.weights.as_ref().context("--field needs --weights")?;
     let (capture, _) = load_capture_dir(capture_dir, default_net_from_world())
         .with_context(|| format!("loading the capture {}", capture_dir.display()))?;
-    let model = nelf_field::Model::load(
-        weights,
-        nelf_field::NelfConfig::default(),
-        &candle_core::Device::Cpu,
-    )
-    .with_context(|| format!("loading the weights {}", weights.display()))?;
+    let device = nelf_field::default_device();
+    let model = nelf_field::Model::load(weights, nelf_field::NelfConfig::for_device(&device), &device)
+        .with_context(|| format!("loading the weights {}", weights.display()))?;
     let field = nelf_field::NelfField::new(model, &capture).context("encoding the capture")?;
     let (lo, hi) = field.bounds();
     let (camera, capture_envmap) = resolve_camera(args, (lo.as_dvec3(), hi.as_dvec3()))?;
@@ -389,7 +387,7 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
         "config": args,
         "camera": CameraJson::from_camera(&camera),
         "envmap": light_name,
-        "device": "nelf-network (cpu)",
+        "device": format!("nelf-network ({})", nelf_field::device_name(&device)),
         "world_from_light": world_from_light.to_cols_array(),
         "load_seconds": load_seconds,
         "render_seconds": render_seconds,
