@@ -6,7 +6,7 @@
 //   x and y, so slot coordinates are bit operations.
 // * Indirection grid: one u32 per brick cell: a present brick's or a halo cell's slot,
 //   or a far cell's distance to the nearest present brick (see `FAR_FLAG`).
-// * Ray–box slab test, hashing for jitter, ACES (Narkowicz 2015 fit) tone mapping,
+// * Full-screen triangle, ray–box slab test, hashing for jitter, ACES (Narkowicz 2015 fit) tone mapping,
 //   and the sRGB transfer function (IEC 61966-2-1).
 
 // Voxels along a brick edge (SPEC.md).
@@ -62,6 +62,17 @@ fn has_slot(entry: u32) -> bool {
 // The atlas slot of an entry with one.
 fn slot_of(entry: u32) -> u32 {
     return (entry & SLOT_BITS) - 1u;
+}
+
+// Full-screen triangle: vertex `index` (0, 1, 2) has uv (0, 0), (2, 0), (0, 2); uv (0, 0)
+// is the top-left of the viewport and (1, 1) its bottom-right.
+fn fullscreen_uv(index: u32) -> vec2<f32> {
+    return vec2<f32>(f32((index << 1u) & 2u), f32(index & 2u));
+}
+
+// Clip-space position of a full-screen-triangle vertex with texture coordinates `uv`.
+fn fullscreen_position(uv: vec2<f32>) -> vec4<f32> {
+    return vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, 0.0, 1.0);
 }
 
 // Reciprocal of a ray direction with zero components replaced by tiny ones of the

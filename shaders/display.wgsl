@@ -27,9 +27,9 @@ struct VertexOut {
 // Vertices 0, 1, 2 make one triangle covering the viewport; uv (0, 0) is its top-left.
 @vertex
 fn vs_main(@builtin(vertex_index) index: u32) -> VertexOut {
-    let uv = vec2<f32>(f32((index << 1u) & 2u), f32(index & 2u));
+    let uv = fullscreen_uv(index);
     var out: VertexOut;
-    out.position = vec4<f32>(uv.x * 2.0 - 1.0, 1.0 - uv.y * 2.0, 0.0, 1.0);
+    out.position = fullscreen_position(uv);
     out.uv = uv;
     return out;
 }

@@ -1,4 +1,6 @@
-// march.wgsl — the ray-march pass (compute, one invocation per pixel).
+// march.wgsl — the ray-march pass, one invocation per pixel: a compute entry (`march`,
+// which can also count samples) and a fragment entry over a full-screen triangle
+// (`march_vs`/`march_fs`); both run `march_pixel`.
 //
 // Mirrors nelf_render::march (the CPU reference; its module docs define every step):
 // a ray per pixel centre of an OpenCV pinhole camera, clipped against the grid box,
@@ -93,17 +95,20 @@ fn composite(acc: ptr<function, Accum>, value: vec4<f32>, step: f32, view: u32, 
     return (*acc).transmittance < min_transmittance;
 }
 
-@compute @workgroup_size(8, 8, 1)
-fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let size = params.image.xy;
-    if gid.x >= size.x || gid.y >= size.y {
-        return;
-    }
+// One pixel's march: its colour and what it cost.
+struct MarchResult {
+    color: vec4<f32>,
+    samples: u32,
+    steps: u32,
+}
+
+// Marches the ray through the centre of pixel `pixel`.
+fn march_pixel(pixel: vec2<u32>) -> MarchResult {
     let packing = SlotPacking(params.view.y, params.view.z);
     let grid = params.grid_bricks.xyz;
     // Ray through the pixel centre (OpenCV pinhole), unit length in metres.
     let k = params.intrinsics;
-    let d_cam = vec3<f32>((f32(gid.x) + 0.5 - k.z) / k.x, (f32(gid.y) + 0.5 - k.w) / k.y, 1.0);
+    let d_cam = vec3<f32>((f32(pixel.x) + 0.5 - k.z) / k.x, (f32(pixel.y) + 0.5 - k.w) / k.y, 1.0);
     let dir = normalize(
         d_cam.x * params.world_from_camera_x.xyz + d_cam.y * params.world_from_camera_y.xyz
             + d_cam.z * params.world_from_camera_z.xyz,
@@ -116,7 +121,7 @@ fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
     let t_entry = max(span.x, 0.0);
     var offset = 0.5;
     if (params.image.w & 1u) != 0u {
-        offset = jitter_01(gid.xy, params.image.z);
+        offset = jitter_01(pixel, params.image.z);
     }
     var count = 0;
     if span.x < span.y && span.y > 0.0 {
@@ -188,10 +193,6 @@ fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
             break;
         }
     }
-    if COUNT_SAMPLES {
-        atomicAdd(&counters.samples, samples);
-        atomicAdd(&counters.steps, steps);
-    }
     var out = vec4<f32>(acc.rgb, 1.0 - acc.transmittance);
     if view == VIEW_DENSITY {
         out = vec4<f32>(vec3<f32>(acc.max_sigma * params.scales.x), 1.0);
@@ -200,5 +201,31 @@ fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
     } else if view == VIEW_COST {
         out = vec4<f32>(f32(samples), f32(steps), f32(count), 1.0);
     }
-    textureStore(output, vec2<i32>(gid.xy), out);
+    return MarchResult(out, samples, steps);
+}
+
+// The compute march: one invocation per pixel, into the `output` storage texture.
+@compute @workgroup_size(8, 8, 1)
+fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
+    if gid.x >= params.image.x || gid.y >= params.image.y {
+        return;
+    }
+    let result = march_pixel(gid.xy);
+    if COUNT_SAMPLES {
+        atomicAdd(&counters.samples, result.samples);
+        atomicAdd(&counters.steps, result.steps);
+    }
+    textureStore(output, vec2<i32>(gid.xy), result.color);
+}
+
+// The fragment march: a full-screen triangle over a colour target of the image's size
+// (llvmpipe's rasteriser writes its tiles faster than per-invocation storage stores).
+@vertex
+fn march_vs(@builtin(vertex_index) index: u32) -> @builtin(position) vec4<f32> {
+    return fullscreen_position(fullscreen_uv(index));
+}
+
+@fragment
+fn march_fs(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {
+    return march_pixel(vec2<u32>(position.xy)).color;
 }

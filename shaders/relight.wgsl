@@ -7,16 +7,16 @@
 // and for f16 coefficients light_mean = P_mean, light[k] = P_k, q_k = c_k. Shading is
 // linear in T = mean + Σ c_k B_k, so this equals shading every sample (DESIGN.md).
 //
-// Two entry points, dispatched one after the other:
-// * `shade`: one invocation per stored voxel: its K-term dot product, with its density,
-//   into `voxels` (rgb = radiance, a = σ in 1/m);
-// * `fill`: one invocation per atlas texel: texel (slot s, local l ∈ [−1, 8]³) copies the
-//   voxel at global voxel coordinates 8·cell(s) + l — its own brick's voxel inside, a
-//   neighbour's in the apron, 0 where that brick is missing (the CPU reference counts
-//   missing voxels as 0; a halo slot's cell is missing, so only its apron is non-zero),
-//   so hardware trilinear filtering inside a slot equals the reference's trilinear
-//   across brick borders. Shading each voxel once, not once per texel that shows it,
-//   halves the dot products (aprons and halos repeat voxels).
+// One invocation per stored voxel (brick b, local l ∈ [0, 8)³): its K-term dot product,
+// with its density, is written to every atlas texel that holds it — its own slot at
+// local l, and the apron (local l − 8d) of the slot of each neighbouring cell b + d,
+// d ∈ {−1, 0, 1}³, that the voxel borders (a present brick or a halo cell; see
+// viewer/src/atlas.rs). So a texel (slot s, local m ∈ [−1, 8]³) holds the voxel at global
+// voxel coordinates 8·cell(s) + m — its own brick's inside, a neighbour's in the apron,
+// and 0 where that brick is missing (never written: wgpu creates textures zeroed; the
+// CPU reference counts missing voxels as 0) — so hardware trilinear filtering inside a
+// slot equals the reference's trilinear across brick borders. rgb = radiance, a = σ
+// (1/m). Each voxel is shaded once however many texels show it.
 
 #import "common.wgsl"
 
@@ -30,7 +30,7 @@ struct RelightParams {
     words: vec4<u32>,
     // Folded mean radiance (rgb).
     light_mean: vec4<f32>,
-    // x: stored voxels; y: invocations per row of the `shade` dispatch (x · 64).
+    // x: stored voxels; y: invocations per row of the dispatch (workgroups along x · 64).
     dispatch: vec4<u32>,
 }
 
@@ -45,12 +45,12 @@ const MAX_RANK: u32 = 384u;
 @group(0) @binding(2) var<storage, read> coefficients: array<u32>;
 // Density σ (1/m) as f16, two voxels per word.
 @group(0) @binding(3) var<storage, read> density: array<u32>;
-// Brick-cell coordinates per slot (present bricks, then halo cells): (x | y << 16, z).
-@group(0) @binding(4) var<storage, read> slot_cells: array<vec2<u32>>;
-@group(0) @binding(5) var indirection: texture_3d<u32>;
-@group(0) @binding(6) var atlas: texture_storage_3d<rgba16float, write>;
-// Shaded voxels (rgb radiance, σ), written by `shade`, read by `fill`.
-@group(0) @binding(7) var<storage, read_write> voxels: array<vec4<f32>>;
+// Per present brick, 27 slots: that of cell b + d for d = (dx, dy, dz) ∈ {−1, 0, 1}³ at
+// index (dx + 1) + 3 (dy + 1) + 9 (dz + 1) (13: its own), or NO_SLOT.
+@group(0) @binding(4) var<storage, read> neighbour_slots: array<u32>;
+@group(0) @binding(5) var atlas: texture_storage_3d<rgba16float, write>;
+
+const NO_SLOT: u32 = 0xffffffffu;
 
 // IEEE binary16 bits (low 16 bits of `bits`) to f32, exactly, for finite values (the
 // reader has rejected non-finite ones); written out so no f16 capability is needed.
@@ -98,7 +98,7 @@ fn voxel_density(voxel: u32) -> f32 {
 }
 
 @compute @workgroup_size(64, 1, 1)
-fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
+fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
     let v = gid.x + gid.y * params.dispatch.y;
     if gid.x >= params.dispatch.y || v >= params.dispatch.x {
         return;
@@ -107,28 +107,22 @@ fn shade(@builtin(global_invocation_id) gid: vec3<u32>) {
     if params.words.z == 1u {
         rgb = abs(rgb);
     }
-    voxels[v] = vec4<f32>(rgb, voxel_density(v));
-}
-
-@compute @workgroup_size(4, 4, 4)
-fn fill(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let texel = vec3<i32>(gid);
-    let slot = texel / SLOT;
+    let value = vec4<f32>(rgb, voxel_density(v));
+    let brick = v / 512u;
+    let local = vec3<i32>(vec3<u32>(v & 7u, (v >> 3u) & 7u, (v >> 6u) & 7u));
+    // Neighbours whose apron holds this voxel: d_a = −1 where l_a = 0, +1 where l_a = 7.
+    let low = select(vec3<i32>(0), vec3<i32>(-1), local == vec3<i32>(0));
+    let high = select(vec3<i32>(0), vec3<i32>(1), local == vec3<i32>(BRICK - 1));
     let packing = SlotPacking(params.atlas.x, params.atlas.y);
-    let slot_index = u32(slot.x) | (u32(slot.y) << packing.x_bits) | (u32(slot.z) << (packing.x_bits + packing.y_bits));
-    if slot.x >= (1 << packing.x_bits) || slot.y >= (1 << packing.y_bits) || slot_index >= params.atlas.z {
-        return;
+    for (var dz = low.z; dz <= high.z; dz++) {
+        for (var dy = low.y; dy <= high.y; dy++) {
+            for (var dx = low.x; dx <= high.x; dx++) {
+                let slot = neighbour_slots[brick * 27u + u32((dx + 1) + 3 * (dy + 1) + 9 * (dz + 1))];
+                if slot != NO_SLOT {
+                    let d = vec3<i32>(dx, dy, dz);
+                    textureStore(atlas, slot_coords(slot, packing) * SLOT + local - d * BRICK + vec3<i32>(1), value);
+                }
+            }
+        }
     }
-    let packed = slot_cells[slot_index];
-    let cell_of_slot = vec3<i32>(vec3<u32>(packed.x & 0xffffu, packed.x >> 16u, packed.y));
-    // Global voxel coordinates of this texel, then the brick that holds it.
-    let voxel = cell_of_slot * BRICK + (texel - slot * SLOT) - vec3<i32>(1);
-    let cell = voxel >> vec3<u32>(3u);
-    let entry = brick_entry(indirection, cell, params.grid_bricks.xyz);
-    var value = vec4<f32>(0.0);
-    if is_present(entry) {
-        let local = voxel - cell * BRICK;
-        value = voxels[(entry - 1u) * 512u + u32(local.x + BRICK * (local.y + BRICK * local.z))];
-    }
-    textureStore(atlas, texel, value);
 }

@@ -17,7 +17,7 @@
 //! reference's own time for that frame.
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use glam::{DMat3, DVec3};
 use nelf_format::conventions::{LatLong, PinholeCamera, direction, rotation_y};
@@ -25,24 +25,43 @@ use nelf_format::synthetic::SyntheticField;
 use nelf_format::{Asset, CoefficientEncoding, WriteOptions, read_asset, write_asset};
 use nelf_render::{Image, MarchSettings, render_asset};
 use nelf_viewer::shaders::{DENSE_MARCH_WGSL, DenseParams, preprocess};
-use nelf_viewer::{GpuRenderer, MarchView, ViewSettings};
+use nelf_viewer::{GpuRenderer, MarchPass, MarchView, ViewSettings};
 use wgpu::util::DeviceExt as _;
 
 type BoxError = Box<dyn std::error::Error>;
 
-/// Median of `reps` timings of `f` after two warm-up calls, in milliseconds.
-fn median_ms(reps: usize, mut f: impl FnMut() -> Result<(), BoxError>) -> Result<f64, BoxError> {
+/// Wall-clock timings of a blocking GPU job, milliseconds.
+#[derive(Debug, Clone, Copy)]
+struct Timing {
+    /// Fastest run: on a shared machine contention only adds time, so this is the
+    /// closest to the device's own speed.
+    min: f64,
+    /// Median run.
+    median: f64,
+}
+
+impl std::fmt::Display for Timing {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:.1} (median {:.1})", self.min, self.median)
+    }
+}
+
+/// Times `f` `reps` times after two warm-up calls.
+fn time_ms(reps: usize, mut f: impl FnMut() -> Result<(), BoxError>) -> Result<Timing, BoxError> {
     for _ in 0..2 {
         f()?;
     }
-    let mut times: Vec<Duration> = Vec::with_capacity(reps);
-    for _ in 0..reps {
+    let mut times: Vec<f64> = Vec::with_capacity(reps.max(1));
+    for _ in 0..reps.max(1) {
         let start = Instant::now();
         f()?;
-        times.push(start.elapsed());
+        times.push(start.elapsed().as_secs_f64() * 1e3);
     }
-    times.sort();
-    Ok(times[times.len() / 2].as_secs_f64() * 1e3)
+    times.sort_by(f64::total_cmp);
+    Ok(Timing {
+        min: times[0],
+        median: times[times.len() / 2],
+    })
 }
 
 /// A sky with a warm key light from the front right and a cool fill, 64 × 32.
@@ -93,7 +112,7 @@ fn psnr(reference: &Image, test: &Image) -> f64 {
 }
 
 /// The bare dense march of PLATFORM.md on `gpu`'s device: ms per frame and samples.
-fn dense_baseline(gpu: &GpuRenderer, reps: usize) -> Result<(f64, u64), BoxError> {
+fn dense_baseline(gpu: &GpuRenderer, reps: usize) -> Result<(Timing, u64), BoxError> {
     let device = gpu.device();
     let queue = gpu.queue();
     let (size, steps, n) = (512u32, 128u32, 128u32);
@@ -190,7 +209,7 @@ fn dense_baseline(gpu: &GpuRenderer, reps: usize) -> Result<(f64, u64), BoxError
             },
         ],
     });
-    let ms = median_ms(reps, || {
+    let timing = time_ms(reps, || {
         let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
         {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
@@ -202,10 +221,11 @@ fn dense_baseline(gpu: &GpuRenderer, reps: usize) -> Result<(f64, u64), BoxError
         device.poll(wgpu::PollType::wait_indefinitely())?;
         Ok(())
     })?;
-    Ok((ms, u64::from(size) * u64::from(size) * u64::from(steps)))
+    Ok((timing, u64::from(size) * u64::from(size) * u64::from(steps)))
 }
 
 fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) -> Result<(), BoxError> {
+    let mut notes = Vec::new();
     let start = Instant::now();
     let info = gpu.load_asset(asset)?;
     let upload_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -225,22 +245,45 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
     );
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
     println!(
-        "GPU memory: {:.2} MiB total = atlas {:.2} + coefficients {:.2} + density {:.2} + shaded voxels {:.2} + indirection {:.3} + other {:.3}\n",
+        "GPU memory: {:.2} MiB total = atlas {:.2} + coefficients {:.2} + density {:.2} + neighbour slots {:.3} + indirection {:.3} + other {:.3}\n",
         mib(m.total()),
         mib(m.atlas_bytes),
         mib(m.coefficient_bytes),
         mib(m.density_bytes),
-        mib(m.shaded_bytes),
+        mib(m.neighbour_bytes),
         mib(m.indirection_bytes),
         mib(m.other_bytes)
     );
-    let relight_ms = median_ms(reps, || Ok(gpu.relight_blocking()?))?;
-    println!("relight pass: {relight_ms:.2} ms (K = {})\n", info.rank);
+    for used in [0usize, 1, 4, 12, 32, 64] {
+        if used > info.rank {
+            break;
+        }
+        gpu.set_rank(Some(used));
+        let t = time_ms(reps, || Ok(gpu.relight_blocking()?))?;
+        eprintln!("relight pass with rank {used}: {t} ms");
+    }
+    gpu.set_rank(None);
+    let relight = time_ms(reps, || Ok(gpu.relight_blocking()?))?;
+    println!("relight pass (K = {}): {relight} ms", info.rank);
+    // A relight after a rotation: the projection on the CPU plus the pass.
+    let mut angle = 0.0;
+    let rotate = time_ms(reps, || {
+        angle += 0.1;
+        gpu.set_light_rotation(rotation_y(angle))?;
+        Ok(gpu.relight_blocking()?)
+    })?;
+    println!("lighting rotation (project_light on the CPU + relight pass): {rotate} ms\n");
 
+    // The ceiling, measured now (the machine's load changes).
+    let (dense, dense_samples) = dense_baseline(gpu, reps)?;
+    let dense_rate = dense_samples as f64 / (dense.min * 1e-3) / 1e6;
     println!(
-        "| frame | march only (ms) | relight + march (ms) | ratio | jitter on (ms) | samples/frame | M samples/s | steps/frame |"
+        "bare dense march (PLATFORM.md; 512² rays × 128 steps in a 128³ RGBA16F texture): {dense} ms = {dense_rate:.0} M trilinear samples/s\n"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!(
+        "| frame | march, fragment pass (ms) | march, compute pass (ms) | relight + march (ms) | ratio | jitter on (ms) | samples/frame | M samples/s | of dense |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for (w, h) in [(512u32, 512u32), (1920, 1080)] {
         let camera = portrait_camera(asset, w, h);
         let settings = ViewSettings {
@@ -248,64 +291,71 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
             jitter: false,
             frame_index: 0,
             view: MarchView::Shaded,
+            pass: MarchPass::Fragment,
         };
-        let march_ms = median_ms(reps, || Ok(gpu.frame_blocking(&camera, &settings)?))?;
-        let both_ms = median_ms(reps, || {
+        let compute = ViewSettings {
+            pass: MarchPass::Compute,
+            ..settings
+        };
+        let mut frame = 0u32;
+        let jittered = |frame: u32| ViewSettings {
+            jitter: true,
+            frame_index: frame,
+            ..settings
+        };
+        let march = time_ms(reps, || Ok(gpu.frame_blocking(&camera, &settings)?))?;
+        let march_compute = time_ms(reps, || Ok(gpu.frame_blocking(&camera, &compute)?))?;
+        let both = time_ms(reps, || {
             gpu.invalidate_lighting();
             Ok(gpu.frame_blocking(&camera, &settings)?)
         })?;
-        let mut frame = 0u32;
-        let jitter_ms = median_ms(reps, || {
+        let jitter = time_ms(reps, || {
             frame += 1;
-            let jittered = ViewSettings {
-                jitter: true,
-                frame_index: frame,
-                ..settings
-            };
-            Ok(gpu.frame_blocking(&camera, &jittered)?)
+            Ok(gpu.frame_blocking(&camera, &jittered(frame))?)
         })?;
         let counters = gpu.count_samples(&camera, &settings)?;
-        // SIMD efficiency: lavapipe runs 8 invocations (a row of 8 pixels of a workgroup)
-        // in lock step, so a group costs its slowest ray.
+        let rate = f64::from(counters.samples) / (march.min * 1e-3) / 1e6;
+        println!(
+            "| {w}×{h} | {march} = {:.1} fps | {march_compute} | {both} | {:.2} | {jitter} | {} | {rate:.0} | {:.2} |",
+            1e3 / march.min,
+            both.min / march.min,
+            counters.samples,
+            rate / dense_rate
+        );
+        // Where the samples go (rays entering the grid box), and SIMD lane use: lavapipe
+        // runs 8 invocations in lock step, so a group of 8 pixels costs its slowest ray.
         let cost = gpu.render(
             &camera,
             &ViewSettings {
                 view: MarchView::Cost,
+                pass: MarchPass::Compute,
                 ..settings
             },
         )?;
         let (mut useful, mut paid) = (0.0f64, 0.0f64);
-        for row in 0..h as usize {
-            for group in cost.rgb[row * w as usize..(row + 1) * w as usize].chunks(8) {
+        for row in cost.rgb.chunks(w as usize) {
+            for group in row.chunks(8) {
                 useful += group.iter().map(|c| f64::from(c[0])).sum::<f64>();
                 paid += 8.0 * group.iter().map(|c| f64::from(c[0])).fold(0.0, f64::max);
             }
         }
-        let in_box = cost.rgb.iter().filter(|c| c[1] > 0.0).count();
-        let generic: f64 = cost.rgb.iter().map(|c| f64::from(c[1])).sum();
-        let samples: f64 = cost.rgb.iter().map(|c| f64::from(c[0])).sum();
-        let lattice: f64 = cost.rgb.iter().map(|c| f64::from(c[2])).sum();
-        eprintln!(
-            "{w}×{h}: {in_box} rays enter the box ({:.0} %), per such ray: {:.1} samples, {:.1} loop steps, {:.1} lattice samples",
-            100.0 * in_box as f64 / cost.rgb.len() as f64,
-            samples / in_box.max(1) as f64,
-            generic / in_box.max(1) as f64,
-            lattice / in_box.max(1) as f64
-        );
-        eprintln!(
-            "{w}×{h}: lane efficiency {:.2} (samples taken / 8 × slowest per group of 8)",
+        let entering = cost.rgb.iter().filter(|c| c[2] > 0.0).count().max(1) as f64;
+        let total = |i: usize| cost.rgb.iter().map(|c| f64::from(c[i])).sum::<f64>() / entering;
+        notes.push(format!(
+            "{w}×{h}: {:.0} % of rays enter the grid box; each takes {:.1} samples in {:.1} loop steps out of {:.1} lattice samples; lane use {:.2}",
+            100.0 * entering / cost.rgb.len() as f64,
+            total(0),
+            total(1),
+            total(2),
             useful / paid.max(1.0)
-        );
-        println!(
-            "| {w}×{h} | {march_ms:.1} ({:.1} fps) | {both_ms:.1} | {:.3} | {jitter_ms:.1} | {} | {:.0} | {} |",
-            1e3 / march_ms,
-            both_ms / march_ms,
-            counters.samples,
-            f64::from(counters.samples) / (march_ms * 1e-3) / 1e6,
-            counters.steps
-        );
+        ));
     }
-    // Accuracy beside speed: the GPU frame against the CPU reference at 256².
+    for note in &notes {
+        println!("\n{note}");
+    }
+    // Accuracy beside speed: the GPU frame against the CPU reference at 256², both under
+    // the sky as stored.
+    gpu.set_light_rotation(DMat3::IDENTITY)?;
     let camera = portrait_camera(asset, 256, 256);
     let settings = ViewSettings::default();
     let got = gpu.render(&camera, &settings)?;
@@ -319,17 +369,11 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
         &MarchSettings::default(),
     )?;
     let cpu_ms = start.elapsed().as_secs_f64() * 1e3;
-    let gpu_ms = median_ms(reps.min(5), || Ok(gpu.frame_blocking(&camera, &settings)?))?;
+    let gpu_frame = time_ms(reps, || Ok(gpu.frame_blocking(&camera, &settings)?))?;
     println!(
-        "\nGPU vs CPU reference at 256²: PSNR {:.1} dB; CPU reference {cpu_ms:.0} ms (relight + march, rayon), GPU march {gpu_ms:.1} ms",
+        "\nGPU vs CPU reference at 256²: PSNR {:.1} dB; CPU reference (project, relight, march; rayon) {cpu_ms:.0} ms, GPU march {gpu_frame} ms",
         psnr(&want, &got)
     );
-    // A relight after a rotation costs the projection on the CPU plus the pass.
-    let rotate_ms = median_ms(reps, || {
-        gpu.set_light_rotation(rotation_y(0.3))?;
-        Ok(gpu.relight_blocking()?)
-    })?;
-    println!("rotation change (project_light on the CPU + relight pass): {rotate_ms:.2} ms");
     Ok(())
 }
 
@@ -351,11 +395,6 @@ fn main() -> Result<(), BoxError> {
             info.name, info.backend, info.device_type
         );
     }
-    let (dense_ms, dense_samples) = dense_baseline(&gpu, reps)?;
-    println!(
-        "bare dense march (PLATFORM.md): 512² × 128 steps, 128³ RGBA16F: {dense_ms:.1} ms = {:.0} M trilinear samples/s",
-        dense_samples as f64 / (dense_ms * 1e-3) / 1e6
-    );
     if paths.is_empty() {
         let start = Instant::now();
         let asset = SyntheticField::new(300_000, 7).asset(12, CoefficientEncoding::U8Affine)?;

@@ -30,7 +30,7 @@ use nelf_render::MarchSettings;
 
 use crate::atlas::RelightView;
 use crate::error::ViewerError;
-use crate::gpu::{DisplaySettings, GpuRenderer, MarchView, ToneMap, ViewSettings};
+use crate::gpu::{DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewSettings};
 
 /// A named environment map offered in the picker.
 #[derive(Debug, Clone)]
@@ -698,6 +698,7 @@ impl ViewerApp {
                 jitter: self.jitter,
                 frame_index: self.frame_index,
                 view,
+                pass: MarchPass::default(),
             },
             display: DisplaySettings {
                 exposure_ev: self.exposure_ev,

@@ -237,9 +237,34 @@ pub fn indirection_grid(grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Result<In
     Ok(Indirection { entries, slot_cells })
 }
 
-/// Slot cells packed for the relight pass: `(x | y << 16, z)`.
-pub fn packed_cells(cells: &[[u32; 3]]) -> Vec<[u32; 2]> {
-    cells.iter().map(|c| [c[0] | (c[1] << 16), c[2]]).collect()
+/// Marker of "no slot" in [`neighbour_slots`].
+pub const NO_SLOT: u32 = u32::MAX;
+
+/// For every present brick `b` (file order), the atlas slots of the 27 cells `b + d`,
+/// `d ∈ {−1, 0, 1}³`, at index `(dx + 1) + 3 (dy + 1) + 9 (dz + 1)` (13 is its own slot),
+/// [`NO_SLOT`] for far cells and cells outside the grid: where the relight pass writes
+/// each voxel (its own slot and the aprons of the neighbours it borders).
+pub fn neighbour_slots(indirection: &Indirection, grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Vec<u32> {
+    let [nx, ny, _] = grid_bricks.map(|n| n as usize);
+    let mut out = Vec::with_capacity(bricks.len() * 27);
+    for b in bricks {
+        for d in 0..27usize {
+            let offset = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i64 - 1);
+            let c: [i64; 3] = std::array::from_fn(|a| i64::from(b[a]) + offset[a]);
+            let slot = if (0..3).all(|a| c[a] >= 0 && c[a] < i64::from(grid_bricks[a])) {
+                let entry = indirection.entries[c[0] as usize + nx * (c[1] as usize + ny * c[2] as usize)];
+                if entry & FAR_FLAG != 0 {
+                    NO_SLOT
+                } else {
+                    (entry & SLOT_BITS) - 1
+                }
+            } else {
+                NO_SLOT
+            };
+            out.push(slot);
+        }
+    }
+    out
 }
 
 /// Coefficients as the relight pass reads them.
@@ -413,8 +438,8 @@ pub struct GpuMemory {
     pub density_bytes: u64,
     /// Indirection grid.
     pub indirection_bytes: u64,
-    /// Shaded voxels (`rgb`, σ as f32), the relight pass's intermediate.
-    pub shaded_bytes: u64,
+    /// Where the relight pass writes each brick's voxels (27 slots per brick).
+    pub neighbour_bytes: u64,
     /// Brick coordinates and the lighting buffer.
     pub other_bytes: u64,
 }
@@ -525,7 +550,23 @@ mod tests {
         assert!(none.entries.iter().all(|&e| e == FAR_FLAG | !FAR_FLAG));
         assert!(indirection_grid([65536, 65536, 2], &[]).is_err());
         assert!(indirection_grid([2, 2, 2], &[[5, 0, 0]]).is_err());
-        assert_eq!(packed_cells(&[[3, 65535, 7]]), vec![[3 | (65535 << 16), 7]]);
+        // Neighbour slots point at the cells around each brick.
+        let table = neighbour_slots(&ind, grid, &bricks);
+        assert_eq!(table.len(), 2 * 27);
+        for (b, brick) in bricks.iter().enumerate() {
+            assert_eq!(table[b * 27 + 13], b as u32);
+            for d in 0..27 {
+                let slot = table[b * 27 + d];
+                let offset = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i32 - 1);
+                let cell: [i32; 3] = std::array::from_fn(|a| i32::from(brick[a]) + offset[a]);
+                assert_ne!(slot, NO_SLOT, "every neighbour of an inner brick is a halo cell");
+                assert_eq!(ind.slot_cells[slot as usize], cell.map(|c| c as u32));
+            }
+        }
+        let edge = indirection_grid([2, 1, 1], &[[0, 0, 0]]).unwrap();
+        let table = neighbour_slots(&edge, [2, 1, 1], &[[0, 0, 0]]);
+        assert_eq!(table.iter().filter(|&&s| s != NO_SLOT).count(), 2);
+        assert_eq!(table[14], 1);
     }
 
     #[test]

@@ -18,8 +18,8 @@ use nelf_render::{Image, MarchSettings, ProjectedLight, project_light};
 use wgpu::util::DeviceExt as _;
 
 use crate::atlas::{
-    AtlasLayout, Dequantization, GpuMemory, RelightView, fold_light, indirection_grid, pack_coefficients,
-    pack_density, packed_cells,
+    AtlasLayout, Dequantization, GpuMemory, RelightView, fold_light, indirection_grid, neighbour_slots,
+    pack_coefficients, pack_density,
 };
 use crate::error::ViewerError;
 use crate::shaders::{
@@ -57,6 +57,19 @@ pub struct ViewSettings {
     pub frame_index: u32,
     /// What to show.
     pub view: MarchView,
+    /// Which pass marches (the same `march_pixel` either way).
+    pub pass: MarchPass,
+}
+
+/// How the march runs: both give the same image; which is faster depends on the device
+/// (the benchmark measures both).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MarchPass {
+    /// A compute dispatch writing a storage texture.
+    Compute,
+    /// A full-screen triangle rasterised into a colour target.
+    #[default]
+    Fragment,
 }
 
 /// Tone curve of the display pass.
@@ -121,11 +134,12 @@ pub struct AssetInfo {
 /// Compute and render pipelines, created once per device.
 struct Pipelines {
     relight_layout: wgpu::BindGroupLayout,
-    shade: wgpu::ComputePipeline,
-    fill: wgpu::ComputePipeline,
+    relight: wgpu::ComputePipeline,
     march_layout: wgpu::BindGroupLayout,
     march: wgpu::ComputePipeline,
     march_counting: wgpu::ComputePipeline,
+    march_fragment_layout: wgpu::BindGroupLayout,
+    march_fragment: wgpu::RenderPipeline,
     display_layout: wgpu::BindGroupLayout,
     display_module: wgpu::ShaderModule,
     display_pipeline_layout: wgpu::PipelineLayout,
@@ -164,7 +178,9 @@ struct Target {
     width: u32,
     height: u32,
     texture: wgpu::Texture,
+    view: wgpu::TextureView,
     march_bind_group: wgpu::BindGroup,
+    march_fragment_bind_group: wgpu::BindGroup,
     display_bind_group: wgpu::BindGroup,
 }
 
@@ -196,6 +212,9 @@ impl std::fmt::Debug for GpuRenderer {
             .finish_non_exhaustive()
     }
 }
+
+/// Format of the march's output: linear premultiplied rgb and alpha.
+const MARCH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
 /// Bytes per row of a texture copy, padded to wgpu's 256-byte alignment.
 fn padded_row_bytes(unpadded: u32) -> u32 {
@@ -287,9 +306,7 @@ impl Pipelines {
                 storage_entry(2, true, S::COMPUTE),
                 storage_entry(3, true, S::COMPUTE),
                 storage_entry(4, true, S::COMPUTE),
-                texture_entry(5, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
-                storage_texture_entry(6, wgpu::TextureFormat::Rgba16Float, D::D3),
-                storage_entry(7, false, S::COMPUTE),
+                storage_texture_entry(5, wgpu::TextureFormat::Rgba16Float, D::D3),
             ],
         });
         let march_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -311,6 +328,25 @@ impl Pipelines {
                 texture_entry(3, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
                 storage_texture_entry(4, wgpu::TextureFormat::Rgba32Float, D::D2),
                 storage_entry(5, false, S::COMPUTE),
+            ],
+        });
+        let march_fragment_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("march (fragment)"),
+            entries: &[
+                uniform_entry(0, S::FRAGMENT),
+                texture_entry(
+                    1,
+                    wgpu::TextureSampleType::Float { filterable: true },
+                    D::D3,
+                    S::FRAGMENT,
+                ),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: S::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+                texture_entry(3, wgpu::TextureSampleType::Uint, D::D3, S::FRAGMENT),
             ],
         });
         let display_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -347,10 +383,39 @@ impl Pipelines {
         let relight_module = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
         let march_module = shader_module(device, "march.wgsl", MARCH_WGSL)?;
         let display_module = shader_module(device, "display.wgsl", DISPLAY_WGSL)?;
-        let shade = compute(&relight_layout, &relight_module, "shade", &[]);
-        let fill = compute(&relight_layout, &relight_module, "fill", &[]);
+        let relight = compute(&relight_layout, &relight_module, "relight", &[]);
         let march = compute(&march_layout, &march_module, "march", &[]);
         let march_counting = compute(&march_layout, &march_module, "march", &[("COUNT_SAMPLES", 1.0)]);
+        let march_fragment_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("march (fragment)"),
+            bind_group_layouts: &[Some(&march_fragment_layout)],
+            immediate_size: 0,
+        });
+        let march_fragment = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("march (fragment)"),
+            layout: Some(&march_fragment_pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &march_module,
+                entry_point: Some("march_vs"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &march_module,
+                entry_point: Some("march_fs"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: MARCH_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
         let display_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("display"),
             bind_group_layouts: &[Some(&display_layout)],
@@ -368,11 +433,12 @@ impl Pipelines {
         });
         Ok(Self {
             relight_layout,
-            shade,
-            fill,
+            relight,
             march_layout,
             march,
             march_counting,
+            march_fragment_layout,
+            march_fragment,
             display_layout,
             display_module,
             display_pipeline_layout,
@@ -543,13 +609,13 @@ impl GpuRenderer {
         let layout = AtlasLayout::for_bricks(indirection.slot_cells.len(), limits.max_texture_dimension_3d)?;
         let coefficients = pack_coefficients(&asset.coefficients);
         let density = pack_density(&asset.density);
-        let slot_cells = packed_cells(&indirection.slot_cells);
+        let neighbours = neighbour_slots(&indirection, grid_bricks, &asset.bricks);
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let voxel_count = asset.voxel_count();
         for (what, bytes) in [
             ("coefficients", coefficients.words.len() as u64 * 4),
             ("densities", density.len() as u64 * 4),
-            ("shaded voxels", voxel_count as u64 * 16),
+            ("neighbour slots", neighbours.len() as u64 * 4),
         ] {
             if bytes > max_binding {
                 return Err(ViewerError::TooLarge(format!(
@@ -574,14 +640,8 @@ impl GpuRenderer {
         };
         let coefficient_buffer = storage("coefficients", bytemuck::cast_slice(&coefficients.words));
         let density_buffer = storage("density", bytemuck::cast_slice(&density));
-        let brick_buffer = storage("slot cells", bytemuck::cast_slice(&slot_cells));
+        let neighbour_buffer = storage("neighbour slots", bytemuck::cast_slice(&neighbours));
         let rank = asset.rank();
-        let shaded = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("shaded voxels"),
-            size: (voxel_count.max(1) * 16) as u64,
-            usage: wgpu::BufferUsages::STORAGE,
-            mapped_at_creation: false,
-        });
         let light = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("light"),
             size: (LT_DIM * 16) as u64,
@@ -654,19 +714,11 @@ impl GpuRenderer {
                 },
                 wgpu::BindGroupEntry {
                     binding: 4,
-                    resource: brick_buffer.as_entire_binding(),
+                    resource: neighbour_buffer.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 5,
-                    resource: wgpu::BindingResource::TextureView(&indirection_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
                     resource: wgpu::BindingResource::TextureView(&atlas_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: shaded.as_entire_binding(),
                 },
             ],
         });
@@ -675,8 +727,8 @@ impl GpuRenderer {
             coefficient_bytes: coefficient_buffer.size(),
             density_bytes: density_buffer.size(),
             indirection_bytes: indirection.entries.len() as u64 * 4,
-            shaded_bytes: shaded.size(),
-            other_bytes: brick_buffer.size() + light.size() + relight_params.size(),
+            neighbour_bytes: neighbour_buffer.size(),
+            other_bytes: light.size() + relight_params.size(),
         };
         let max_density_per_m = asset.density.iter().map(|d| d.to_f32()).fold(0.0f32, f32::max);
         let info = AssetInfo {
@@ -784,9 +836,9 @@ impl GpuRenderer {
         self.queue
             .write_buffer(&asset.light, 0, bytemuck::cast_slice(&components));
         let g = asset.grid.grid_bricks;
-        // `shade`: 64 voxels per workgroup, rows of at most 32768 workgroups.
+        // 64 voxels per workgroup, rows of at most 32768 workgroups.
         let groups = (asset.voxel_count as u32).div_ceil(64).max(1);
-        let shade_groups = [groups.min(32_768), groups.div_ceil(32_768)];
+        let groups = [groups.min(32_768), groups.div_ceil(32_768)];
         let params = RelightParams {
             atlas: [
                 asset.layout.x_bits,
@@ -802,24 +854,17 @@ impl GpuRenderer {
                 0,
             ],
             light_mean: [folded.mean_rgb[0], folded.mean_rgb[1], folded.mean_rgb[2], 0.0],
-            dispatch: [asset.voxel_count as u32, shade_groups[0] * 64, 0, 0],
+            dispatch: [asset.voxel_count as u32, groups[0] * 64, 0, 0],
         };
         self.queue
             .write_buffer(&asset.relight_params, 0, bytemuck::bytes_of(&params));
-        let texels = asset.layout.texels();
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("relight"),
             timestamp_writes: None,
         });
         pass.set_bind_group(0, &asset.relight_bind_group, &[]);
-        pass.set_pipeline(&self.pipelines.shade);
-        pass.dispatch_workgroups(shade_groups[0], shade_groups[1], 1);
-        pass.set_pipeline(&self.pipelines.fill);
-        pass.dispatch_workgroups(
-            texels[0].div_ceil(4),
-            texels[1].div_ceil(4),
-            texels[2].div_ceil(4),
-        );
+        pass.set_pipeline(&self.pipelines.relight);
+        pass.dispatch_workgroups(groups[0], groups[1], 1);
         drop(pass);
         self.relight_dirty = false;
         Ok(())
@@ -851,9 +896,10 @@ impl GpuRenderer {
             mip_level_count: 1,
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
-            format: wgpu::TextureFormat::Rgba32Float,
+            format: MARCH_FORMAT,
             usage: wgpu::TextureUsages::STORAGE_BINDING
                 | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::RENDER_ATTACHMENT
                 | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         });
@@ -888,6 +934,28 @@ impl GpuRenderer {
                 },
             ],
         });
+        let march_fragment_bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("march (fragment)"),
+            layout: &self.pipelines.march_fragment_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: self.march_params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&asset.atlas_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&self.pipelines.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&asset.indirection_view),
+                },
+            ],
+        });
         let display_bind_group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("display"),
             layout: &self.pipelines.display_layout,
@@ -906,7 +974,9 @@ impl GpuRenderer {
             width,
             height,
             texture,
+            view,
             march_bind_group,
+            march_fragment_bind_group,
             display_bind_group,
         });
         Ok(())
@@ -1007,6 +1077,28 @@ impl GpuRenderer {
         self.queue
             .write_buffer(&self.march_params, 0, bytemuck::bytes_of(&params));
         let target = self.target.as_ref().ok_or(ViewerError::NoAsset)?;
+        if settings.pass == MarchPass::Fragment && !count_samples {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("march (fragment)"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &target.view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.pipelines.march_fragment);
+            pass.set_bind_group(0, &target.march_fragment_bind_group, &[]);
+            pass.draw(0..3, 0..1);
+            return Ok(());
+        }
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("march"),
             timestamp_writes: None,

@@ -22,4 +22,6 @@ pub mod shaders;
 pub use app::{NamedEnvmap, ViewerConfig, run_viewer};
 pub use atlas::{GpuMemory, RelightView};
 pub use error::ViewerError;
-pub use gpu::{AssetInfo, DisplayImage, DisplaySettings, GpuRenderer, MarchView, ToneMap, ViewSettings};
+pub use gpu::{
+    AssetInfo, DisplayImage, DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewSettings,
+};

@@ -13,7 +13,9 @@ use nelf_format::conventions::{ENV_W, LatLong, PinholeCamera, rotation_y};
 use nelf_format::synthetic::SyntheticField;
 use nelf_format::{Asset, CoefficientEncoding, Coefficients, WriteOptions, read_asset, write_asset};
 use nelf_render::{Image, MarchSettings, render_asset};
-use nelf_viewer::{DisplaySettings, GpuRenderer, MarchView, RelightView, ToneMap, ViewSettings, ViewerError};
+use nelf_viewer::{
+    DisplaySettings, GpuRenderer, MarchPass, MarchView, RelightView, ToneMap, ViewSettings, ViewerError,
+};
 
 fn renderer() -> GpuRenderer {
     GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}"))
@@ -128,6 +130,7 @@ fn no_jitter() -> ViewSettings {
         jitter: false,
         frame_index: 0,
         view: MarchView::Shaded,
+        pass: MarchPass::Fragment,
     }
 }
 
@@ -162,6 +165,12 @@ fn gpu_matches_cpu_reference() {
         .unwrap();
         let covered = want.alpha.iter().filter(|&&a| a > 0.5).count();
         assert!(covered > 500, "the head covers only {covered} pixels");
+        // The compute pass marches the same pixels as the fragment pass.
+        let compute = ViewSettings {
+            pass: MarchPass::Compute,
+            ..no_jitter()
+        };
+        assert_eq!(gpu.render(&cam, &compute).unwrap(), got);
         let db = psnr(&want, &got);
         eprintln!("{encoding:?} rank {rank} truncated {truncate:?} holes {holes}: PSNR {db:.1} dB");
         assert!(
