@@ -92,14 +92,6 @@ fn ray_box(o: vec3<f32>, inv_d: vec3<f32>, lo: vec3<f32>, hi: vec3<f32>) -> vec2
     return vec2<f32>(max(max(t_small.x, t_small.y), t_small.z), min(min(t_large.x, t_large.y), t_large.z));
 }
 
-// `1 − exp(−x)` without cancellation for small x (the CPU reference uses −expm1(−x)).
-fn one_minus_exp_neg(x: f32) -> f32 {
-    if x < 1e-3 {
-        return x * (1.0 - x * (0.5 - x * (1.0 / 6.0)));
-    }
-    return 1.0 - exp(-x);
-}
-
 // A 32-bit integer hash (Jarzynski & Olano 2020, "Hash functions for GPU rendering": PCG).
 fn pcg_hash(v: u32) -> u32 {
     let state = v * 747796405u + 2891336453u;

@@ -35,9 +35,9 @@ fn dense_march(@builtin(global_invocation_id) gid: vec3<u32>) {
     for (var i = 0u; i < steps; i++) {
         let p = origin + (span.x + (f32(i) + 0.5) * step) * dir;
         let v = textureSampleLevel(volume, volume_sampler, p, 0.0);
-        let alpha = one_minus_exp_neg(v.a * step);
-        rgb += transmittance * alpha * v.rgb;
-        transmittance *= 1.0 - alpha;
+        let survive = exp(-v.a * step);
+        rgb += transmittance * (1.0 - survive) * v.rgb;
+        transmittance *= survive;
     }
     textureStore(output, vec2<i32>(gid.xy), vec4<f32>(rgb, 1.0 - transmittance));
 }

@@ -89,9 +89,10 @@ fn composite(acc: ptr<function, Accum>, value: vec4<f32>, step: f32, view: u32, 
     if view == VIEW_DENSITY {
         return false;
     }
-    let alpha = one_minus_exp_neg(sigma * step);
-    (*acc).rgb += ((*acc).transmittance * alpha) * value.rgb;
-    (*acc).transmittance *= 1.0 - alpha;
+    // As the reference: s = exp(−σΔ), α = 1 − s, T ← T·s.
+    let survive = exp(-sigma * step);
+    (*acc).rgb += ((*acc).transmittance * (1.0 - survive)) * value.rgb;
+    (*acc).transmittance *= survive;
     return (*acc).transmittance < min_transmittance;
 }
 

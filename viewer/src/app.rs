@@ -808,3 +808,66 @@ fn save_color_image(image: &egui::ColorImage, path: &Path) -> Result<(), String>
     }
     buffer.save(path).map_err(|e| e.to_string())
 }
+
+#[cfg(test)]
+mod tests {
+    use nelf_format::capture::{Capture, CaptureView};
+
+    use super::*;
+
+    #[test]
+    fn capture_light_is_found_beside_the_asset() {
+        let dir = tempfile::tempdir().unwrap();
+        let asset = dir.path().join("head.nelf");
+        assert_eq!(capture_light_beside(&asset), None);
+        // A capture folder holding the asset: the lighting its cameras.json names.
+        let camera = PinholeCamera::look_at(DVec3::new(0.0, 0.0, 2.0), DVec3::ZERO, DVec3::Y, 8, 8, 0.5);
+        let mut capture = Capture::new(vec![CaptureView {
+            name: "v0".into(),
+            image: "images/v0.exr".into(),
+            mask: None,
+            camera,
+        }]);
+        capture.envmap = Some("lighting/studio.exr".into());
+        for file in ["images/v0.exr", "lighting/studio.exr"] {
+            let path = dir.path().join(file);
+            std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+            std::fs::write(path, b"").unwrap();
+        }
+        capture.save(dir.path()).unwrap();
+        assert_eq!(
+            capture_light_beside(&asset),
+            Some(dir.path().join("lighting/studio.exr"))
+        );
+        // An estimated light named after the asset (`nelf light … -o head.light.exr`) wins.
+        std::fs::write(dir.path().join("head.light.exr"), b"").unwrap();
+        assert_eq!(
+            capture_light_beside(&asset),
+            Some(dir.path().join("head.light.exr"))
+        );
+    }
+
+    #[test]
+    fn orbit_frames_the_box_and_pans_in_the_image_plane() {
+        let mut orbit = Orbit::framing([-0.1, -0.2, -0.1], [0.1, 0.2, 0.1]);
+        let camera = orbit.camera(64, 64);
+        camera.validate().unwrap();
+        // Every corner of the box projects inside the image.
+        for corner in 0..8 {
+            let p = DVec3::new(
+                if corner & 1 == 0 { -0.1 } else { 0.1 },
+                if corner & 2 == 0 { -0.2 } else { 0.2 },
+                if corner & 4 == 0 { -0.1 } else { 0.1 },
+            );
+            let px = camera.project(p).unwrap();
+            assert!(
+                (0.0..64.0).contains(&px.x) && (0.0..64.0).contains(&px.y),
+                "{px:?}"
+            );
+        }
+        // The camera starts in front (+z) and a pan right moves the target left in the world.
+        assert!(camera.centre().z > 0.0);
+        orbit.pan(10.0, 0.0, 64.0);
+        assert!(orbit.target.x < 0.0);
+    }
+}
