@@ -33,7 +33,7 @@ pub struct ViewArgs {
     /// Close the window once the screenshot is saved.
     #[arg(long, requires = "screenshot")]
     pub exit: bool,
-    /// Window size in points, WIDTHxHEIGHT.
+    /// Window size in points, `WIDTHxHEIGHT`.
     #[arg(long, default_value = "1280x800", value_parser = parse_size)]
     pub size: [f32; 2],
 }
