@@ -124,3 +124,90 @@ fn bake_mesh_writes_an_asset_and_bad_captures_fail() {
         "{err}"
     );
 }
+
+#[test]
+fn bake_capture_with_network_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = dir.path().join("cap");
+    let synth = nelf(
+        &[
+            "capture",
+            "synth",
+            "-o",
+            cap.to_str().unwrap(),
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--texel-samples",
+            "1",
+            "--indirect-samples",
+            "4",
+            "--bounces",
+            "0",
+            "--targets",
+            "0",
+            "--head-cells",
+            "40",
+        ]
+        .map(std::ffi::OsStr::new),
+    );
+    assert!(
+        synth.status.success(),
+        "{}",
+        String::from_utf8_lossy(&synth.stderr)
+    );
+    let weights = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/../shared/nelf-oracle/fixture_seed0.safetensors"
+    );
+    let asset_path = dir.path().join("net.nelf");
+    let bake = nelf(
+        &[
+            "bake",
+            "capture",
+            cap.to_str().unwrap(),
+            "--weights",
+            weights,
+            "-o",
+            asset_path.to_str().unwrap(),
+            "--resolution",
+            "24",
+            "--quiet",
+        ]
+        .map(std::ffi::OsStr::new),
+    );
+    assert!(bake.status.success(), "{}", String::from_utf8_lossy(&bake.stderr));
+    let asset = read_asset(&asset_path).unwrap();
+    assert_eq!(
+        asset.metadata["source"]["source"]["kind"], "nelf-network",
+        "{}",
+        asset.metadata
+    );
+    // The light frame is the network's (view 0's camera turned by π about its z):
+    // for the frontal view 0 of a synthetic capture that is diag(−1, 1, −1).
+    let expected = glam::DMat3::from_diagonal(glam::DVec3::new(-1.0, 1.0, -1.0));
+    assert!(
+        asset.world_from_light.abs_diff_eq(expected, 1e-9),
+        "{:?}",
+        asset.world_from_light
+    );
+    assert!(asset.voxel_count() > 0);
+
+    // Missing weights: a clear error naming the file.
+    let missing = nelf(
+        &[
+            "bake",
+            "capture",
+            cap.to_str().unwrap(),
+            "--weights",
+            "/nonexistent/w.safetensors",
+            "-o",
+            asset_path.to_str().unwrap(),
+            "--quiet",
+        ]
+        .map(std::ffi::OsStr::new),
+    );
+    assert!(!missing.status.success());
+    assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent/w.safetensors"));
+}

@@ -31,8 +31,9 @@ pub mod source;
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
 pub use error::BakeError;
 pub use pipeline::{
-    BakeConfig, BakeOutput, BakeReport, EncodingChoice, FieldBake, Reference, StageTimings, ViewPolicyChoice,
-    bake_capture, bake_field, bake_mesh, mesh_cameras, sidecar_path, write_bake,
+    BakeConfig, BakeOutput, BakeReport, CapturePlan, EncodingChoice, FieldBake, Reference, StageTimings,
+    ViewPolicyChoice, bake_capture, bake_capture_field, bake_field, bake_mesh, mesh_cameras, plan_capture,
+    sidecar_path, write_bake,
 };
 pub use progress::Progress;
 pub use source::{GroundTruth, InsetMeshField, ShellPlacement, TraceOverrides};

@@ -590,27 +590,50 @@ pub fn bake_field(
     Ok(BakeOutput { asset, report })
 }
 
-/// Bakes a capture's ground-truth field: visual hull of its masks, the mesh of
-/// `truth` as the field, the capture's cameras as the views.
-pub fn bake_capture(
-    capture: &LoadedCapture,
-    truth: &GroundTruth,
-    config: &BakeConfig,
-    progress: &Progress,
-) -> Result<BakeOutput> {
+/// A capture's grid, before any field is evaluated: the visual hull of its masks,
+/// the hull's box, the voxel size the configuration asks for, and the bricks over
+/// the hull.
+#[derive(Debug, Clone)]
+pub struct CapturePlan {
+    /// Bricks over the hull.
+    pub plan: GridPlan,
+    /// Voxel edge, metres.
+    pub voxel_size_m: f64,
+    /// The hull's box `(min, max)`, metres.
+    pub hull_box_m: (DVec3, DVec3),
+    /// Seconds carving the hull.
+    pub hull_secs: f64,
+}
+
+/// Carves the visual hull of a capture's masks and lays bricks over it.
+pub fn plan_capture(capture: &LoadedCapture, config: &BakeConfig) -> Result<CapturePlan> {
     config.validate()?;
     let t = Instant::now();
     let carver = HullCarver::new(&capture.cameras, &capture.masks, config.dilate_px)?;
     let (lo, hi) = hull_bounds(&carver, capture.head_centre_m)?;
     let voxel = voxel_size_for(hi - lo, config.resolution, config.voxel_size_m)?;
     let plan = plan_from_hull(&carver, geometry_for_box(lo, hi, voxel)?);
-    let hull_secs = t.elapsed().as_secs_f64();
+    Ok(CapturePlan {
+        plan,
+        voxel_size_m: voxel,
+        hull_box_m: (lo, hi),
+        hull_secs: t.elapsed().as_secs_f64(),
+    })
+}
 
-    let mesh = truth.mesh()?;
-    let trace = config.trace.apply(truth.trace_settings());
-    let field = mesh_field(&mesh, trace, voxel, config.shell_voxels, config.shell_placement)?;
-    let centres: Vec<DVec3> = capture.cameras.iter().map(PinholeCamera::centre).collect();
-    let view_policy = view_policy_for(config.view_policy, &centres)?;
+/// Bakes any field source over a capture's plan: the capture's cameras are the
+/// views the PCA is weighted by and the rank is judged at; its images under its
+/// lighting (when the capture names an env map) measure the grid's own error.
+/// `field_provenance` describes the field in the metadata.
+pub fn bake_capture_field(
+    capture: &LoadedCapture,
+    planned: CapturePlan,
+    field: &dyn FieldSource,
+    view_policy: ViewPolicy,
+    field_provenance: &serde_json::Value,
+    config: &BakeConfig,
+    progress: &Progress,
+) -> Result<BakeOutput> {
     let reference = match capture.source_envmap_path() {
         Some(path) => Reference::Images {
             images: capture.images.clone(),
@@ -619,6 +642,7 @@ pub fn bake_capture(
         },
         None => Reference::AssumedSnrDb(config.reference_snr_db),
     };
+    let (lo, hi) = planned.hull_box_m;
     let provenance = serde_json::json!({
         "kind": "capture",
         "capture": capture.dir.display().to_string(),
@@ -626,22 +650,56 @@ pub fn bake_capture(
         "views": capture.names,
         "head_centre_m": capture.head_centre_m.to_array(),
         "hull_box_m": [lo.to_array(), hi.to_array()],
-        "ground_truth": truth.describe(),
-        "field": describe_trace(&trace, config.shell_voxels, config.shell_placement),
+        "source": field_provenance,
     });
     let job = FieldBake {
-        field: field.as_ref(),
-        plan,
+        field,
+        plan: planned.plan,
         cameras: capture.cameras.clone(),
         view_policy,
         reference,
         provenance,
     };
     let prior = StageTimings {
-        hull_secs,
+        hull_secs: planned.hull_secs,
         ..StageTimings::default()
     };
     bake_field(&job, config, progress, prior)
+}
+
+/// Bakes a capture's ground-truth field: visual hull of its masks, the mesh of
+/// `truth` as the field, the capture's cameras as the views.
+pub fn bake_capture(
+    capture: &LoadedCapture,
+    truth: &GroundTruth,
+    config: &BakeConfig,
+    progress: &Progress,
+) -> Result<BakeOutput> {
+    let planned = plan_capture(capture, config)?;
+    let mesh = truth.mesh()?;
+    let trace = config.trace.apply(truth.trace_settings());
+    let field = mesh_field(
+        &mesh,
+        trace,
+        planned.voxel_size_m,
+        config.shell_voxels,
+        config.shell_placement,
+    )?;
+    let centres: Vec<DVec3> = capture.cameras.iter().map(PinholeCamera::centre).collect();
+    let view_policy = view_policy_for(config.view_policy, &centres)?;
+    let field_provenance = serde_json::json!({
+        "ground_truth": truth.describe(),
+        "field": describe_trace(&trace, config.shell_voxels, config.shell_placement),
+    });
+    bake_capture_field(
+        capture,
+        planned,
+        field.as_ref(),
+        view_policy,
+        &field_provenance,
+        config,
+        progress,
+    )
 }
 
 /// The synthetic cameras a mesh bake is judged by: the frontal cone of a default

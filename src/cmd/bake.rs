@@ -1,14 +1,17 @@
 //! `nelf bake …`: turn a capture or a mesh into a `.nelf` asset (`nelf-bake`).
 //! `capture DIR` bakes the capture's ground-truth field over the visual hull of its
-//! masks; `mesh FILE` bakes a mesh directly (its occupancy is the hull).
+//! masks (or, with `--weights`, the NeLF network's field from the capture's own
+//! images); `mesh FILE` bakes a mesh directly (its occupancy is the hull).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use nelf_bake::{
-    BakeConfig, BakeOutput, CaptureFormat, CaptureLoadOptions, GroundTruth, Progress, bake_capture,
-    bake_mesh, load_capture, sidecar_path, write_bake,
+    BakeConfig, BakeOutput, CaptureFormat, CaptureLoadOptions, GroundTruth, LoadedCapture, Progress,
+    bake_capture, bake_capture_field, bake_mesh, load_capture, plan_capture, sidecar_path, write_bake,
 };
+use nelf_field::capture::default_net_from_world;
+use nelf_field::{Model, NelfConfig, NelfField, NetCapture};
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 
 /// Options of `nelf bake`.
@@ -49,6 +52,11 @@ pub struct CaptureBakeArgs {
     pub dir: PathBuf,
     #[command(flatten)]
     pub output: OutputArgs,
+    /// Bake the NeLF network's field, evaluated from the capture's own images, with
+    /// these weights (safetensors with the official checkpoint's key names,
+    /// field/CHECKPOINT.md) instead of a ground-truth mesh.
+    #[arg(long, conflicts_with = "mesh")]
+    pub weights: Option<PathBuf>,
     /// Ground-truth mesh in the capture's world frame (default: rebuilt from
     /// the `synth_config.json` every synthetic capture has).
     #[arg(long)]
@@ -108,6 +116,17 @@ fn run_capture(args: &CaptureBakeArgs) -> anyhow::Result<()> {
     };
     let capture = load_capture(&args.dir, &options)
         .with_context(|| format!("loading the capture in {}", args.dir.display()))?;
+    if let Some(weights) = &args.weights {
+        let mut output =
+            bake_network(&capture, weights, &args.config, progress(&args.output)).with_context(|| {
+                format!(
+                    "baking {} with the network {}",
+                    args.dir.display(),
+                    weights.display()
+                )
+            })?;
+        return finish(&mut output, &args.config, &args.output);
+    }
     let truth = match &args.mesh {
         Some(path) => GroundTruth::MeshFile {
             path: path.clone(),
@@ -127,6 +146,45 @@ fn run_capture(args: &CaptureBakeArgs) -> anyhow::Result<()> {
     let mut output = bake_capture(&capture, &truth, &args.config, &progress(&args.output))
         .with_context(|| format!("baking {}", args.dir.display()))?;
     finish(&mut output, &args.config, &args.output)
+}
+
+/// The network's field over the capture's hull: the views are encoded once, then
+/// density and light transport are evaluated at the voxels (toward the mean camera,
+/// the policy measured best in field/README.md).
+fn bake_network(
+    capture: &LoadedCapture,
+    weights: &std::path::Path,
+    config: &BakeConfig,
+    progress: Progress,
+) -> anyhow::Result<BakeOutput> {
+    let planned = plan_capture(capture, config)?;
+    let prepared = NetCapture::new(
+        &capture.cameras,
+        &capture.images,
+        &capture.masks,
+        capture.head_centre_m,
+        default_net_from_world(),
+    )?;
+    let device = nelf_field::default_device();
+    let model = Model::load(weights, NelfConfig::for_device(&device), &device)
+        .with_context(|| format!("loading the weights {}", weights.display()))?;
+    let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
+    let view_policy = field.recommended_view_policy();
+    let provenance = serde_json::json!({
+        "kind": "nelf-network",
+        "weights": weights.display().to_string(),
+        "device": nelf_field::device_name(&device),
+        "view_policy": "toward the mean camera",
+    });
+    Ok(bake_capture_field(
+        capture,
+        planned,
+        &field,
+        view_policy,
+        &provenance,
+        config,
+        &progress,
+    )?)
 }
 
 fn run_mesh(args: &MeshBakeArgs) -> anyhow::Result<()> {
