@@ -41,7 +41,8 @@ const MAX_RANK: u32 = 384u;
 // Folded per-component radiance (rgb in xyz); entries from the rank used up to the next
 // multiple of 4 are 0, so whole words of codes can be applied.
 @group(0) @binding(1) var<uniform> light: array<vec4<f32>, MAX_RANK>;
-// Coefficients, voxel-major, `words.y` words per voxel: 4 codes (u8) or 2 halves (f16) per word.
+// Coefficients, word-major: word q of voxel v at q · voxels + v; 4 codes (u8) or 2
+// halves (f16) per word (neighbouring invocations read neighbouring words).
 @group(0) @binding(2) var<storage, read> coefficients: array<u32>;
 // Density σ (1/m) as f16, two voxels per word.
 @group(0) @binding(3) var<storage, read> density: array<u32>;
@@ -73,19 +74,19 @@ fn half_of(word: u32, index: u32) -> f32 {
 
 // Σ_k q_k · light[k] over the components used, a word (4 codes or 2 halves) at a time.
 fn shade_voxel(voxel: u32) -> vec3<f32> {
-    let base = voxel * params.words.y;
+    let voxels = params.dispatch.x;
     let used = params.atlas.w;
     var rgb = params.light_mean.xyz;
     if params.grid_bricks.w == 1 {
         for (var q = 0u; q < (used + 3u) / 4u; q++) {
-            let word = coefficients[base + q];
+            let word = coefficients[q * voxels + voxel];
             let k = 4u * q;
             rgb += f32(word & 0xffu) * light[k].xyz + f32((word >> 8u) & 0xffu) * light[k + 1u].xyz
                 + f32((word >> 16u) & 0xffu) * light[k + 2u].xyz + f32(word >> 24u) * light[k + 3u].xyz;
         }
     } else {
         for (var q = 0u; q < (used + 1u) / 2u; q++) {
-            let word = coefficients[base + q];
+            let word = coefficients[q * voxels + voxel];
             let k = 2u * q;
             rgb += half_of(word, 0u) * light[k].xyz + half_of(word, 1u) * light[k + 1u].xyz;
         }

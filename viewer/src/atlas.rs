@@ -15,8 +15,9 @@
 //!   present brick or halo cell, or a far cell's distance to the nearest present brick;
 //!   it drives the apron build and empty-space skipping.
 //! * **Coefficients** stay as stored (8-bit codes or f16 halves), packed into `u32`
-//!   words, `⌈K/4⌉` or `⌈K/2⌉` words per voxel; the dequantisation is folded into the
-//!   projected lighting ([`fold_light`]).
+//!   words, `⌈K/4⌉` or `⌈K/2⌉` words per voxel, word-major so SIMD lanes (neighbouring
+//!   voxels) read neighbouring words; the dequantisation is folded into the projected
+//!   lighting ([`fold_light`]).
 
 use nelf_format::Coefficients;
 use nelf_format::spec::BRICK_VOXELS;
@@ -267,10 +268,11 @@ pub fn neighbour_slots(indirection: &Indirection, grid_bricks: [u32; 3], bricks:
     out
 }
 
-/// Coefficients as the relight pass reads them.
+/// Coefficients as the relight pass reads them: word-major (word `q` of every voxel,
+/// then word `q + 1`), so neighbouring invocations read neighbouring words.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub struct PackedCoefficients {
-    /// Words, voxel-major, [`PackedCoefficients::words_per_voxel`] per voxel.
+    /// Words: word `q` of voxel `v` at `q · voxels + v`.
     pub words: Vec<u32>,
     /// `⌈K/4⌉` (8-bit) or `⌈K/2⌉` (f16).
     pub words_per_voxel: u32,
@@ -284,10 +286,11 @@ pub fn pack_coefficients(coefficients: &Coefficients) -> PackedCoefficients {
     match coefficients {
         Coefficients::U8Affine { codes, .. } => {
             let per_voxel = rank.div_ceil(4);
-            let mut words = vec![0u32; codes.len() / rank * per_voxel];
+            let voxels = codes.len() / rank;
+            let mut words = vec![0u32; voxels * per_voxel];
             for (voxel, chunk) in codes.chunks_exact(rank).enumerate() {
                 for (k, &code) in chunk.iter().enumerate() {
-                    words[voxel * per_voxel + k / 4] |= u32::from(code) << (8 * (k % 4));
+                    words[(k / 4) * voxels + voxel] |= u32::from(code) << (8 * (k % 4));
                 }
             }
             PackedCoefficients {
@@ -298,10 +301,11 @@ pub fn pack_coefficients(coefficients: &Coefficients) -> PackedCoefficients {
         }
         Coefficients::F16 { values, .. } => {
             let per_voxel = rank.div_ceil(2);
-            let mut words = vec![0u32; values.len() / rank * per_voxel];
+            let voxels = values.len() / rank;
+            let mut words = vec![0u32; voxels * per_voxel];
             for (voxel, chunk) in values.chunks_exact(rank).enumerate() {
                 for (k, v) in chunk.iter().enumerate() {
-                    words[voxel * per_voxel + k / 2] |= u32::from(v.to_bits()) << (16 * (k % 2));
+                    words[(k / 2) * voxels + voxel] |= u32::from(v.to_bits()) << (16 * (k % 2));
                 }
             }
             PackedCoefficients {
@@ -580,7 +584,7 @@ mod tests {
         };
         for (i, &code) in codes.iter().enumerate() {
             let (v, k) = (i / 5, i % 5);
-            let word = p.words[v * 2 + k / 4];
+            let word = p.words[(k / 4) * 7 + v];
             assert_eq!((word >> (8 * (k % 4))) & 0xff, u32::from(code));
         }
         let h = Coefficients::quantize(&values, 5, CoefficientEncoding::F16).unwrap();
@@ -589,7 +593,7 @@ mod tests {
         let back = h.to_f32();
         for (i, want) in back.iter().enumerate() {
             let (v, k) = (i / 5, i % 5);
-            let bits = (p.words[v * 3 + k / 2] >> (16 * (k % 2))) & 0xffff;
+            let bits = (p.words[(k / 2) * 7 + v] >> (16 * (k % 2))) & 0xffff;
             assert_eq!(f16::from_bits(bits as u16).to_f32(), *want);
         }
         let d = pack_density(&[f16::from_f32(1.0), f16::from_f32(2.0), f16::from_f32(3.0)]);
@@ -625,7 +629,7 @@ mod tests {
                         let code = if packed.encoding == 1 {
                             ((packed.words[v] >> (8 * k)) & 0xff) as f32
                         } else {
-                            let w = packed.words[v * 2 + k / 2] >> (16 * (k % 2));
+                            let w = packed.words[(k / 2) * 9 + v] >> (16 * (k % 2));
                             f16::from_bits((w & 0xffff) as u16).to_f32()
                         };
                         for ch in 0..3 {
