@@ -31,7 +31,7 @@
 
 use std::path::{Component, Path, PathBuf};
 
-use glam::{DMat3, DVec3};
+use glam::DVec3;
 use image::DynamicImage;
 use nelf_format::capture::{CAPTURE_FILE_NAME, Capture};
 use nelf_format::colmap::read_colmap_text;
@@ -268,26 +268,7 @@ fn colmap_mask_candidates(dir: &Path, relative: &Path) -> Vec<PathBuf> {
     out
 }
 
-/// The least-squares point nearest every optical axis, or `None` when the axes are
-/// (nearly) parallel (the normal matrix is singular to 1e-6 relative).
-pub fn head_centre(cameras: &[PinholeCamera]) -> Option<DVec3> {
-    let mut a = DMat3::ZERO;
-    let mut b = DVec3::ZERO;
-    for cam in cameras {
-        let d = cam.forward().normalize();
-        let projector = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-        a += projector;
-        b += projector * cam.centre();
-    }
-    // Eigenvalues of A are n minus those of Σ d dᵀ; parallel axes leave one ≈ 0.
-    // The determinant over the largest possible (n³) is a scale-free singularity test.
-    let n = cameras.len() as f64;
-    if a.determinant().partial_cmp(&(1e-6 * n * n * n)) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
-    let c = a.inverse() * b;
-    c.is_finite().then_some(c)
-}
+pub use nelf_format::conventions::nearest_point_to_axes as head_centre;
 
 fn decode(path: &Path, what: &str) -> Result<DynamicImage> {
     if !path.is_file() {

@@ -706,13 +706,7 @@ pub fn bake_capture(
 /// synthetic capture (`nelf_scene::synth::source_viewpoints`) around the mesh's
 /// bounding sphere, `size × size` pixels.
 pub fn mesh_cameras(mesh: &Mesh, size: u32) -> Vec<PinholeCamera> {
-    let (lo, hi) = mesh.bounds();
-    let centre = (0.5 * (lo + hi)).as_dvec3();
-    let radius = mesh
-        .positions
-        .iter()
-        .map(|p| (p.as_dvec3() - centre).length())
-        .fold(0.0, f64::max);
+    let (centre, radius) = mesh.bounding_sphere();
     let config = SynthConfig {
         width: size,
         height: size,

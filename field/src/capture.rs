@@ -166,25 +166,7 @@ impl NetCapture {
     }
 }
 
-/// The least-squares point nearest every camera's optical axis
-/// (`argmin_c Σ_i |(I − a_i a_iᵀ)(c − o_i)|²`), or `None` when the axes are
-/// (nearly) parallel.
-pub fn head_centre(cameras: &[PinholeCamera]) -> Option<DVec3> {
-    let mut a = DMat3::ZERO;
-    let mut b = DVec3::ZERO;
-    for cam in cameras {
-        let d = cam.forward().normalize();
-        let projector = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
-        a += projector;
-        b += projector * cam.centre();
-    }
-    let n = cameras.len() as f64;
-    if a.determinant().partial_cmp(&(1e-6 * n * n * n)) != Some(std::cmp::Ordering::Greater) {
-        return None;
-    }
-    let c = a.inverse() * b;
-    c.is_finite().then_some(c)
-}
+pub use nelf_format::conventions::nearest_point_to_axes as head_centre;
 
 fn decode(path: &Path) -> Result<DynamicImage, NetError> {
     image::ImageReader::open(path)

@@ -486,6 +486,29 @@ impl PinholeCamera {
     }
 }
 
+/// The least-squares point nearest every camera's optical axis,
+/// `argmin_c Σ_i |(I − a_i a_iᵀ)(c − o_i)|²` with `o_i` the centre and `a_i` the unit
+/// viewing axis of camera `i` — where a capture's cameras look, i.e. the head
+/// centre. `None` when the axes are (nearly) parallel: the normal matrix
+/// `Σ (I − a aᵀ)` then has an eigenvalue ≈ 0, tested scale-free as
+/// `det ≤ 1e-6 · n³` (n³ is the largest possible determinant).
+pub fn nearest_point_to_axes(cameras: &[PinholeCamera]) -> Option<DVec3> {
+    let mut a = DMat3::ZERO;
+    let mut b = DVec3::ZERO;
+    for cam in cameras {
+        let d = cam.forward().normalize();
+        let projector = DMat3::IDENTITY - DMat3::from_cols(d * d.x, d * d.y, d * d.z);
+        a += projector;
+        b += projector * cam.centre();
+    }
+    let n = cameras.len() as f64;
+    if a.determinant().partial_cmp(&(1e-6 * n * n * n)) != Some(std::cmp::Ordering::Greater) {
+        return None;
+    }
+    let c = a.inverse() * b;
+    c.is_finite().then_some(c)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -612,6 +635,21 @@ mod tests {
         lt[lt_index(1, 2, 3)] = 2.0;
         let rgb = shade(&lt, &light);
         assert_eq!(rgb, [0.0, 2.0 * light.get(2, 3)[1], 0.0]);
+    }
+
+    #[test]
+    fn cameras_looking_at_a_point_meet_there() {
+        let target = DVec3::new(0.1, -0.2, 0.3);
+        let cams: Vec<PinholeCamera> = [
+            DVec3::new(0.0, 0.0, 2.0),
+            DVec3::new(1.5, 0.3, 1.0),
+            DVec3::new(-1.0, 1.0, 1.5),
+        ]
+        .iter()
+        .map(|&eye| PinholeCamera::look_at(eye, target, DVec3::Y, 32, 32, 0.5))
+        .collect();
+        assert!(nearest_point_to_axes(&cams).unwrap().abs_diff_eq(target, 1e-9));
+        assert!(nearest_point_to_axes(&[cams[0], cams[0]]).is_none());
     }
 
     #[test]

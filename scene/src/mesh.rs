@@ -156,6 +156,19 @@ impl Mesh {
         )
     }
 
+    /// Centre (the bounding-box centre) and radius (the farthest vertex from it) of
+    /// a sphere around the mesh, metres: what a camera must frame.
+    pub fn bounding_sphere(&self) -> (glam::DVec3, f64) {
+        let (lo, hi) = self.bounds();
+        let centre = (0.5 * (lo + hi)).as_dvec3();
+        let radius = self
+            .positions
+            .iter()
+            .map(|p| (p.as_dvec3() - centre).length())
+            .fold(0.0, f64::max);
+        (centre, radius)
+    }
+
     /// The three corners of triangle `t`.
     pub fn corners(&self, t: usize) -> [Vec3; 3] {
         self.triangles[t].map(|i| self.positions[i as usize])

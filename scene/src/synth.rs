@@ -382,18 +382,6 @@ fn lighting(file: Option<&Path>, seed: u64, rotate_deg: f32) -> Result<LatLong, 
     Ok(envmap_to_basis(&full, rotate_deg))
 }
 
-/// Bounding-sphere centre (the bounding-box centre) and radius of a mesh, in metres.
-fn bounding_sphere(mesh: &Mesh) -> (DVec3, f64) {
-    let (lo, hi) = mesh.bounds();
-    let centre = (0.5 * (lo + hi)).as_dvec3();
-    let radius = mesh
-        .positions
-        .iter()
-        .map(|p| (p.as_dvec3() - centre).length())
-        .fold(0.0, f64::max);
-    (centre, radius)
-}
-
 /// Exposure (stops) that puts the mean luminance of the covered pixels at 0.36.
 fn preview_exposure(image: &RenderedImage) -> f32 {
     let (sum, weight) = image
@@ -459,7 +447,7 @@ pub fn write_synthetic_capture(
 
     let mesh = synth_mesh(config)?;
     let tracer = LtTracer::new(&mesh, config.trace_settings())?;
-    let (centre, radius) = bounding_sphere(&mesh);
+    let (centre, radius) = mesh.bounding_sphere();
     let source_light = lighting(config.envmap.as_deref(), config.env_seed, config.env_rotate_deg)?;
     write_exr_rgb(out_dir.join("lighting/source.exr"), 16, 8, source_light.texels())?;
     let setup_secs = start.elapsed().as_secs_f64();

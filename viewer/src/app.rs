@@ -250,8 +250,7 @@ struct ViewerApp {
     rank: usize,
     debug_view: DebugView,
     component: usize,
-    render_scale: f32,
-    jitter: bool,
+    rendering: Rendering,
     frame_index: u32,
     frame_ms_smoothed: f32,
     march_size: [u32; 2],
@@ -283,6 +282,17 @@ struct Screenshots {
     receiver: Receiver<ScreenshotMessage>,
 }
 
+/// Rendering options of the UI.
+#[derive(Debug, Clone, Copy)]
+struct Rendering {
+    /// March resolution relative to the viewport's pixels.
+    scale: f32,
+    /// Jitter the first sample of each ray (per pixel and frame).
+    jitter: bool,
+    /// Redraw every frame (shows the frame time; costs the CPU when idle).
+    continuous: bool,
+}
+
 /// What the renderer was last told, to send only changes.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 struct AppliedLighting {
@@ -312,8 +322,11 @@ impl ViewerApp {
             rank: 0,
             debug_view: DebugView::Shaded,
             component: 0,
-            render_scale: 1.0,
-            jitter: true,
+            rendering: Rendering {
+                scale: 1.0,
+                jitter: true,
+                continuous: false,
+            },
             frame_index: 0,
             frame_ms_smoothed: 0.0,
             march_size: [0, 0],
@@ -523,7 +536,7 @@ impl ViewerApp {
             None => ui.label("no asset: drop a .nelf file here"),
         };
         ui.label(format!(
-            "frame {:.1} ms ({:.0} fps), march {}×{}",
+            "frame interval {:.1} ms ({:.0} fps), march {}×{}",
             self.frame_ms_smoothed,
             if self.frame_ms_smoothed > 0.0 {
                 1000.0 / self.frame_ms_smoothed
@@ -607,8 +620,9 @@ impl ViewerApp {
         ui.separator();
 
         ui.label("Rendering");
-        ui.add(egui::Slider::new(&mut self.render_scale, 0.25..=1.0).text("resolution scale"));
-        ui.checkbox(&mut self.jitter, "jitter samples");
+        ui.add(egui::Slider::new(&mut self.rendering.scale, 0.25..=1.0).text("resolution scale"));
+        ui.checkbox(&mut self.rendering.jitter, "jitter samples");
+        ui.checkbox(&mut self.rendering.continuous, "redraw continuously (frame time)");
         if ui.button("Screenshot (F12)").clicked() {
             self.request_screenshot(ui.ctx(), None);
         }
@@ -679,8 +693,8 @@ impl ViewerApp {
             orbit.distance_m *= (-f64::from(scroll) * 0.002).exp() / f64::from(zoom.max(1e-3));
         }
         let ppp = ui.ctx().pixels_per_point();
-        let width = ((rect.width() * ppp * self.render_scale).round() as u32).max(1);
-        let height = ((rect.height() * ppp * self.render_scale).round() as u32).max(1);
+        let width = ((rect.width() * ppp * self.rendering.scale).round() as u32).max(1);
+        let height = ((rect.height() * ppp * self.rendering.scale).round() as u32).max(1);
         self.march_size = [width, height];
         let camera = orbit.camera(width, height);
         let view = match self.debug_view {
@@ -695,7 +709,7 @@ impl ViewerApp {
             camera,
             settings: ViewSettings {
                 march: MarchSettings::default(),
-                jitter: self.jitter,
+                jitter: self.rendering.jitter,
                 frame_index: self.frame_index,
                 view,
                 pass: MarchPass::default(),
@@ -716,12 +730,19 @@ impl eframe::App for ViewerApp {
         let ctx = ui.ctx().clone();
         let state = frame.wgpu_render_state().cloned();
         let state = state.as_ref();
+        // Frame interval, smoothed; egui redraws only on input or animation, so an interval
+        // after idling (over half a second) says nothing about the frame's cost.
         let dt = ctx.input(|i| i.unstable_dt);
-        self.frame_ms_smoothed = if self.frame_ms_smoothed == 0.0 {
-            dt * 1000.0
-        } else {
-            0.9 * self.frame_ms_smoothed + 0.1 * dt * 1000.0
-        };
+        if dt < 0.5 {
+            self.frame_ms_smoothed = if self.frame_ms_smoothed == 0.0 {
+                dt * 1000.0
+            } else {
+                0.9 * self.frame_ms_smoothed + 0.1 * dt * 1000.0
+            };
+        }
+        if self.rendering.continuous {
+            ctx.request_repaint();
+        }
         self.handle_dropped_files(&ctx, state);
         if self.auto_rotate {
             self.rotation_deg += self.auto_rotate_deg_per_s * dt.min(0.1);
