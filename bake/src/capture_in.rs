@@ -384,34 +384,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn head_centre_is_where_axes_meet() {
-        let target = DVec3::new(0.1, -0.2, 0.05);
-        let cams: Vec<PinholeCamera> = [
-            DVec3::new(0.0, 0.0, 2.0),
-            DVec3::new(1.0, 0.3, 1.5),
-            DVec3::new(-1.0, -0.2, 1.7),
-        ]
-        .iter()
-        .map(|&eye| PinholeCamera::look_at(eye, target, DVec3::Y, 32, 32, 0.8))
-        .collect();
-        let c = head_centre(&cams).unwrap();
-        assert!(c.abs_diff_eq(target, 1e-9), "{c}");
-        // Two cameras looking the same way: no centre.
-        let parallel = [
-            PinholeCamera::look_at(DVec3::new(0.0, 0.0, 2.0), DVec3::ZERO, DVec3::Y, 32, 32, 0.8),
-            PinholeCamera::look_at(
-                DVec3::new(0.5, 0.0, 2.0),
-                DVec3::new(0.5, 0.0, 0.0),
-                DVec3::Y,
-                32,
-                32,
-                0.8,
-            ),
-        ];
-        assert!(head_centre(&parallel).is_none());
-    }
-
-    #[test]
     fn colmap_names_are_kept_inside_the_folder() {
         assert!(safe_relative("a/b.jpg").is_some());
         assert!(safe_relative("../b.jpg").is_none());

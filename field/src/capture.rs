@@ -268,21 +268,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn head_centre_is_where_axes_meet() {
-        let target = DVec3::new(0.1, -0.2, 0.05);
-        let cams: Vec<PinholeCamera> = [
-            DVec3::new(0.0, 0.0, 2.0),
-            DVec3::new(1.0, 0.3, 1.5),
-            DVec3::new(-1.0, -0.2, 1.7),
-        ]
-        .iter()
-        .map(|&eye| PinholeCamera::look_at(eye, target, DVec3::Y, 32, 32, 0.8))
-        .collect();
-        assert!(head_centre(&cams).unwrap().abs_diff_eq(target, 1e-9));
-        assert!(head_centre(&[cams[0], cams[0]]).is_none());
-    }
-
-    #[test]
     fn default_frame_turns_y_up_into_z_up() {
         let a = default_net_from_world();
         assert!((a * DVec3::Y).abs_diff_eq(DVec3::Z, 1e-12));

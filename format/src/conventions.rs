@@ -650,6 +650,19 @@ mod tests {
         .collect();
         assert!(nearest_point_to_axes(&cams).unwrap().abs_diff_eq(target, 1e-9));
         assert!(nearest_point_to_axes(&[cams[0], cams[0]]).is_none());
+        // Two distinct cameras looking the same way (offset sideways): no centre.
+        let parallel = [
+            PinholeCamera::look_at(DVec3::new(0.0, 0.0, 2.0), DVec3::ZERO, DVec3::Y, 32, 32, 0.8),
+            PinholeCamera::look_at(
+                DVec3::new(0.5, 0.0, 2.0),
+                DVec3::new(0.5, 0.0, 0.0),
+                DVec3::Y,
+                32,
+                32,
+                0.8,
+            ),
+        ];
+        assert!(nearest_point_to_axes(&parallel).is_none());
     }
 
     #[test]
