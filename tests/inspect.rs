@@ -26,7 +26,7 @@ fn inspect_prints_text_and_json_and_rejects_damage() {
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let text = String::from_utf8(out.stdout).unwrap();
     for needle in [
-        "format:            .nelf v1.0".to_string(),
+        "format:            .nelf v1.1".to_string(),
         format!("bricks:            {}", asset.bricks.len()),
         format!("voxels:            {}", asset.voxel_count()),
         "PCA rank:          6".to_string(),
@@ -42,7 +42,7 @@ fn inspect_prints_text_and_json_and_rejects_damage() {
     let out = nelf(&["inspect".as_ref(), "--json".as_ref(), path.as_os_str()]);
     assert!(out.status.success());
     let json: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    assert_eq!(json["version"], "1.0");
+    assert_eq!(json["version"], "1.1");
     assert_eq!(json["pca_rank"], 6);
     assert_eq!(json["brick_count"], asset.bricks.len());
     assert_eq!(json["voxel_count"], asset.voxel_count());

@@ -243,11 +243,36 @@ pub enum Coefficients {
 impl Coefficients {
     /// Quantizes `values` (voxel-major, `rank` per voxel) with `encoding`.
     ///
-    /// `U8Affine` maps each component's `[min, max]` onto codes `0..=255`
-    /// (`code = round((c − min) / scale)`), so the error per coefficient is at most
-    /// `scale_k / 2` (plus `f32` rounding). `F16` rounds to nearest binary16: relative
-    /// error ≤ 2⁻¹¹ for |c| ≥ 2⁻¹⁴, absolute ≤ 2⁻²⁵ below; |c| > 65504 is an error.
+    /// `U8Affine` gives component `k` the step `scale_k = (max_k − min_k) / 254` and
+    /// the offset `scale_k · ⌊min_k / scale_k⌋` (a multiple of the step, so a
+    /// coefficient 0 — a voxel whose vector is the PCA mean — is stored exactly when
+    /// `min_k ≤ 0 ≤ max_k`), and `code = round((c − offset_k) / scale_k)` in `0..=255`;
+    /// the error per coefficient is at most `scale_k / 2` (plus `f32` rounding). `F16`
+    /// rounds to nearest binary16: relative error ≤ 2⁻¹¹ for |c| ≥ 2⁻¹⁴, absolute ≤
+    /// 2⁻²⁵ below; |c| > 65504 is an error.
     pub fn quantize(values: &[f32], rank: usize, encoding: CoefficientEncoding) -> Result<Self> {
+        Self::quantize_with_min_step(values, rank, encoding, 0.0)
+    }
+
+    /// [`Self::quantize`] whose 8-bit steps are at least `min_step`:
+    /// `scale_k = max((max_k − min_k) / 254, min_step)`. With an orthonormal basis
+    /// the squared reconstruction error of a vector is the sum over components of
+    /// the coefficient errors, so one step for every component (reverse
+    /// water-filling) spends bits where the error is: a component whose spread is a
+    /// few steps takes a few codes and compresses to almost nothing, where its own
+    /// range over 255 codes would store noise. Ignored for `F16`.
+    pub fn quantize_with_min_step(
+        values: &[f32],
+        rank: usize,
+        encoding: CoefficientEncoding,
+        min_step: f32,
+    ) -> Result<Self> {
+        if !(min_step.is_finite() && min_step >= 0.0) {
+            return Err(FormatError::InvalidValue {
+                what: "minimum quantization step".into(),
+                reason: format!("{min_step} must be finite and ≥ 0"),
+            });
+        }
         if rank == 0 || rank > LT_DIM {
             return Err(FormatError::BadRank {
                 rank: rank as u64,
@@ -275,14 +300,25 @@ impl Coefficients {
                         max[k] = max[k].max(voxel[k]);
                     }
                 }
-                let offset: Vec<f32> = min.iter().map(|&m| if m.is_finite() { m } else { 0.0 }).collect();
+                let lo: Vec<f32> = min.iter().map(|&m| if m.is_finite() { m } else { 0.0 }).collect();
                 let scale: Vec<f32> = (0..rank)
                     .map(|k| {
-                        let range = f64::from(max[k]) - f64::from(offset[k]);
+                        let range = f64::from(max[k]) - f64::from(lo[k]);
                         if range.is_finite() && range > 0.0 {
-                            (range / 255.0) as f32
+                            ((range / 254.0) as f32).max(min_step)
                         } else {
                             0.0
+                        }
+                    })
+                    .collect();
+                // Offsets on the step lattice: (max − offset) / scale ≤ 254 + 1.
+                let offset: Vec<f32> = (0..rank)
+                    .map(|k| {
+                        if scale[k] > 0.0 {
+                            let s = f64::from(scale[k]);
+                            ((f64::from(lo[k]) / s).floor() * s) as f32
+                        } else {
+                            lo[k]
                         }
                     })
                     .collect();
@@ -466,25 +502,34 @@ pub(crate) fn validate_quant_params(scale: &[f32], offset: &[f32]) -> Result<()>
     Ok(())
 }
 
-/// Encodes densities σ (1/m) as binary16, round to nearest. Values above 65504 1/m
-/// are clamped to 65504 (already opaque at any voxel size ≥ 0.1 mm); negative or
-/// non-finite values are an error. Relative error ≤ 2⁻¹¹ (≈ 4.9·10⁻⁴) for
-/// σ ≥ 6.1·10⁻⁵ 1/m, absolute ≤ 3·10⁻⁸ 1/m below.
+/// Encodes densities σ (1/m) as binary16, round to nearest. Magnitudes above 65504
+/// 1/m are clamped to ±65504 (already opaque at any voxel size ≥ 0.1 mm); non-finite
+/// values are an error. Negative values are allowed: the density a renderer uses is
+/// `max(0, trilinear(σ))` (SPEC §8), and the writer marks such files with
+/// [`crate::spec::FLAG_SIGNED_DENSITY`]. Relative error ≤ 2⁻¹¹ (≈ 4.9·10⁻⁴) for
+/// |σ| ≥ 6.1·10⁻⁵ 1/m, absolute ≤ 3·10⁻⁸ 1/m below.
 pub fn encode_density(sigma_per_m: &[f32]) -> Result<Vec<f16>> {
+    let max = f16::MAX.to_f32();
     sigma_per_m
         .iter()
         .enumerate()
         .map(|(i, &s)| {
-            if s.is_nan() || s.is_infinite() || s < 0.0 {
+            if s.is_finite() {
+                Ok(f16::from_f32(s.clamp(-max, max)))
+            } else {
                 Err(FormatError::InvalidValue {
                     what: format!("density of voxel {i}"),
-                    reason: format!("{s} must be finite and non-negative"),
+                    reason: format!("{s} must be finite"),
                 })
-            } else {
-                Ok(f16::from_f32(s.min(f16::MAX.to_f32())))
             }
         })
         .collect()
+}
+
+/// Whether any stored density is negative (the file then needs
+/// [`crate::spec::FLAG_SIGNED_DENSITY`]).
+pub fn has_negative_density(density: &[f16]) -> bool {
+    density.iter().any(|d| d.to_f32() < 0.0)
 }
 
 /// A whole `.nelf` asset in memory.
@@ -594,7 +639,7 @@ impl Asset {
                 self.density.len()
             )));
         }
-        validate_density(&self.density, 0)?;
+        validate_density(&self.density, 0, true)?;
         self.pca.validate()?;
         if self.coefficients.rank() != self.pca.rank() {
             return Err(FormatError::InvalidAsset(format!(
@@ -631,18 +676,19 @@ pub(crate) fn validate_bricks(bricks: &[[u16; 3]], grid_bricks: [u32; 3]) -> Res
     Ok(())
 }
 
-/// Checks densities are finite and non-negative; `first_voxel` numbers them in messages.
-pub(crate) fn validate_density(density: &[f16], first_voxel: usize) -> Result<()> {
+/// Checks densities are finite, and not negative unless `signed` (the file's
+/// [`crate::spec::FLAG_SIGNED_DENSITY`]); `first_voxel` numbers them in messages.
+pub(crate) fn validate_density(density: &[f16], first_voxel: usize, signed: bool) -> Result<()> {
     for (i, d) in density.iter().enumerate() {
         if !d.is_finite() {
             return Err(FormatError::NonFinite {
                 what: format!("section DENS voxel {}", first_voxel + i),
             });
         }
-        if d.to_f32() < 0.0 {
+        if !signed && d.to_f32() < 0.0 {
             return Err(FormatError::InvalidValue {
                 what: format!("section DENS voxel {}", first_voxel + i),
-                reason: format!("negative density {d}"),
+                reason: format!("negative density {d} in a file without the signed-density flag"),
             });
         }
     }
@@ -676,11 +722,63 @@ mod tests {
             let bound = q.abs_error_bound(i % 3).unwrap();
             assert!((a - b).abs() <= bound, "{i}: {a} vs {b}, bound {bound}");
         }
-        // Extremes are exact up to rounding.
+        // The range spans (nearly) every code.
         let Coefficients::U8Affine { codes, .. } = &q else {
             panic!()
         };
-        assert!(codes.contains(&0) && codes.contains(&255));
+        assert!(codes.contains(&0) && codes.iter().any(|&c| c >= 254));
+    }
+
+    #[test]
+    fn u8_step_floor_keeps_zero_exact_and_uses_fewer_codes() {
+        // Component 0 spans ±1, component 1 only ±0.01.
+        let values: Vec<f32> = (0..1000)
+            .flat_map(|i| {
+                let x = ((i as f32) * 0.61).sin();
+                [x, 0.01 * ((i as f32) * 1.3).cos()]
+            })
+            .chain([0.0, 0.0])
+            .collect();
+        let plain = Coefficients::quantize(&values, 2, CoefficientEncoding::U8Affine).unwrap();
+        let step = 0.004;
+        let floored =
+            Coefficients::quantize_with_min_step(&values, 2, CoefficientEncoding::U8Affine, step).unwrap();
+        for q in [&plain, &floored] {
+            let back = q.to_f32();
+            assert_eq!(
+                &back[back.len() - 2..],
+                [0.0, 0.0],
+                "a zero coefficient decodes to 0"
+            );
+            for (i, (a, b)) in values.iter().zip(&back).enumerate() {
+                assert!((a - b).abs() <= q.abs_error_bound(i % 2).unwrap(), "{i}");
+            }
+        }
+        let distinct = |q: &Coefficients, k: usize| {
+            let Coefficients::U8Affine { codes, scale, .. } = q else {
+                panic!()
+            };
+            let set: std::collections::BTreeSet<u8> = codes.iter().skip(k).step_by(2).copied().collect();
+            (set.len(), scale[k])
+        };
+        let (plain_codes, plain_scale) = distinct(&plain, 1);
+        let (floored_codes, floored_scale) = distinct(&floored, 1);
+        assert!(
+            plain_codes > 50 && plain_scale < step,
+            "{plain_codes} codes, step {plain_scale}"
+        );
+        assert_eq!(floored_scale, step);
+        assert!(
+            floored_codes <= 7,
+            "±0.01 in steps of 0.004: {floored_codes} codes"
+        );
+        assert!(
+            distinct(&floored, 0).1 > step,
+            "a wider component keeps its own step"
+        );
+        assert!(
+            Coefficients::quantize_with_min_step(&values, 2, CoefficientEncoding::U8Affine, -1.0).is_err()
+        );
     }
 
     #[test]
@@ -704,10 +802,12 @@ mod tests {
 
     #[test]
     fn density_encoding_clamps_and_rejects() {
-        let d = encode_density(&[0.0, 1.0, 1e6]).unwrap();
+        let d = encode_density(&[0.0, 1.0, 1e6, -1.0]).unwrap();
         assert_eq!(d[2], f16::MAX);
-        assert!(encode_density(&[-1.0]).is_err());
+        assert_eq!(d[3].to_f32(), -1.0, "signed densities are kept");
+        assert!(has_negative_density(&d) && !has_negative_density(&d[..3]));
         assert!(encode_density(&[f32::NAN]).is_err());
+        assert!(encode_density(&[f32::NEG_INFINITY]).is_err());
     }
 
     #[test]

@@ -16,6 +16,7 @@ pub mod write;
 
 pub use asset::{
     Asset, BrickData, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, encode_density,
+    has_negative_density,
 };
 pub use error::FormatError;
 pub use read::{AssetReader, read_asset, read_asset_bytes};

@@ -277,7 +277,7 @@ impl<R: Read + Seek> AssetReader<R> {
         let within = index - chunk * chunk_bricks;
         let d_bytes = 2 * BRICK_VOXELS;
         let density: Vec<f16> = f16s(&cached.density[within * d_bytes..(within + 1) * d_bytes]);
-        validate_density(&density, index * BRICK_VOXELS)?;
+        validate_density(&density, index * BRICK_VOXELS, self.header.signed_density())?;
         let c_bytes = self.coefficients.bytes_per_brick as usize;
         let raw = &cached.coefficients[within * c_bytes..(within + 1) * c_bytes];
         let coefficients = dequantize(
@@ -403,7 +403,7 @@ impl<R: Read + Seek> AssetReader<R> {
                     check_finite_f16(&f16s(&raw), self.header.pca_rank as usize, first_voxel)?;
                 }
             } else {
-                validate_density(&f16s(&raw), first_voxel)?;
+                validate_density(&f16s(&raw), first_voxel, self.header.signed_density())?;
             }
             f(i, &raw)?;
         }

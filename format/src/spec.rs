@@ -16,7 +16,7 @@ pub const MAGIC: [u8; 8] = [0x89, b'N', b'E', b'L', b'F', 0x0D, 0x0A, 0x1A];
 /// Major version this crate reads and writes; a reader rejects any other.
 pub const VERSION_MAJOR: u16 = 1;
 /// Minor version this crate writes; readers accept any minor of their major.
-pub const VERSION_MINOR: u16 = 0;
+pub const VERSION_MINOR: u16 = 1;
 /// Size of the fixed header in bytes.
 pub const HEADER_SIZE: usize = 256;
 /// Size of one section-table entry in bytes.
@@ -42,8 +42,13 @@ pub const MAX_METADATA_BYTES: u64 = 1 << 20;
 /// No zstd data decodes to more than this many times its size (one 4-byte RLE
 /// block expands to at most 128 KiB); a larger declared length is a lie.
 pub const MAX_ZSTD_EXPANSION: u64 = 32_768;
-/// Header flags: bits a reader must understand (low 32). None are defined in v1.0.
+/// Header flags: bits a reader must understand (low 32).
 pub const REQUIRED_FLAGS_MASK: u64 = 0xFFFF_FFFF;
+/// Required flag bit 0 (v1.1): `DENS` may hold negative values; the density along a
+/// ray is `max(0, trilinear(σ))`. Set by writers exactly when a stored σ is negative.
+pub const FLAG_SIGNED_DENSITY: u64 = 1;
+/// The required flag bits this reader understands.
+pub const KNOWN_REQUIRED_FLAGS: u64 = FLAG_SIGNED_DENSITY;
 /// Section-entry flag bit: a reader that does not know this kind must reject the file.
 pub const SECTION_FLAG_REQUIRED: u16 = 1;
 
@@ -184,7 +189,7 @@ pub struct Header {
     pub version_minor: u16,
     /// Sections in the table.
     pub section_count: u32,
-    /// Feature flags (low 32 bits required, high 32 optional; none defined in v1.0).
+    /// Feature flags (low 32 bits required, high 32 optional; [`FLAG_SIGNED_DENSITY`] in v1.1).
     pub flags: u64,
     /// Grid placement and extent.
     pub grid: GridGeometry,
@@ -207,6 +212,11 @@ pub struct Header {
 }
 
 impl Header {
+    /// Whether `DENS` may hold negative values ([`FLAG_SIGNED_DENSITY`]).
+    pub fn signed_density(&self) -> bool {
+        self.flags & FLAG_SIGNED_DENSITY != 0
+    }
+
     /// Voxels stored (`brick_count × 512`).
     pub fn voxel_count(&self) -> u64 {
         u64::from(self.brick_count) * BRICK_VOXELS as u64
@@ -339,9 +349,9 @@ impl Header {
             });
         }
         let flags = u64_at(b, 24);
-        if flags & REQUIRED_FLAGS_MASK != 0 {
+        if flags & REQUIRED_FLAGS_MASK & !KNOWN_REQUIRED_FLAGS != 0 {
             return Err(FormatError::UnsupportedFeature {
-                flags: flags & REQUIRED_FLAGS_MASK,
+                flags: flags & REQUIRED_FLAGS_MASK & !KNOWN_REQUIRED_FLAGS,
             });
         }
         let f64s =

@@ -7,13 +7,13 @@
 use std::io::Write;
 use std::path::{Path, PathBuf};
 
-use crate::asset::{Asset, Coefficients};
+use crate::asset::{Asset, Coefficients, has_negative_density};
 use crate::error::{FormatError, Result};
 use crate::spec::{
-    BRICK_VOXELS, CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header, KIND_BRICKS,
-    KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, MAX_CHUNK_RAW_BYTES,
-    MAX_METADATA_BYTES, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind, VERSION_MAJOR,
-    VERSION_MINOR, checksum, header_checksum, kind_name, shuffle,
+    BRICK_VOXELS, CHUNK_ENTRY_SIZE, FLAG_SIGNED_DENSITY, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header,
+    KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS,
+    MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind,
+    VERSION_MAJOR, VERSION_MINOR, checksum, header_checksum, kind_name, shuffle,
 };
 
 /// Choices the writer makes; none of them changes what a reader gets back.
@@ -178,7 +178,11 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
         version_major: VERSION_MAJOR,
         version_minor: VERSION_MINOR,
         section_count: section_count as u32,
-        flags: 0,
+        flags: if has_negative_density(&asset.density) {
+            FLAG_SIGNED_DENSITY
+        } else {
+            0
+        },
         grid: asset.grid,
         brick_count: asset.bricks.len() as u32,
         chunk_bricks,

@@ -162,9 +162,10 @@ fn hostile_headers_give_named_errors() {
         |b| field(b, 16, &100_000u32.to_le_bytes()),
         FormatError::TooManySections { .. }
     );
+    // Bit 0 (signed density) is known; bit 1 is not.
     expect!(
-        |b| field(b, 24, &1u64.to_le_bytes()),
-        FormatError::UnsupportedFeature { flags: 1 }
+        |b| field(b, 24, &3u64.to_le_bytes()),
+        FormatError::UnsupportedFeature { flags: 2 }
     );
     expect!(|b| field(b, 32, &nan), FormatError::NonFinite { .. });
     expect!(|b| field(b, 80, &nan), FormatError::NonFinite { .. });

@@ -10,7 +10,8 @@ use std::io::Cursor;
 use common::{FileParts, chunked_payload, small_asset};
 use nelf_format::conventions::{ENV_H, ENV_W, LT_DIM, LatLong, shade};
 use nelf_format::spec::{
-    BRICK_VOXELS, KIND_COEFFICIENTS, KIND_METADATA, SectionCodec, SectionEntry, VERSION_MAJOR, checksum,
+    BRICK_VOXELS, FLAG_SIGNED_DENSITY, KIND_COEFFICIENTS, KIND_METADATA, SectionCodec, SectionEntry,
+    VERSION_MAJOR, checksum,
 };
 use nelf_format::synthetic::SyntheticField;
 use nelf_format::{
@@ -248,8 +249,8 @@ fn invalid_assets_are_refused_by_the_writer() {
     a.metadata = serde_json::json!([1, 2]);
     cases.push(("metadata array", a));
     let mut a = good.clone();
-    a.density[5] = half::f16::from_f32(-1.0);
-    cases.push(("negative density", a));
+    a.density[5] = half::f16::INFINITY;
+    cases.push(("infinite density", a));
     let mut a = good.clone();
     a.grid.voxel_size_m = 0.0;
     cases.push(("zero voxel size", a));
@@ -353,4 +354,44 @@ fn foreign_writer_layouts_are_read() {
         codes.len() as u64,
     );
     assert!(read_asset_bytes(&parts.build()).unwrap() == asset);
+}
+
+#[test]
+fn signed_density_sets_its_flag_and_round_trips() {
+    let plain = small_asset(CoefficientEncoding::U8Affine, 4, 2);
+    let (bytes, _) = encode_asset(&plain, &WriteOptions::default()).unwrap();
+    let flags = |b: &[u8]| u64::from_le_bytes(b[24..32].try_into().unwrap());
+    assert_eq!(
+        flags(&bytes),
+        0,
+        "no negative value, no flag: 1.0 readers still read it"
+    );
+
+    let mut signed = plain.clone();
+    signed.density[5] = half::f16::from_f32(-250.0);
+    signed.density[700] = half::f16::from_f32(-0.5);
+    let (bytes, _) = encode_asset(&signed, &WriteOptions::default()).unwrap();
+    assert_eq!(flags(&bytes), FLAG_SIGNED_DENSITY);
+    assert!(read_asset_bytes(&bytes).unwrap() == signed);
+    let mut reader = AssetReader::new(Cursor::new(&bytes)).unwrap();
+    assert_eq!(reader.read_brick(1).unwrap().density[700 - BRICK_VOXELS], -0.5);
+
+    // The flag allows negative values; it does not require them.
+    let (mut plain_bytes, _) = encode_asset(&plain, &WriteOptions::default()).unwrap();
+    plain_bytes[24..32].copy_from_slice(&FLAG_SIGNED_DENSITY.to_le_bytes());
+    common::resign(&mut plain_bytes);
+    assert!(read_asset_bytes(&plain_bytes).unwrap() == plain);
+
+    // Negative values without the flag are refused, naming the voxel.
+    let mut unflagged = bytes.clone();
+    unflagged[24..32].copy_from_slice(&0u64.to_le_bytes());
+    common::resign(&mut unflagged);
+    let err = read_asset_bytes(&unflagged).unwrap_err();
+    assert!(err.to_string().contains("voxel 5"), "{err}");
+
+    // The encoder keeps the sign and clamps magnitudes to binary16's range.
+    let encoded = nelf_format::encode_density(&[-1e9, -3.0, 0.0, 7.5, 1e9]).unwrap();
+    let back: Vec<f32> = encoded.iter().map(|d| d.to_f32()).collect();
+    assert_eq!(back, [-65504.0, -3.0, 0.0, 7.5, 65504.0]);
+    assert!(nelf_format::encode_density(&[f32::NAN]).is_err());
 }
