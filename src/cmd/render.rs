@@ -95,6 +95,10 @@ pub struct RenderArgs {
     /// Stop a ray once its transmittance falls below this.
     #[arg(long, default_value_t = 1e-3)]
     pub min_transmittance: f32,
+    /// Supersampling: `n × n` rays per pixel, averaged (CPU only; 4 matches the
+    /// antialiasing of synthetic ground-truth images).
+    #[arg(long, default_value_t = 1, conflicts_with = "gpu")]
+    pub pixel_grid: u32,
     /// Render on the GPU (`nelf_viewer::GpuRenderer`, wgpu; Mesa's lavapipe on machines
     /// without one) instead of the CPU reference; the same image to f16 precision.
     #[arg(long)]
@@ -188,6 +192,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     let settings = MarchSettings {
         step_voxels: args.step_voxels,
         min_transmittance: args.min_transmittance,
+        pixel_grid: args.pixel_grid,
     };
     settings.validate()?;
     if let Some(capture) = &args.field {

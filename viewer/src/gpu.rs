@@ -990,6 +990,12 @@ impl GpuRenderer {
     ) -> Result<MarchParams, ViewerError> {
         camera.validate()?;
         settings.march.validate()?;
+        if settings.march.pixel_grid != 1 {
+            return Err(ViewerError::BadSetting(format!(
+                "pixel_grid = {}: the GPU renderer takes one ray per pixel (antialias with jitter)",
+                settings.march.pixel_grid
+            )));
+        }
         let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
         let grid = &asset.grid;
         let voxel = grid.voxel_size_m;

@@ -197,6 +197,7 @@ fn gpu_matches_cpu_from_inside_the_grid_and_with_coarse_steps() {
             march: MarchSettings {
                 step_voxels,
                 min_transmittance: 1e-3,
+                ..MarchSettings::default()
             },
             ..no_jitter()
         };
@@ -314,6 +315,7 @@ fn damaged_or_invalid_assets_are_errors_and_the_renderer_keeps_working() {
         march: MarchSettings {
             step_voxels: 0.0,
             min_transmittance: 1e-3,
+            ..MarchSettings::default()
         },
         ..no_jitter()
     };
