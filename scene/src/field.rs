@@ -196,6 +196,18 @@ fn length_error(points: usize, density: usize, lt: usize) -> FieldError {
     }
 }
 
+/// Checks a density-only batch's buffer size and point finiteness (for
+/// [`FieldSource::evaluate_density`] implementers).
+pub fn check_density_batch(points: &[Vec3], density: &[f32]) -> Result<(), FieldError> {
+    if density.len() != points.len() {
+        return Err(length_error(points.len(), density.len(), points.len() * LT_DIM));
+    }
+    if let Some(index) = points.iter().position(|p| !p.is_finite()) {
+        return Err(FieldError::NotFinite { index });
+    }
+    Ok(())
+}
+
 /// Checks a batch's buffer sizes and point finiteness (for [`FieldSource`] implementers).
 pub fn check_batch(points: &[Vec3], density: &[f32], lt: &[f32]) -> Result<(), FieldError> {
     if density.len() != points.len() || lt.len() != points.len() * LT_DIM {
@@ -390,12 +402,7 @@ impl FieldSource for MeshField {
     }
 
     fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
-        if density.len() != points.len() {
-            return Err(length_error(points.len(), density.len(), points.len() * LT_DIM));
-        }
-        if let Some(index) = points.iter().position(|p| !p.is_finite()) {
-            return Err(FieldError::NotFinite { index });
-        }
+        check_density_batch(points, density)?;
         points
             .par_iter()
             .zip(density.par_iter_mut())

@@ -17,7 +17,7 @@
 //! eyes (58 boundary edges): load it with [`LoadOptions::head_off`] (turn +90°
 //! about +y, orient outward, fit 0.23 m).
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::{Path, PathBuf};
 
 use glam::{DVec3, Vec2, Vec3};
@@ -50,6 +50,11 @@ pub struct LoadOptions {
     /// closed or nearly closed meshes (a head with an open neck is fine); turn it
     /// off for open sheets, whose signed volume says nothing.
     pub orient_outward: bool,
+    /// Close every hole with a fan of triangles ([`Mesh::close_holes`]) before
+    /// orienting: a head scan open at the neck or the eyes becomes a closed surface,
+    /// so ground-truth images and the volume field agree there. Turn it off for
+    /// open sheets.
+    pub close_holes: bool,
 }
 
 impl Default for LoadOptions {
@@ -59,6 +64,7 @@ impl Default for LoadOptions {
             rotate_y_deg: 0.0,
             default_albedo: DEFAULT_SKIN_ALBEDO,
             orient_outward: true,
+            close_holes: true,
         }
     }
 }
@@ -106,6 +112,9 @@ fn finish(mut mesh: Mesh, path: &Path, options: &LoadOptions) -> Result<Mesh, Sc
         source,
     };
     mesh.validate().map_err(invalid)?;
+    if options.close_holes {
+        mesh.close_holes();
+    }
     if options.orient_outward && mesh.signed_volume() < 0.0 {
         mesh.flip_winding();
     }
@@ -148,6 +157,91 @@ impl Mesh {
                 corners.swap(1, 2);
             }
         }
+    }
+
+    /// Closes every hole: each loop of boundary edges (a directed edge `a → b` whose
+    /// reverse no triangle has) gets a new vertex at the loop's centroid and a fan of
+    /// triangles `(b, a, centroid)`, oriented like their neighbours. Scans open at the
+    /// neck or the eyes become closed surfaces, so inside and outside are defined
+    /// everywhere and a camera looking into an opening sees a cap, as a volume model
+    /// of the head will show. The new vertex's albedo is the loop's mean (per-vertex
+    /// colours) and each cap corner's texture coordinate is copied from the
+    /// neighbouring triangle's corner (the centroid's: their mean). Returns the
+    /// number of loops closed. Non-manifold boundary vertices (several boundary edges
+    /// leaving one vertex) are followed one way; every boundary edge gets a cap.
+    pub fn close_holes(&mut self) -> usize {
+        let tri_count = self.triangles.len();
+        let mut directed: HashSet<(u32, u32)> = HashSet::with_capacity(3 * tri_count);
+        for tri in &self.triangles {
+            for e in 0..3 {
+                directed.insert((tri[e], tri[(e + 1) % 3]));
+            }
+        }
+        // Boundary edges a → b by start vertex, with the (triangle, corner) of a and b.
+        let mut leaving: HashMap<u32, Vec<(u32, usize, usize)>> = HashMap::new();
+        let mut boundary = Vec::new();
+        for (t, tri) in self.triangles.iter().enumerate() {
+            for e in 0..3 {
+                let (a, b) = (tri[e], tri[(e + 1) % 3]);
+                if !directed.contains(&(b, a)) {
+                    leaving
+                        .entry(a)
+                        .or_default()
+                        .push((b, 3 * t + e, 3 * t + (e + 1) % 3));
+                    boundary.push((a, b, 3 * t + e, 3 * t + (e + 1) % 3));
+                }
+            }
+        }
+        let mut used: HashSet<(u32, u32)> = HashSet::new();
+        let mut loops = 0;
+        for &(start, first, ..) in &boundary {
+            if used.contains(&(start, first)) {
+                continue;
+            }
+            // Walk the loop start → first → … back to start.
+            let mut edges = Vec::new();
+            let mut a = start;
+            while let Some(next) = leaving
+                .get(&a)
+                .and_then(|list| list.iter().find(|(b, ..)| !used.contains(&(a, *b))).copied())
+            {
+                used.insert((a, next.0));
+                edges.push((a, next.0, next.1, next.2));
+                a = next.0;
+                if a == start {
+                    break;
+                }
+            }
+            if edges.len() < 3 {
+                continue;
+            }
+            let n = edges.len() as f32;
+            let centroid = edges
+                .iter()
+                .map(|e| self.positions[e.0 as usize])
+                .sum::<glam::Vec3>()
+                / n;
+            let c = self.positions.len() as u32;
+            self.positions.push(centroid);
+            if let Albedo::PerVertex(colours) = &mut self.albedo {
+                let mean: [f32; 3] = std::array::from_fn(|ch| {
+                    edges.iter().map(|e| colours[e.0 as usize][ch]).sum::<f32>() / n
+                });
+                colours.push(mean);
+            }
+            if let Albedo::Texture { uvs, .. } = &mut self.albedo {
+                let centre_uv = edges.iter().map(|e| uvs[e.2]).sum::<glam::Vec2>() / n;
+                for &(_, _, corner_a, corner_b) in &edges {
+                    let (uv_a, uv_b) = (uvs[corner_a], uvs[corner_b]);
+                    uvs.extend_from_slice(&[uv_b, uv_a, centre_uv]);
+                }
+            }
+            for &(a, b, ..) in &edges {
+                self.triangles.push([b, a, c]);
+            }
+            loops += 1;
+        }
+        loops
     }
 
     /// Signed volume enclosed by the triangles, about the bounding-box centre, in

@@ -39,6 +39,7 @@ fn shared_head_loads_validates_and_faces_plus_z() {
         shared_head(),
         &LoadOptions {
             orient_outward: false,
+            close_holes: false,
             ..LoadOptions::default()
         },
     )
@@ -54,8 +55,17 @@ fn shared_head_loads_validates_and_faces_plus_z() {
     // Open at the neck and the eyes: 58 boundary edges, nothing else wrong.
     assert_eq!(raw.edge_defects(), 58);
 
+    let mut closed = raw.clone();
+    let loops = closed.close_holes();
+    assert_eq!(loops, 3, "the neck and two eyes");
+    assert_eq!(closed.edge_defects(), 0, "watertight once closed");
+    assert_eq!(closed.triangles.len(), 2918 + 58);
+    assert_eq!(closed.positions.len(), 1487 + 3);
+    assert_eq!(closed.close_holes(), 0, "nothing left to close");
+
     let head = load_mesh(shared_head(), &LoadOptions::head_off()).unwrap();
-    assert_eq!(head.triangles.len(), 2918);
+    assert_eq!(head.triangles.len(), 2918 + 58, "holes closed by default");
+    assert_eq!(head.edge_defects(), 0);
     assert!(head.signed_volume() > 0.0, "oriented outward");
     let (lo, hi) = head.bounds();
     assert!((hi.y - lo.y - 0.23).abs() < 1e-5, "fitted to 0.23 m");
@@ -202,6 +212,7 @@ fn write_texture(dir: &Path, name: &str) {
 fn keep_winding() -> LoadOptions {
     LoadOptions {
         orient_outward: false,
+        close_holes: false,
         ..LoadOptions::default()
     }
 }
@@ -296,7 +307,7 @@ fn obj_vertex_colours_are_used_when_there_is_no_texture() {
         "vc.obj",
         "v 0 0 0 1 0 0\nv 1 0 0 0 1 0\nv 0 1 0 0 0 1\nf 1 2 3\n",
     );
-    let mesh = load_mesh(&obj, &LoadOptions::default()).unwrap();
+    let mesh = load_mesh(&obj, &keep_winding()).unwrap();
     assert_eq!(
         mesh.albedo,
         Albedo::PerVertex(vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
