@@ -31,6 +31,6 @@ pub use error::RenderError;
 pub use grid::BrickGrid;
 pub use light::{ProjectedLight, project_light, project_light_texels, radiance_from_lt, voxel_radiance};
 pub use march::{
-    Image, MarchSettings, MarchStats, asset_density, render_asset, render_volume, render_volume_stats,
-    render_volume_unskipped, visibility_weights,
+    Image, MAX_PIXEL_GRID, MarchSettings, MarchStats, asset_density, render_asset, render_features,
+    render_volume, render_volume_stats, render_volume_unskipped, visibility_weights,
 };

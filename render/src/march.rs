@@ -311,6 +311,29 @@ fn ray_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
     (t_near < t_far && t_far > 0.0).then_some((t_near, t_far))
 }
 
+/// The `n²` rays of pixel `(col, row)` (module docs, `pixel_grid`): the pixel centre
+/// for `n = 1`, else the centres of an `n × n` sub-pixel grid, x fastest.
+fn pixel_rays(
+    camera: &PinholeCamera,
+    col: usize,
+    row: usize,
+    n: u32,
+) -> impl Iterator<Item = (DVec3, DVec3)> {
+    (0..n).flat_map(move |j| {
+        (0..n).map(move |i| {
+            if n == 1 {
+                camera.pixel_ray(col as u32, row as u32)
+            } else {
+                let sub = |p: usize, k: u32| p as f64 + (f64::from(k) + 0.5) / f64::from(n);
+                (
+                    camera.centre(),
+                    camera.ray_direction(DVec2::new(sub(col, i), sub(row, j))),
+                )
+            }
+        })
+    })
+}
+
 /// Checks the inputs shared by [`render_volume`] and [`visibility_weights`].
 fn check_inputs(
     grid: &BrickGrid,
@@ -404,16 +427,7 @@ fn render_volume_with(
             let share = 1.0 / (n * n) as f32;
             for (col, (rgb, alpha)) in rgb_row.iter_mut().zip(alpha_row.iter_mut()).enumerate() {
                 let (mut pixel_rgb, mut pixel_alpha) = ([0.0f32; 3], 0.0f32);
-                for (i, j) in (0..n).flat_map(|j| (0..n).map(move |i| (i, j))) {
-                    let (origin, dir) = if n == 1 {
-                        camera.pixel_ray(col as u32, row as u32)
-                    } else {
-                        let sub = |p: usize, k: u32| p as f64 + (f64::from(k) + 0.5) / f64::from(n);
-                        (
-                            camera.centre(),
-                            camera.ray_direction(DVec2::new(sub(col, i), sub(row, j))),
-                        )
-                    };
+                for (origin, dir) in pixel_rays(camera, col, row, n) {
                     let mut sum = [0.0f32; 3];
                     let t_end = marcher.march(origin, dir, &mut stats, |w, corners| {
                         let mut c = [0.0f32; 3];
@@ -443,6 +457,54 @@ fn render_volume_with(
         })
         .reduce(MarchStats::default, |a, b| a + b);
     Ok((image, stats))
+}
+
+/// Renders an arbitrary per-voxel feature vector (`dim` floats per voxel, voxel-major)
+/// with the same samples and compositing weights as [`render_volume`]: per pixel
+/// `Σ_i w_i · Σ_corners weight · f_v` (premultiplied over 0), `dim` floats per pixel,
+/// row-major. Since a render is linear in the radiance for a fixed density, the image
+/// of any radiance that is a linear map of the features (e.g. `mean + Σ_k c_k P_k`,
+/// the PCA reconstruction shaded by some lighting) is that map applied to these
+/// pixels: one feature render serves every lighting and every rank.
+pub fn render_features(
+    grid: &BrickGrid,
+    density: &[f32],
+    features: &[f32],
+    dim: usize,
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+) -> Result<Vec<f32>, RenderError> {
+    check_inputs(grid, density, camera, settings)?;
+    if dim == 0 || features.len() != grid.voxel_count() * dim {
+        return Err(RenderError::LengthMismatch {
+            what: "features",
+            expected: grid.voxel_count() * dim.max(1),
+            found: features.len(),
+        });
+    }
+    let marcher = Marcher::new(grid, density, *settings, Skipping::On);
+    let width = camera.width as usize;
+    let n = settings.pixel_grid;
+    let share = 1.0 / (n * n) as f32;
+    let mut out = vec![0.0f32; width * camera.height as usize * dim];
+    out.par_chunks_mut(width * dim)
+        .enumerate()
+        .for_each(|(row, out_row)| {
+            let mut stats = MarchStats::default();
+            for (col, pixel) in out_row.chunks_exact_mut(dim).enumerate() {
+                for (origin, dir) in pixel_rays(camera, col, row, n) {
+                    marcher.march(origin, dir, &mut stats, |w, corners| {
+                        for &(v, cw) in corners {
+                            let weight = share * w * cw;
+                            for (p, f) in pixel.iter_mut().zip(&features[v * dim..(v + 1) * dim]) {
+                                *p += weight * f;
+                            }
+                        }
+                    });
+                }
+            }
+        });
+    Ok(out)
 }
 
 /// Rows per band of [`visibility_weights`]: rows `r` with `r mod BANDS = b` form band `b`,

@@ -9,8 +9,8 @@ use glam::{DMat3, DVec3};
 use nelf_format::CoefficientEncoding;
 use nelf_format::conventions::PinholeCamera;
 use nelf_render::{
-    BrickGrid, MarchSettings, RenderError, asset_density, project_light, render_volume, render_volume_stats,
-    render_volume_unskipped, visibility_weights, voxel_radiance,
+    BrickGrid, MarchSettings, RenderError, asset_density, project_light, render_features, render_volume,
+    render_volume_stats, render_volume_unskipped, visibility_weights, voxel_radiance,
 };
 
 const SLAB_VOXEL_M: f64 = 0.005;
@@ -416,4 +416,41 @@ fn negative_density_clips_after_interpolation() {
             );
         }
     }
+}
+
+#[test]
+fn feature_renders_are_renders_of_linear_radiance() {
+    let asset = synthetic(60_000, 6, CoefficientEncoding::U8Affine, 5);
+    let grid = BrickGrid::from_asset(&asset).unwrap();
+    let density = asset_density(&asset);
+    let env = random_map(32, 16, 4, 2.0);
+    let light = project_light(&asset.pca, asset.world_from_light, &env, DMat3::IDENTITY).unwrap();
+    let radiance = voxel_radiance(&asset, &light, None);
+    let camera = orbit_camera(-40.0, 15.0, 0.5, 24, 20);
+    for pixel_grid in [1, 2] {
+        let settings = MarchSettings {
+            pixel_grid,
+            ..MarchSettings::default()
+        };
+        let image = render_volume(&grid, &density, &radiance, &camera, &settings).unwrap();
+        let white = vec![[1.0f32; 3]; grid.voxel_count()];
+        let ones = render_volume(&grid, &density, &white, &camera, &settings).unwrap();
+        // Features [1, r, g, b]: the first renders a constant radiance of 1 (missing
+        // voxels count 0 in interpolation, as for any radiance), the others the image.
+        let features: Vec<f32> = radiance.iter().flat_map(|c| [1.0, c[0], c[1], c[2]]).collect();
+        let pixels = render_features(&grid, &density, &features, 4, &camera, &settings).unwrap();
+        let scale = image.rgb.iter().flatten().fold(0.0f32, |m, &x| m.max(x.abs()));
+        for (p, (rgb, one)) in pixels.chunks_exact(4).zip(image.rgb.iter().zip(&ones.rgb)) {
+            assert!((p[0] - one[0]).abs() < 1e-5, "{} vs {}", p[0], one[0]);
+            for ch in 0..3 {
+                assert!(
+                    (p[ch + 1] - rgb[ch]).abs() < 1e-5 * scale,
+                    "{} vs {}",
+                    p[ch + 1],
+                    rgb[ch]
+                );
+            }
+        }
+    }
+    assert!(render_features(&grid, &density, &[0.0; 3], 4, &camera, &MarchSettings::default()).is_err());
 }
