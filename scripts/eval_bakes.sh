@@ -5,8 +5,8 @@
 # path-traced ground truth at held-aside novel views, one per shared HDRI (8 novel
 # lights), plus the source views under the capture's lighting.
 #
-#   cargo build --release -p nelf -p nelf-bake --example bake_eval
-#   bash scripts/eval_bakes.sh [OUT_DIR]        # env: SIZE (px, 128), RESOLUTIONS ("64 96 128"), FIXED_RANK (16)
+#   cargo build --release -p nelf --bins -p nelf-bake --examples
+#   bash scripts/eval_bakes.sh [OUT_DIR]        # env: SIZE (px, 128), RESOLUTIONS ("64 96 128 160"), FIXED_RANK (16)
 #
 # Writes OUT_DIR/table.md. Needs ../shared (the HDRIs and the scan).
 set -euo pipefail
@@ -14,7 +14,7 @@ cd "$(dirname "$0")/.."
 OUT=${1:-out/eval}
 SHARED=${SHARED:-../shared}
 SIZE=${SIZE:-128}
-RESOLUTIONS=${RESOLUTIONS:-"64 96 128"}
+RESOLUTIONS=${RESOLUTIONS:-"64 96 128 160"}
 FIXED_RANK=${FIXED_RANK:-16}
 NELF=target/release/nelf
 EVAL=target/release/examples/bake_eval
@@ -37,8 +37,8 @@ for head in procedural scan; do
 done
 
 {
-  echo "| head | resolution | rank policy | K | voxels | file (bytes) | bake (s) | LT (s) | rank choice (s) | PSNR targets (dB) | SSIM targets | PSNR sources (dB) | render (s) |"
-  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+  echo "| head | resolution | voxel (mm) | rank policy | K | voxels | file (bytes) | bake (s) | LT (s) | rank choice (s) | compression loss (dB) | PSNR targets (dB) | SSIM targets | interior PSNR targets (dB) | edge share | PSNR sources (dB) | render (s) |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 } > "$OUT/table.md"
 for head in procedural scan; do
   for res in $RESOLUTIONS; do
@@ -58,8 +58,9 @@ bake = json.load(open(stem + ".bake.json"))["report"]
 ev = json.load(open(stem + ".eval.json"))
 t, s = ev["mean_targets"], ev["mean_sources"]
 tm = bake["timings"]
-print(f"| {head} | {res} | {policy} | {bake['rank']} | {bake['voxels']} | {bake['file_size']} | {secs:.1f} | "
-      f"{tm['lt_secs']:.1f} | {tm['rank_secs']:.1f} | {t['psnr_db']:.2f} | {t['ssim']:.4f} | {s['psnr_db']:.2f} | {t['render_secs']:.3f} |")
+print(f"| {head} | {res} | {1000 * bake['voxel_size_m']:.2f} | {policy} | {bake['rank']} | {bake['voxels']} | {bake['file_size']} | {secs:.1f} | "
+      f"{tm['lt_secs']:.1f} | {tm['rank_secs']:.1f} | {bake['loss_db']:.3f} | {t['psnr_db']:.2f} | {t['ssim']:.4f} | "
+      f"{t['interior_psnr_db']:.2f} | {t['edge_share']:.2f} | {s['psnr_db']:.2f} | {t['render_secs']:.3f} |")
 PY
     done
   done

@@ -12,7 +12,7 @@
 
 use std::path::{Path, PathBuf};
 
-use nelf_bake::eval::{ViewScore, data_range, read_linear_rgb, score_view};
+use nelf_bake::eval::{ErrorBreakdown, ViewScore, data_range, error_breakdown, read_linear_rgb, score_view};
 use nelf_bake::{CaptureLoadOptions, load_capture};
 use nelf_format::conventions::{LatLong, PinholeCamera};
 use nelf_format::read_asset;
@@ -26,10 +26,12 @@ fn measure(
     camera: &PinholeCamera,
     env: &LatLong,
     reference: &[[f32; 3]],
+    mask: &[f32],
     name: &str,
     out: Option<&Path>,
-) -> Result<ViewScore, Error> {
+) -> Result<(ViewScore, ErrorBreakdown), Error> {
     let (score, image) = score_view(asset, camera, env, reference, name)?;
+    let breakdown = error_breakdown(&image, reference, mask, f64::from(data_range(reference)))?;
     if let Some(dir) = out {
         let stops = (0.5 / data_range(reference)).log2();
         for (suffix, rgb) in [("render", &image.rgb[..]), ("truth", reference)] {
@@ -42,17 +44,27 @@ fn measure(
             )?;
         }
     }
-    Ok(score)
+    Ok((score, breakdown))
 }
 
-fn mean(scores: &[ViewScore]) -> Option<(f64, f64, f64)> {
-    let n = scores.len() as f64;
-    (!scores.is_empty()).then(|| {
-        (
-            scores.iter().map(|s| s.psnr_db).sum::<f64>() / n,
-            scores.iter().map(|s| s.ssim).sum::<f64>() / n,
-            scores.iter().map(|s| s.render_secs).sum::<f64>() / n,
-        )
+fn mean(rows: &[(ViewScore, ErrorBreakdown)]) -> Option<[f64; 6]> {
+    let n = rows.len() as f64;
+    (!rows.is_empty()).then(|| {
+        let mut m = [0.0; 6];
+        for (s, b) in rows {
+            let v = [
+                s.psnr_db,
+                s.ssim,
+                s.render_secs,
+                b.edge_share,
+                b.interior_psnr_db,
+                b.coverage_error,
+            ];
+            for (a, x) in m.iter_mut().zip(v) {
+                *a += x / n;
+            }
+        }
+        m
     })
 }
 
@@ -76,8 +88,14 @@ fn main() -> Result<(), Error> {
     let mut sources = Vec::new();
     if let Some(path) = capture.source_envmap_path() {
         let env = load_envmap(&path)?;
-        for ((name, cam), img) in capture.names.iter().zip(&capture.cameras).zip(&capture.images) {
-            sources.push(measure(&asset, cam, &env, img, name, out.as_deref())?);
+        for (((name, cam), img), mask) in capture
+            .names
+            .iter()
+            .zip(&capture.cameras)
+            .zip(&capture.images)
+            .zip(&capture.masks)
+        {
+            sources.push(measure(&asset, cam, &env, img, mask, name, out.as_deref())?);
         }
     }
     let mut targets = Vec::new();
@@ -85,31 +103,57 @@ fn main() -> Result<(), Error> {
         for t in &desc.targets {
             let env = load_envmap(t.envmap_path(&dir))?;
             let (_, _, img) = read_linear_rgb(&t.image_path(&dir))?;
-            targets.push(measure(&asset, &t.camera, &env, &img, &t.name, out.as_deref())?);
+            let mask: Vec<f32> = match t.mask_path(&dir) {
+                Some(p) => image::open(&p)?.to_luma32f().into_raw(),
+                None => img
+                    .iter()
+                    .map(|p| if p.iter().any(|&c| c > 0.0) { 1.0 } else { 0.0 })
+                    .collect(),
+            };
+            targets.push(measure(
+                &asset,
+                &t.camera,
+                &env,
+                &img,
+                &mask,
+                &t.name,
+                out.as_deref(),
+            )?);
         }
     }
     if json {
-        let summary = |s: &[ViewScore]| {
-            mean(s).map(|(p, q, r)| serde_json::json!({"psnr_db": p, "ssim": q, "render_secs": r}))
+        let summary = |s: &[(ViewScore, ErrorBreakdown)]| {
+            mean(s).map(|m| {
+                serde_json::json!({"psnr_db": m[0], "ssim": m[1], "render_secs": m[2],
+                    "edge_share": m[3], "interior_psnr_db": m[4], "coverage_error": m[5]})
+            })
+        };
+        let rows = |s: &[(ViewScore, ErrorBreakdown)]| {
+            s.iter()
+                .map(|(v, b)| serde_json::json!({"score": v, "breakdown": b}))
+                .collect::<Vec<_>>()
         };
         let value = serde_json::json!({
-            "sources": sources, "targets": targets,
+            "sources": rows(&sources), "targets": rows(&targets),
             "mean_sources": summary(&sources), "mean_targets": summary(&targets),
         });
         println!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
-    println!("| view | PSNR (dB) | SSIM | render (s) |");
-    println!("| --- | --- | --- | --- |");
-    for r in sources.iter().chain(&targets) {
+    println!("| view | PSNR (dB) | SSIM | render (s) | edge share | interior PSNR (dB) | coverage error |");
+    println!("| --- | --- | --- | --- | --- | --- | --- |");
+    for (r, b) in sources.iter().chain(&targets) {
         println!(
-            "| {} | {:.2} | {:.4} | {:.3} |",
-            r.name, r.psnr_db, r.ssim, r.render_secs
+            "| {} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} |",
+            r.name, r.psnr_db, r.ssim, r.render_secs, b.edge_share, b.interior_psnr_db, b.coverage_error
         );
     }
     for (label, rows) in [("mean of sources", &sources), ("mean of targets", &targets)] {
-        if let Some((p, s, t)) = mean(rows) {
-            println!("| {label} | {p:.2} | {s:.4} | {t:.3} |");
+        if let Some(m) = mean(rows) {
+            println!(
+                "| {label} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} |",
+                m[0], m[1], m[2], m[3], m[4], m[5]
+            );
         }
     }
     Ok(())

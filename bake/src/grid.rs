@@ -22,7 +22,7 @@
 //! vector for the ground truth) is the expensive part, and most voxels never show:
 //! deep inside an opaque head a ray has long terminated. The optical depth from
 //! outside, `τ(v) = min over 26-connected voxel paths from any missing voxel of
-//! Σ ½(σ_a + σ_b)·|a − b|`, is computed by forward/backward sweeps (a
+//! Σ ½(σ⁺_a + σ⁺_b)·|a − b|` (`σ⁺ = max(σ, 0)`, as the renderer clips), is computed by forward/backward sweeps (a
 //! chamfer-style shortest path; it is at most the optical depth along any straight
 //! ray, so it errs toward keeping voxels). `T` is evaluated for every voxel with
 //! `σ > 0` and `τ < τ_max`, and for their 26 neighbours (trilinear interpolation of
@@ -281,6 +281,47 @@ pub fn evaluate_density(
     })
 }
 
+/// Voxels along the longest side of the box probed by [`occupied_box`].
+pub const PROBE_RESOLUTION: u32 = 64;
+
+/// The box `(min, max)`, metres, of the region where `field` is dense, within
+/// `[lo, hi]` (and within the hull when `carver` is given): the density is probed on
+/// a coarse grid ([`PROBE_RESOLUTION`] voxels along the longest side), voxels at or
+/// above `brick_density_threshold(min_opacity, probe voxel)` count, and their box is
+/// grown by one probe voxel on every side (a feature thinner than a probe voxel can
+/// still end up to a voxel outside) and clipped to `[lo, hi]`. The baker sizes its
+/// voxels by this box, not the hull's: a few frontal views bound depth loosely, so
+/// a hull box is often half again as deep as the head.
+pub fn occupied_box(
+    carver: Option<&HullCarver>,
+    lo: DVec3,
+    hi: DVec3,
+    field: &dyn FieldSource,
+    min_opacity: f64,
+    progress: &Progress,
+) -> Result<(DVec3, DVec3)> {
+    let probe = voxel_size_for(hi - lo, PROBE_RESOLUTION, None)?;
+    let geometry = geometry_for_box(lo, hi, probe)?;
+    let plan = match carver {
+        Some(c) => plan_from_hull(c, geometry),
+        None => plan_all_bricks(geometry),
+    };
+    let dense = evaluate_density(&plan, field, min_opacity, progress)?;
+    let sigma_min = dense.sigma_min_per_m;
+    let mut box_lo = DVec3::INFINITY;
+    let mut box_hi = DVec3::NEG_INFINITY;
+    for (v, &sigma) in dense.density.iter().enumerate() {
+        if f64::from(sigma) >= sigma_min && sigma > 0.0 {
+            let centre = voxel_position(&geometry, dense.grid.bricks(), v);
+            box_lo = box_lo.min(centre);
+            box_hi = box_hi.max(centre);
+        }
+    }
+    // A dense brick holds at least one voxel at the threshold, so the box is not empty.
+    let pad = DVec3::splat(1.5 * probe);
+    Ok(((box_lo - pad).max(lo), (box_hi + pad).min(hi)))
+}
+
 /// The dense bricks plus every brick of the grid holding a voxel 26-adjacent to a
 /// voxel with `σ > 0` of a dense brick, sorted by (z, y, x). A missing voxel counts
 /// as 0 in trilinear interpolation, so without these a surface lying at a brick's
@@ -357,9 +398,9 @@ pub fn optical_depth_from_outside(grid: &BrickGrid, density: &[f32]) -> Vec<f32>
             let (du, su) = if u == usize::MAX {
                 (0.0, 0.0)
             } else {
-                (depth[u], density[u])
+                (depth[u], density[u].max(0.0))
             };
-            let candidate = du + 0.5 * (su + density[v]) * voxel * offsets[i].1;
+            let candidate = du + 0.5 * (su + density[v].max(0.0)) * voxel * offsets[i].1;
             if candidate < best {
                 best = candidate;
             }

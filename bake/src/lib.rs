@@ -36,4 +36,4 @@ pub use pipeline::{
     sidecar_path, write_bake,
 };
 pub use progress::Progress;
-pub use source::{GroundTruth, InsetMeshField, ShellPlacement, TraceOverrides};
+pub use source::{GroundTruth, ShellMeshField, ShellPlacement, ShellProfile, TraceOverrides};

@@ -28,14 +28,15 @@ use crate::capture_in::LoadedCapture;
 use crate::error::{BakeError, Result, io_error};
 use crate::grid::{
     GridPlan, evaluate_density, evaluate_light_transport, geometry_for_box, light_transport_band,
-    plan_all_bricks, plan_from_hull, voxel_size_for,
+    occupied_box, plan_all_bricks, plan_from_hull, voxel_size_for,
 };
 use crate::hull::{HullCarver, hull_bounds};
-use crate::pca::{fit_weighted_pca, project_coefficients};
+use crate::pca::{WeightedPca, fit_weighted_pca, project_coefficients};
 use crate::progress::Progress;
 use crate::rank::{
-    CandidateLoss, RankScene, box_downsample, candidate_loss, candidate_ranks, light_texels, reduced_camera,
-    reference_renders, relative_error_vs_images, test_environments, unquantized_radiance,
+    CandidateLoss, RankScene, box_downsample, candidate_loss, candidate_ranks, component_images,
+    light_texels, reduced_camera, reference_renders, relative_error_vs_images, test_environments,
+    unquantized_radiance,
 };
 use crate::source::{GroundTruth, ShellPlacement, TraceOverrides, describe_trace, mesh_field};
 
@@ -94,12 +95,17 @@ pub struct BakeConfig {
     /// this (plus one voxel around), elsewhere the PCA mean.
     #[arg(long, default_value_t = 10.0)]
     pub max_optical_depth: f64,
-    /// Ground-truth field: width of the density shell at the surface, voxels.
-    #[arg(long, default_value_t = 2.0)]
-    pub shell_voxels: f32,
-    /// Ground-truth field: where the density shell sits (inside the surface, or centred on it).
+    /// Ground-truth field: how density follows the signed distance to the mesh (a
+    /// signed linear ramp through the surface, a ramp inside it, or one centred on it).
     #[arg(long, value_enum, default_value_t)]
     pub shell_placement: ShellPlacement,
+    /// Ground-truth field, `inside`/`centred` shells: ramp width, voxels.
+    #[arg(long, default_value_t = 2.0)]
+    pub shell_voxels: f32,
+    /// Ground-truth field, `signed` shell: how far outside the surface the density
+    /// crosses zero, voxels (the slope puts transmittance ½ at the surface).
+    #[arg(long, default_value_t = 0.25)]
+    pub lead_voxels: f32,
     /// Outgoing direction the light transport is baked for.
     #[arg(long, value_enum, default_value_t)]
     pub view_policy: ViewPolicyChoice,
@@ -144,8 +150,9 @@ impl Default for BakeConfig {
             dilate_px: 2,
             min_brick_opacity: 0.01,
             max_optical_depth: 10.0,
+            shell_placement: ShellPlacement::Signed,
             shell_voxels: 2.0,
-            shell_placement: ShellPlacement::Inside,
+            lead_voxels: 0.25,
             view_policy: ViewPolicyChoice::AverageCameras,
             render_size: 128,
             step_voxels: 0.5,
@@ -196,6 +203,9 @@ impl BakeConfig {
         if !(self.shell_voxels.is_finite() && self.shell_voxels > 0.0) {
             return bad(format!("--shell-voxels {} must be positive", self.shell_voxels));
         }
+        if !(self.lead_voxels.is_finite() && self.lead_voxels > 0.0 && self.lead_voxels <= 2.0) {
+            return bad(format!("--lead-voxels {} must be in (0, 2]", self.lead_voxels));
+        }
         self.march().validate()?;
         Ok(())
     }
@@ -207,6 +217,24 @@ impl BakeConfig {
             ..MarchSettings::default()
         }
     }
+}
+
+/// Share of the PCA truncation error that 8-bit quantization may add (see
+/// [`quantization_step`]).
+pub const QUANTIZATION_ERROR_SHARE: f64 = 0.1;
+
+/// The one 8-bit step floor for every component
+/// (`Coefficients::quantize_with_min_step`): uniform rounding with step `δ` adds
+/// `δ²/12` of squared error per component, so `K` components add `K δ²/12`; setting
+/// that to [`QUANTIZATION_ERROR_SHARE`] of the weighted PCA's truncation error at
+/// rank `K` (the sum of the dropped eigenvalues) gives
+/// `δ = √(12 · share · Σ_{k>K} λ_k / K)`. Equal error per component is the
+/// reverse water-filling allocation (least squared error for the bits). The rank
+/// choice then judges the quantized asset, so the loss it reports includes this.
+pub fn quantization_step(pca: &WeightedPca, rank: usize) -> f32 {
+    let dropped: f64 = pca.eigenvalues.iter().skip(rank).map(|l| l.max(0.0)).sum();
+    let step = (12.0 * QUANTIZATION_ERROR_SHARE * dropped / rank.max(1) as f64).sqrt();
+    if step.is_finite() { step as f32 } else { 0.0 }
 }
 
 /// How the unquantized grid's own error `m₀` is known (see [`crate::rank`]).
@@ -427,6 +455,7 @@ pub fn bake_field(
             .copy_from_slice(&compact[i * top_rank..(i + 1) * top_rank]);
     }
     let encoding = config.encoding.encoding();
+    let min_step = quantization_step(&pca, top_rank);
     let world_from_light = job.field.world_from_light();
     let stored_density = encode_density(density)?;
     let full = Asset {
@@ -435,7 +464,7 @@ pub fn bake_field(
         bricks: grid.bricks().to_vec(),
         density: stored_density.clone(),
         pca: model.clone(),
-        coefficients: Coefficients::quantize(&coefficients, top_rank, encoding)?,
+        coefficients: Coefficients::quantize_with_min_step(&coefficients, top_rank, encoding, min_step)?,
         metadata: serde_json::json!({}),
     };
     timings.pca_secs = t.elapsed().as_secs_f64();
@@ -492,6 +521,7 @@ pub fn bake_field(
     }
     let envs = test_environments();
     let references = reference_renders(&scene, &envs, &lt_voxels, &lt, &model.mean)?;
+    let components = component_images(&scene, &full)?;
     let ranks = match config.rank {
         Some(k) => vec![k],
         None => candidate_ranks(config.max_rank, data_rank),
@@ -500,7 +530,7 @@ pub fn bake_field(
     let mut candidates = Vec::new();
     let mut chosen = None;
     for &k in &ranks {
-        let per_env_db = candidate_loss(&scene, &references, &full, k, m0)?;
+        let per_env_db = candidate_loss(&references, &components, &full, k, m0)?;
         let loss = per_env_db.iter().copied().fold(0.0f64, f64::max);
         candidates.push(CandidateLoss {
             rank: k,
@@ -564,6 +594,7 @@ pub fn bake_field(
             "energy_kept": report.energy_kept,
             "data_rank": data_rank,
             "encoding": encoding.name(),
+            "quantization_min_step": min_step,
             "weighting": "sum over the capture's views of the visibility weights (nelf-render), plus weight_floor × their mean",
             "eigenvalues": pca.eigenvalues.iter().take(top_rank.max(rank)).collect::<Vec<_>>(),
         },
@@ -581,7 +612,7 @@ pub fn bake_field(
     });
     let asset = Asset {
         pca: model.truncated(rank),
-        coefficients: Coefficients::quantize(&truncated, rank, encoding)?,
+        coefficients: Coefficients::quantize_with_min_step(&truncated, rank, encoding, min_step)?,
         metadata,
         density: stored_density,
         ..full
@@ -590,9 +621,9 @@ pub fn bake_field(
     Ok(BakeOutput { asset, report })
 }
 
-/// A capture's grid, before any field is evaluated: the visual hull of its masks,
-/// the hull's box, the voxel size the configuration asks for, and the bricks over
-/// the hull.
+/// A capture's grid, before the bake proper: the visual hull of its masks, the box
+/// where the field is dense inside it, the voxel size the configuration asks for,
+/// and the bricks over the hull within that box.
 #[derive(Debug, Clone)]
 pub struct CapturePlan {
     /// Bricks over the hull.
@@ -601,22 +632,38 @@ pub struct CapturePlan {
     pub voxel_size_m: f64,
     /// The hull's box `(min, max)`, metres.
     pub hull_box_m: (DVec3, DVec3),
-    /// Seconds carving the hull.
+    /// The box the grid covers `(min, max)`, metres: where `probe` is dense inside
+    /// the hull box ([`occupied_box`]), or the hull box when `--voxel-size-m` is given.
+    pub grid_box_m: (DVec3, DVec3),
+    /// Seconds carving the hull and probing the density.
     pub hull_secs: f64,
 }
 
-/// Carves the visual hull of a capture's masks and lays bricks over it.
-pub fn plan_capture(capture: &LoadedCapture, config: &BakeConfig) -> Result<CapturePlan> {
+/// Carves the visual hull of a capture's masks and lays bricks over it. With
+/// `--resolution`, the voxel size is the longest side of the region where `probe`
+/// is dense ([`occupied_box`]) over the resolution, and the grid covers that region;
+/// with `--voxel-size-m` the grid covers the hull's box.
+pub fn plan_capture(
+    capture: &LoadedCapture,
+    config: &BakeConfig,
+    probe: &dyn FieldSource,
+    progress: &Progress,
+) -> Result<CapturePlan> {
     config.validate()?;
     let t = Instant::now();
     let carver = HullCarver::new(&capture.cameras, &capture.masks, config.dilate_px)?;
     let (lo, hi) = hull_bounds(&carver, capture.head_centre_m)?;
-    let voxel = voxel_size_for(hi - lo, config.resolution, config.voxel_size_m)?;
-    let plan = plan_from_hull(&carver, geometry_for_box(lo, hi, voxel)?);
+    let (grid_lo, grid_hi) = match config.voxel_size_m {
+        Some(_) => (lo, hi),
+        None => occupied_box(Some(&carver), lo, hi, probe, config.min_brick_opacity, progress)?,
+    };
+    let voxel = voxel_size_for(grid_hi - grid_lo, config.resolution, config.voxel_size_m)?;
+    let plan = plan_from_hull(&carver, geometry_for_box(grid_lo, grid_hi, voxel)?);
     Ok(CapturePlan {
         plan,
         voxel_size_m: voxel,
         hull_box_m: (lo, hi),
+        grid_box_m: (grid_lo, grid_hi),
         hull_secs: t.elapsed().as_secs_f64(),
     })
 }
@@ -643,6 +690,7 @@ pub fn bake_capture_field(
         None => Reference::AssumedSnrDb(config.reference_snr_db),
     };
     let (lo, hi) = planned.hull_box_m;
+    let (grid_lo, grid_hi) = planned.grid_box_m;
     let provenance = serde_json::json!({
         "kind": "capture",
         "capture": capture.dir.display().to_string(),
@@ -650,6 +698,7 @@ pub fn bake_capture_field(
         "views": capture.names,
         "head_centre_m": capture.head_centre_m.to_array(),
         "hull_box_m": [lo.to_array(), hi.to_array()],
+        "grid_box_m": [grid_lo.to_array(), grid_hi.to_array()],
         "source": field_provenance,
     });
     let job = FieldBake {
@@ -675,21 +724,31 @@ pub fn bake_capture(
     config: &BakeConfig,
     progress: &Progress,
 ) -> Result<BakeOutput> {
-    let planned = plan_capture(capture, config)?;
     let mesh = truth.mesh()?;
     let trace = config.trace.apply(truth.trace_settings());
+    // Occupancy only: any voxel size will do for the probe's shell.
+    let probe = mesh_field(
+        &mesh,
+        trace,
+        config.voxel_size_m.unwrap_or(1e-3),
+        ShellPlacement::Inside,
+        config.shell_voxels,
+        config.lead_voxels,
+    )?;
+    let planned = plan_capture(capture, config, probe.as_ref(), progress)?;
     let field = mesh_field(
         &mesh,
         trace,
         planned.voxel_size_m,
-        config.shell_voxels,
         config.shell_placement,
+        config.shell_voxels,
+        config.lead_voxels,
     )?;
     let centres: Vec<DVec3> = capture.cameras.iter().map(PinholeCamera::centre).collect();
     let view_policy = view_policy_for(config.view_policy, &centres)?;
     let field_provenance = serde_json::json!({
         "ground_truth": truth.describe(),
-        "field": describe_trace(&trace, config.shell_voxels, config.shell_placement),
+        "field": describe_trace(&trace, config),
     });
     bake_capture_field(
         capture,
@@ -739,7 +798,14 @@ pub fn bake_mesh(
     let (lo, hi) = mesh.bounds();
     let voxel = voxel_size_for((hi - lo).as_dvec3(), config.resolution, config.voxel_size_m)?;
     let trace = config.trace.apply(TraceSettings::default());
-    let field = mesh_field(mesh, trace, voxel, config.shell_voxels, config.shell_placement)?;
+    let field = mesh_field(
+        mesh,
+        trace,
+        voxel,
+        config.shell_placement,
+        config.shell_voxels,
+        config.lead_voxels,
+    )?;
     let (flo, fhi) = field.bounds();
     let plan = plan_all_bricks(geometry_for_box(flo.as_dvec3(), fhi.as_dvec3(), voxel)?);
     let hull_secs = t.elapsed().as_secs_f64();
@@ -767,7 +833,7 @@ pub fn bake_mesh(
         "kind": "mesh",
         "mesh": description,
         "triangles": mesh.triangles.len(),
-        "field": describe_trace(&trace, config.shell_voxels, config.shell_placement),
+        "field": describe_trace(&trace, config),
         "reference_views": format!("{} path-traced views under {}", cameras.len(), test_environments()[MESH_REFERENCE_ENV].name),
     });
     let job = FieldBake {

@@ -27,7 +27,7 @@ use glam::DMat3;
 use nelf_format::Asset;
 use nelf_format::conventions::{LT_DIM, LatLong, PinholeCamera, project_envmap, shade};
 use nelf_render::{
-    BrickGrid, Image, MarchSettings, project_light_texels, radiance_from_lt, render_volume, voxel_radiance,
+    BrickGrid, Image, MarchSettings, project_light_texels, radiance_from_lt, render_features, render_volume,
 };
 use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
 use serde::{Deserialize, Serialize};
@@ -269,32 +269,72 @@ pub fn loss_db(m0: f64, m: f64) -> f64 {
     10.0 * ((m0 + m) / m0).log10()
 }
 
-/// Renders `asset` (coefficients of rank ≥ `rank`) with its first `rank`
-/// components under every test environment and measures the loss against the
-/// references (module docs).
+/// The asset's stored coefficients rendered once per view as features `[1, c_0 … c_{K−1}]`
+/// (`nelf_render::render_features`): a render is linear in the radiance, so the
+/// image of rank `r` under any lighting is `F_0 · P_mean + Σ_{k<r} F_{k+1} · P_k`
+/// per pixel (`P` the lighting projected onto the basis), with no further marching.
+#[derive(Debug, Clone)]
+pub struct ComponentImages {
+    /// Floats per pixel, `K + 1`.
+    pub dim: usize,
+    /// Per view, `pixels × dim`, row-major.
+    pub views: Vec<Vec<f32>>,
+}
+
+/// Renders the features of every view of `scene` (see [`ComponentImages`]).
+pub fn component_images(scene: &RankScene<'_>, asset: &Asset) -> Result<ComponentImages> {
+    let rank = asset.coefficients.rank();
+    let dim = rank + 1;
+    let voxels = scene.grid.voxel_count();
+    let mut features = vec![0.0f32; voxels * dim];
+    for (v, f) in features.chunks_exact_mut(dim).enumerate() {
+        f[0] = 1.0;
+        asset.coefficients.voxel_f32(v, &mut f[1..]);
+    }
+    let views = scene
+        .views
+        .iter()
+        .map(|cam| {
+            Ok(render_features(
+                scene.grid,
+                scene.density,
+                &features,
+                dim,
+                cam,
+                &scene.march,
+            )?)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(ComponentImages { dim, views })
+}
+
+/// Loss (dB) of keeping the first `rank` components of `asset` (whose features
+/// `components` holds), per test environment: `L_e(K)` of the module docs, with the
+/// candidate images formed from `components`.
 pub fn candidate_loss(
-    scene: &RankScene<'_>,
     references: &[EnvReference],
+    components: &ComponentImages,
     asset: &Asset,
     rank: usize,
     m0: f64,
 ) -> Result<Vec<f64>> {
+    let used = rank.min(components.dim - 1);
     references
         .iter()
         .map(|r| {
             let light = project_light_texels(&asset.pca, &r.light)?;
-            let radiance = voxel_radiance(asset, &light, Some(rank));
-            let images = render_all(scene, &radiance)?;
-            let err: f64 = images
-                .iter()
-                .zip(&r.images)
-                .flat_map(|(a, b)| a.rgb.iter().zip(&b.rgb))
-                .map(|(a, b)| {
-                    (0..3)
-                        .map(|c| (f64::from(a[c]) - f64::from(b[c])).powi(2))
-                        .sum::<f64>()
-                })
-                .sum();
+            let mut err = 0.0f64;
+            for (features, reference) in components.views.iter().zip(&r.images) {
+                for (f, truth) in features.chunks_exact(components.dim).zip(&reference.rgb) {
+                    for (c, &t) in truth.iter().enumerate() {
+                        let mut value = f[0] * light.mean_rgb[c];
+                        for (fk, p) in f[1..=used].iter().zip(&light.component_rgb) {
+                            value += fk * p[c];
+                        }
+                        err += (f64::from(value) - f64::from(t)).powi(2);
+                    }
+                }
+            }
             let m = if r.signal > 0.0 {
                 err / r.signal
             } else if err > 0.0 {

@@ -157,7 +157,6 @@ fn bake_network(
     config: &BakeConfig,
     progress: Progress,
 ) -> anyhow::Result<BakeOutput> {
-    let planned = plan_capture(capture, config)?;
     let prepared = NetCapture::new(
         &capture.cameras,
         &capture.images,
@@ -169,6 +168,7 @@ fn bake_network(
     let model = Model::load(weights, NelfConfig::for_device(&device), &device)
         .with_context(|| format!("loading the weights {}", weights.display()))?;
     let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
+    let planned = plan_capture(capture, config, &field, &progress)?;
     let view_policy = field.recommended_view_policy();
     let provenance = serde_json::json!({
         "kind": "nelf-network",

@@ -43,7 +43,20 @@ pub fn run(args: &CaptureArgs) -> anyhow::Result<()> {
 
 fn run_synth(args: &SynthArgs) -> anyhow::Result<()> {
     let progress = ProgressBar::new(0);
-    let report = write_synthetic_capture(&args.config, &args.out, &progress)
+    // synth_config.json names its input files; absolute paths keep it usable from
+    // any working directory (a bake of the capture rebuilds the mesh from it).
+    let absolute = |p: &std::path::Path| {
+        std::path::absolute(p).with_context(|| format!("resolving the path {}", p.display()))
+    };
+    let mut config = args.config.clone();
+    config.mesh = config.mesh.as_deref().map(absolute).transpose()?;
+    config.envmap = config.envmap.as_deref().map(absolute).transpose()?;
+    config.target_envmap = config
+        .target_envmap
+        .iter()
+        .map(|p| absolute(p))
+        .collect::<anyhow::Result<_>>()?;
+    let report = write_synthetic_capture(&config, &args.out, &progress)
         .with_context(|| format!("writing a synthetic capture to {}", args.out.display()))?;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report)?);
