@@ -6,7 +6,7 @@
 # lights), plus the source views under the capture's lighting.
 #
 #   cargo build --release -p nelf --bins -p nelf-bake --examples
-#   bash scripts/eval_bakes.sh [OUT_DIR]        # env: SIZE (px, 128), RESOLUTIONS ("64 96 128 160"), FIXED_RANK (16)
+#   bash scripts/eval_bakes.sh [OUT_DIR]        # env: SIZE (px, 128), RESOLUTIONS ("64 96 128 160"), FIXED_RANK (16), REFERENCE_RES (128)
 #
 # Writes OUT_DIR/table.md. Needs ../shared (the HDRIs and the scan).
 set -euo pipefail
@@ -16,6 +16,7 @@ SHARED=${SHARED:-../shared}
 SIZE=${SIZE:-128}
 RESOLUTIONS=${RESOLUTIONS:-"64 96 128 160"}
 FIXED_RANK=${FIXED_RANK:-16}
+REFERENCE_RES=${REFERENCE_RES:-128}
 NELF=target/release/nelf
 EVAL=target/release/examples/bake_eval
 mkdir -p "$OUT"
@@ -42,10 +43,18 @@ done
 } > "$OUT/table.md"
 for head in procedural scan; do
   for res in $RESOLUTIONS; do
-    for policy in auto "K=$FIXED_RANK"; do
+    policies=(auto "K=$FIXED_RANK")
+    # Near-lossless reference (K = 128, f16) at one resolution: the loss due to PCA +
+    # quantization alone is its PSNR minus the others'.
+    [ "$res" = "$REFERENCE_RES" ] && policies+=("K=128-f16")
+    for policy in "${policies[@]}"; do
       name="${head}_${res}_${policy/=/}"
       rank_args=()
-      [ "$policy" = auto ] || rank_args=(--rank "$FIXED_RANK")
+      case "$policy" in
+        auto) ;;
+        K=128-f16) rank_args=(--rank 128 --encoding f16) ;;
+        *) rank_args=(--rank "$FIXED_RANK") ;;
+      esac
       start=$EPOCHREALTIME
       $NELF bake capture "$OUT/capture_$head" -o "$OUT/$name.nelf" --resolution "$res" --quiet "${rank_args[@]}" > /dev/null
       end=$EPOCHREALTIME

@@ -4,17 +4,12 @@
 
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
+mod common;
+
 use std::fmt::Write as _;
-use std::process::Command;
 
+use common::{fixture_weights, nelf, tiny_capture};
 use nelf_format::read_asset;
-
-fn nelf(args: &[&std::ffi::OsStr]) -> std::process::Output {
-    match Command::new(env!("CARGO_BIN_EXE_nelf")).args(args).output() {
-        Ok(out) => out,
-        Err(e) => panic!("cannot run nelf: {e}"),
-    }
-}
 
 /// A closed sphere-like mesh (a subdivided cube pushed onto a sphere of radius
 /// 0.1 m, outward-facing), as OFF text.
@@ -128,39 +123,8 @@ fn bake_mesh_writes_an_asset_and_bad_captures_fail() {
 #[test]
 fn bake_capture_with_network_weights() {
     let dir = tempfile::tempdir().unwrap();
-    let cap = dir.path().join("cap");
-    let synth = nelf(
-        &[
-            "capture",
-            "synth",
-            "-o",
-            cap.to_str().unwrap(),
-            "--width",
-            "32",
-            "--height",
-            "32",
-            "--texel-samples",
-            "1",
-            "--indirect-samples",
-            "4",
-            "--bounces",
-            "0",
-            "--targets",
-            "0",
-            "--head-cells",
-            "40",
-        ]
-        .map(std::ffi::OsStr::new),
-    );
-    assert!(
-        synth.status.success(),
-        "{}",
-        String::from_utf8_lossy(&synth.stderr)
-    );
-    let weights = concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../shared/nelf-oracle/fixture_seed0.safetensors"
-    );
+    let cap = tiny_capture(dir.path(), 32, 0, &["--head-cells", "40"]);
+    let weights = fixture_weights();
     let asset_path = dir.path().join("net.nelf");
     let bake = nelf(
         &[

@@ -5,66 +5,26 @@
 //! `world_from_light`; bad inputs fail with clear messages.
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
-use std::ffi::OsStr;
-use std::path::Path;
-use std::process::{Command, Output};
+mod common;
 
+use common::{fixture_weights, nelf, succeed, tiny_capture};
 use glam::DMat3;
 use nelf_format::conventions::{is_rotation, project_envmap};
 use nelf_scene::envmap::load_envmap;
 
-const WEIGHTS: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../shared/nelf-oracle/fixture_seed0.safetensors"
-);
-
-fn nelf<S: AsRef<OsStr>>(args: &[S]) -> Output {
-    match Command::new(env!("CARGO_BIN_EXE_nelf")).args(args).output() {
-        Ok(out) => out,
-        Err(e) => panic!("cannot run nelf: {e}"),
-    }
-}
-
-fn succeed<S: AsRef<OsStr>>(args: &[S]) -> String {
-    let out = nelf(args);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8(out.stdout).unwrap()
-}
-
 #[test]
 fn light_writes_the_estimate_in_the_world_frame() {
-    if !Path::new(WEIGHTS).is_file() {
-        eprintln!("no weights at {WEIGHTS}: nelf light not checked");
-        return;
-    }
+    let weights = fixture_weights();
     let dir = tempfile::tempdir().unwrap();
-    let capture = dir.path().join("capture");
+    let capture = tiny_capture(dir.path(), 64, 1, &[]);
     let cap = capture.to_str().unwrap();
-    succeed(&[
-        "capture",
-        "synth",
-        "-o",
-        cap,
-        "--width",
-        "64",
-        "--height",
-        "64",
-        "--bounces",
-        "0",
-        "--texel-samples",
-        "2",
-        "--indirect-samples",
-        "4",
-        "--targets",
-        "1",
-    ]);
     let world = dir.path().join("light.exr");
     let raw = dir.path().join("light_frame.exr");
     let summary: serde_json::Value = serde_json::from_str(&succeed(&[
         "light",
         cap,
         "--weights",
-        WEIGHTS,
+        weights,
         "-o",
         world.to_str().unwrap(),
         "--width",
@@ -76,7 +36,7 @@ fn light_writes_the_estimate_in_the_world_frame() {
         "light",
         cap,
         "--weights",
-        WEIGHTS,
+        weights,
         "-o",
         raw.to_str().unwrap(),
         "--light-frame",
@@ -124,7 +84,7 @@ fn light_writes_the_estimate_in_the_world_frame() {
     ]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("loading the weights"));
-    let out = nelf(&["light", dir.path().to_str().unwrap(), "--weights", WEIGHTS]);
+    let out = nelf(&["light", dir.path().to_str().unwrap(), "--weights", weights]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("loading the capture"));
 }

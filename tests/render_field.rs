@@ -4,10 +4,9 @@
 //! the options are checked.
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
-use std::ffi::OsStr;
-use std::path::Path;
-use std::process::{Command, Output};
+mod common;
 
+use common::{fixture_weights, nelf, succeed, tiny_capture};
 use nelf_field::capture::{default_net_from_world, load_capture_dir};
 use nelf_field::light::latlong_to_net_light;
 use nelf_field::render::{ImageSettings, render_image};
@@ -15,51 +14,12 @@ use nelf_field::{Model, NelfConfig, NelfField};
 use nelf_format::conventions::PinholeCamera;
 use nelf_scene::envmap::load_envmap;
 
-const WEIGHTS: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../shared/nelf-oracle/fixture_seed0.safetensors"
-);
-
-fn nelf<S: AsRef<OsStr>>(args: &[S]) -> Output {
-    match Command::new(env!("CARGO_BIN_EXE_nelf")).args(args).output() {
-        Ok(out) => out,
-        Err(e) => panic!("cannot run nelf: {e}"),
-    }
-}
-
-fn succeed<S: AsRef<OsStr>>(args: &[S]) -> String {
-    let out = nelf(args);
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    String::from_utf8(out.stdout).unwrap()
-}
-
 #[test]
 fn render_field_matches_the_library() {
-    if !Path::new(WEIGHTS).is_file() {
-        eprintln!("no weights at {WEIGHTS}: nelf render --field not checked");
-        return;
-    }
+    let weights = fixture_weights();
     let dir = tempfile::tempdir().unwrap();
-    let capture = dir.path().join("capture");
+    let capture = tiny_capture(dir.path(), 64, 1, &[]);
     let cap = capture.to_str().unwrap();
-    succeed(&[
-        "capture",
-        "synth",
-        "-o",
-        cap,
-        "--width",
-        "64",
-        "--height",
-        "64",
-        "--bounces",
-        "0",
-        "--texel-samples",
-        "2",
-        "--indirect-samples",
-        "4",
-        "--targets",
-        "1",
-    ]);
     let out = dir.path().join("field.exr");
     let view_of = format!("{cap}:view_001");
     succeed(&[
@@ -67,7 +27,7 @@ fn render_field_matches_the_library() {
         "--field",
         cap,
         "--weights",
-        WEIGHTS,
+        weights,
         "--view-of",
         &view_of,
         "--width",
@@ -87,7 +47,7 @@ fn render_field_matches_the_library() {
 
     // The library, same camera (the view at 12 × 12), same light, same sampling.
     let (prepared, description) = load_capture_dir(&capture, default_net_from_world()).unwrap();
-    let model = Model::load(WEIGHTS, NelfConfig::default(), &candle_core::Device::Cpu).unwrap();
+    let model = Model::load(weights, NelfConfig::default(), &candle_core::Device::Cpu).unwrap();
     let field = NelfField::new(model, &prepared).unwrap();
     let view = description.view("view_001").unwrap().camera;
     let s = 12.0 / 64.0;
@@ -129,7 +89,7 @@ fn render_field_matches_the_library() {
         "--field",
         cap,
         "--weights",
-        WEIGHTS,
+        weights,
         "--orbit",
         "20,5",
         "--width",
@@ -145,6 +105,6 @@ fn render_field_matches_the_library() {
     let out = nelf(&["render", "--field", cap, "-o", png.to_str().unwrap()]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--weights"));
-    let out = nelf(&["render", "some.nelf", "--field", cap, "--weights", WEIGHTS]);
+    let out = nelf(&["render", "some.nelf", "--field", cap, "--weights", weights]);
     assert!(!out.status.success());
 }

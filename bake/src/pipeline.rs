@@ -34,7 +34,7 @@ use crate::hull::{HullCarver, hull_bounds};
 use crate::pca::{WeightedPca, fit_weighted_pca, project_coefficients};
 use crate::progress::Progress;
 use crate::rank::{
-    CandidateLoss, RankScene, box_downsample, candidate_loss, candidate_ranks, component_images,
+    CandidateLoss, RankScene, TestEnv, box_downsample, candidate_loss, candidate_ranks, component_images,
     light_texels, reduced_camera, reference_renders, relative_error_vs_images, test_environments,
     unquantized_radiance,
 };
@@ -221,7 +221,7 @@ impl BakeConfig {
 
 /// Share of the PCA truncation error that 8-bit quantization may add (see
 /// [`quantization_step`]).
-pub const QUANTIZATION_ERROR_SHARE: f64 = 0.1;
+pub const QUANTIZATION_ERROR_SHARE: f64 = 0.25;
 
 /// The one 8-bit step floor for every component
 /// (`Coefficients::quantize_with_min_step`): uniform rounding with step `δ` adds
@@ -519,7 +519,17 @@ pub fn bake_field(
             "the unquantized grid's relative error against ground truth is {m0}; the rank cannot be chosen from it (force --rank)"
         )));
     }
-    let envs = test_environments();
+    // The fixed test maps, plus the capture's own lighting when known: the views the
+    // loss is judged at are the capture's, and that lighting is a real one for them.
+    let mut envs = test_environments();
+    if let Reference::Images { lighting, .. } = &job.reference
+        && !envs.iter().any(|e| e.map == *lighting)
+    {
+        envs.push(TestEnv {
+            name: "capture-lighting".into(),
+            map: lighting.clone(),
+        });
+    }
     let references = reference_renders(&scene, &envs, &lt_voxels, &lt, &model.mean)?;
     let components = component_images(&scene, &full)?;
     let ranks = match config.rank {

@@ -3,7 +3,8 @@
 //! The capture's own views (at reduced resolution) are rendered by the reference
 //! renderer (`nelf-render`) under a fixed set of test environments: a constant
 //! white map and four procedural maps (`nelf_scene::envgen`, [`TEST_ENVS`]: two
-//! outdoor with a sun, one indoor, one studio). For each
+//! outdoor with a sun, one indoor, one studio), plus the capture's own lighting when
+//! it is known (the pipeline adds it). For each
 //! environment `e`, `I⁰_e` is the render of the **unquantized** grid (each voxel
 //! shaded from its raw 384-vector) and `Iᴷ_e` that of the candidate (rank-`K` PCA,
 //! quantized coefficients, exactly what the file will hold). Summing over views,
@@ -22,6 +23,10 @@
 //! The rank chosen is the smallest candidate in [`RANK_CANDIDATES`] (capped at the
 //! data's numerical rank and the largest rank allowed) whose loss is at most the
 //! target (0.1 dB by default); if none is, the largest candidate, flagged.
+//!
+//! Candidate images are not marched one by one: [`component_images`] renders each
+//! view once with per-voxel features `[1, c_0 … c_{K−1}]` and every candidate image
+//! is a `K`-term sum per pixel (rendering is linear in the radiance).
 
 use glam::DMat3;
 use nelf_format::Asset;

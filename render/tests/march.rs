@@ -56,6 +56,18 @@ fn head_on_camera() -> PinholeCamera {
     )
 }
 
+/// The synthetic shell asset (6³ bricks with empty ones inside and in the corners)
+/// under a random map: grid, density and per-voxel radiance.
+fn shell_scene() -> (BrickGrid, Vec<f32>, Vec<[f32; 3]>) {
+    let asset = synthetic(60_000, 6, CoefficientEncoding::U8Affine, 5);
+    let grid = BrickGrid::from_asset(&asset).unwrap();
+    let density = asset_density(&asset);
+    let env = random_map(32, 16, 4, 2.0);
+    let light = project_light(&asset.pca, asset.world_from_light, &env, DMat3::IDENTITY).unwrap();
+    let radiance = voxel_radiance(&asset, &light, None);
+    (grid, density, radiance)
+}
+
 #[test]
 fn homogeneous_slab_gives_one_minus_exp_optical_depth() {
     // σ L = 40 1/m × 10 voxels × 5 mm = 2. With Δ = ½ voxel and the ray entering on a voxel
@@ -150,12 +162,7 @@ fn rays_missing_the_box_see_nothing_and_cameras_inside_work() {
 
 #[test]
 fn empty_space_skipping_changes_nothing() {
-    let asset = synthetic(60_000, 6, CoefficientEncoding::U8Affine, 5);
-    let grid = BrickGrid::from_asset(&asset).unwrap();
-    let density = asset_density(&asset);
-    let env = random_map(32, 16, 4, 2.0);
-    let light = project_light(&asset.pca, asset.world_from_light, &env, DMat3::IDENTITY).unwrap();
-    let radiance = voxel_radiance(&asset, &light, None);
+    let (grid, density, radiance) = shell_scene();
     let inside = PinholeCamera::look_at(
         DVec3::new(0.02, 0.03, -0.01),
         DVec3::new(0.5, -0.2, 1.0),
@@ -302,12 +309,7 @@ fn bad_inputs_are_refused() {
 fn supersampling_is_the_box_filtered_finer_image() {
     // n² rays through a regular sub-pixel grid are exactly the pixel centres of an
     // n-times finer camera (fx, fy, cx, cy scaled by n), averaged n × n.
-    let asset = synthetic(60_000, 6, CoefficientEncoding::U8Affine, 5);
-    let grid = BrickGrid::from_asset(&asset).unwrap();
-    let density = asset_density(&asset);
-    let env = random_map(32, 16, 4, 2.0);
-    let light = project_light(&asset.pca, asset.world_from_light, &env, DMat3::IDENTITY).unwrap();
-    let radiance = voxel_radiance(&asset, &light, None);
+    let (grid, density, radiance) = shell_scene();
     let camera = orbit_camera(37.0, 21.0, 0.45, 20, 16);
     let one = render_volume(&grid, &density, &radiance, &camera, &MarchSettings::default()).unwrap();
     let n = 3u32;
@@ -420,12 +422,7 @@ fn negative_density_clips_after_interpolation() {
 
 #[test]
 fn feature_renders_are_renders_of_linear_radiance() {
-    let asset = synthetic(60_000, 6, CoefficientEncoding::U8Affine, 5);
-    let grid = BrickGrid::from_asset(&asset).unwrap();
-    let density = asset_density(&asset);
-    let env = random_map(32, 16, 4, 2.0);
-    let light = project_light(&asset.pca, asset.world_from_light, &env, DMat3::IDENTITY).unwrap();
-    let radiance = voxel_radiance(&asset, &light, None);
+    let (grid, density, radiance) = shell_scene();
     let camera = orbit_camera(-40.0, 15.0, 0.5, 24, 20);
     for pixel_grid in [1, 2] {
         let settings = MarchSettings {

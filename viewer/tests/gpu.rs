@@ -140,15 +140,25 @@ fn gpu_matches_cpu_reference() {
     let env = sky(64, 32);
     let env_rotation = rotation_y(0.7);
     let cam = camera(96, 80);
-    for (encoding, rank, truncate, holes) in [
-        (CoefficientEncoding::U8Affine, 8, None, false),
-        (CoefficientEncoding::U8Affine, 8, Some(3), false),
-        (CoefficientEncoding::F16, 6, None, false),
-        (CoefficientEncoding::U8Affine, 8, None, true),
+    for (encoding, rank, truncate, holes, signed) in [
+        (CoefficientEncoding::U8Affine, 8, None, false, false),
+        (CoefficientEncoding::U8Affine, 8, Some(3), false, false),
+        (CoefficientEncoding::F16, 6, None, false, false),
+        (CoefficientEncoding::U8Affine, 8, None, true, false),
+        (CoefficientEncoding::U8Affine, 8, None, true, true),
     ] {
         let mut asset = asset_through_file(40_000, rank, encoding, 5);
         if holes {
             asset = without_bricks(&asset, |b| (b[0] + b[1] + 2 * b[2]) % 3 == 0);
+        }
+        if signed {
+            // Signed density (SPEC 1.1): shift so the thinner parts go negative; both
+            // renderers clip max(0, ·) after interpolating.
+            let max = asset.density.iter().fold(0.0f32, |m, d| m.max(d.to_f32()));
+            for d in &mut asset.density {
+                *d = half::f16::from_f32(2.0 * d.to_f32() - 0.3 * max);
+            }
+            assert!(nelf_format::has_negative_density(&asset.density));
         }
         gpu.load_asset(&asset).unwrap();
         gpu.set_lighting(&env, env_rotation).unwrap();
@@ -172,10 +182,12 @@ fn gpu_matches_cpu_reference() {
         };
         assert_eq!(gpu.render(&cam, &compute).unwrap(), got);
         let db = psnr(&want, &got);
-        eprintln!("{encoding:?} rank {rank} truncated {truncate:?} holes {holes}: PSNR {db:.1} dB");
+        eprintln!(
+            "{encoding:?} rank {rank} truncated {truncate:?} holes {holes} signed {signed}: PSNR {db:.1} dB"
+        );
         assert!(
             db >= 45.0,
-            "{encoding:?} rank {rank} truncated {truncate:?} holes {holes}: PSNR {db:.2} dB"
+            "{encoding:?} rank {rank} truncated {truncate:?} holes {holes} signed {signed}: PSNR {db:.2} dB"
         );
     }
 }

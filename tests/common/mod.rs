@@ -1,0 +1,68 @@
+//! Helpers shared by the end-to-end tests of the `nelf` command: running it, the
+//! parity fixtures' network weights, and a tiny, cheap synthetic capture.
+#![allow(clippy::unwrap_used, dead_code)] // Each test binary uses some of these.
+
+use std::ffi::OsStr;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// The parity fixtures' NeLF weights (random, from the official implementation;
+/// `../shared/nelf-oracle/README.md`). CI has `../shared` beside the checkout.
+pub const FIXTURE_WEIGHTS: &str = concat!(
+    env!("CARGO_MANIFEST_DIR"),
+    "/../shared/nelf-oracle/fixture_seed0.safetensors"
+);
+
+/// The fixture weights' path, failing the test (with the reason) when missing.
+pub fn fixture_weights() -> &'static str {
+    assert!(
+        Path::new(FIXTURE_WEIGHTS).is_file(),
+        "the parity fixtures' weights are missing at {FIXTURE_WEIGHTS}: ../shared must sit beside the checkout"
+    );
+    FIXTURE_WEIGHTS
+}
+
+/// Runs `nelf` with `args`.
+pub fn nelf<S: AsRef<OsStr>>(args: &[S]) -> Output {
+    match Command::new(env!("CARGO_BIN_EXE_nelf")).args(args).output() {
+        Ok(out) => out,
+        Err(e) => panic!("cannot run nelf: {e}"),
+    }
+}
+
+/// Runs `nelf` with `args`, asserts success (showing its stderr) and returns stdout.
+pub fn succeed<S: AsRef<OsStr>>(args: &[S]) -> String {
+    let out = nelf(args);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).unwrap()
+}
+
+/// Writes `nelf capture synth` output to `dir/capture`: `size`² images, `targets`
+/// held-aside views, direct lighting only with few samples (seconds, not minutes),
+/// plus `extra` options. Returns the folder.
+pub fn tiny_capture(dir: &Path, size: u32, targets: u32, extra: &[&str]) -> PathBuf {
+    let capture = dir.join("capture");
+    let size = size.to_string();
+    let targets = targets.to_string();
+    let mut args = vec![
+        "capture",
+        "synth",
+        "-o",
+        capture.to_str().unwrap(),
+        "--width",
+        &size,
+        "--height",
+        &size,
+        "--bounces",
+        "0",
+        "--texel-samples",
+        "2",
+        "--indirect-samples",
+        "4",
+        "--targets",
+        &targets,
+    ];
+    args.extend_from_slice(extra);
+    succeed(&args);
+    capture
+}
