@@ -137,6 +137,11 @@ pub struct BakeConfig {
     /// Coefficient storage.
     #[arg(long, value_enum, default_value_t)]
     pub encoding: EncodingChoice,
+    /// 8-bit coefficients: one quantization step for every component, sized so that
+    /// rounding adds this share of the PCA truncation error (0: each component's
+    /// own range over 254 steps).
+    #[arg(long, default_value_t = 0.1)]
+    pub quantization_share: f64,
     /// Ground-truth path-tracer overrides.
     #[command(flatten)]
     pub trace: TraceOverrides,
@@ -162,6 +167,7 @@ impl Default for BakeConfig {
             max_loss_db: 0.1,
             reference_snr_db: 20.0,
             encoding: EncodingChoice::U8,
+            quantization_share: 0.1,
             trace: TraceOverrides::default(),
         }
     }
@@ -186,6 +192,12 @@ impl BakeConfig {
             return bad(format!(
                 "--reference-snr-db {} must be finite",
                 self.reference_snr_db
+            ));
+        }
+        if !(self.quantization_share.is_finite() && self.quantization_share >= 0.0) {
+            return bad(format!(
+                "--quantization-share {} must be ≥ 0",
+                self.quantization_share
             ));
         }
         if !(self.weight_floor.is_finite() && self.weight_floor >= 0.0) {
@@ -219,21 +231,17 @@ impl BakeConfig {
     }
 }
 
-/// Share of the PCA truncation error that 8-bit quantization may add (see
-/// [`quantization_step`]).
-pub const QUANTIZATION_ERROR_SHARE: f64 = 0.25;
-
 /// The one 8-bit step floor for every component
 /// (`Coefficients::quantize_with_min_step`): uniform rounding with step `δ` adds
 /// `δ²/12` of squared error per component, so `K` components add `K δ²/12`; setting
-/// that to [`QUANTIZATION_ERROR_SHARE`] of the weighted PCA's truncation error at
+/// that to `share` (`--quantization-share`) of the weighted PCA's truncation error at
 /// rank `K` (the sum of the dropped eigenvalues) gives
 /// `δ = √(12 · share · Σ_{k>K} λ_k / K)`. Equal error per component is the
 /// reverse water-filling allocation (least squared error for the bits). The rank
 /// choice then judges the quantized asset, so the loss it reports includes this.
-pub fn quantization_step(pca: &WeightedPca, rank: usize) -> f32 {
+pub fn quantization_step(pca: &WeightedPca, rank: usize, share: f64) -> f32 {
     let dropped: f64 = pca.eigenvalues.iter().skip(rank).map(|l| l.max(0.0)).sum();
-    let step = (12.0 * QUANTIZATION_ERROR_SHARE * dropped / rank.max(1) as f64).sqrt();
+    let step = (12.0 * share * dropped / rank.max(1) as f64).sqrt();
     if step.is_finite() { step as f32 } else { 0.0 }
 }
 
@@ -455,7 +463,7 @@ pub fn bake_field(
             .copy_from_slice(&compact[i * top_rank..(i + 1) * top_rank]);
     }
     let encoding = config.encoding.encoding();
-    let min_step = quantization_step(&pca, top_rank);
+    let min_step = quantization_step(&pca, top_rank, config.quantization_share);
     let world_from_light = job.field.world_from_light();
     let stored_density = encode_density(density)?;
     let full = Asset {
@@ -893,4 +901,30 @@ pub fn write_bake(output: &mut BakeOutput, config: &BakeConfig, path: &Path) -> 
     })?;
     std::fs::write(&sidecar, text + "\n").map_err(|e| io_error(&sidecar, e))?;
     Ok(written)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn quantization_step_spreads_the_share_over_the_kept_components() {
+        let pca = WeightedPca {
+            mean: vec![0.0; LT_DIM],
+            eigenvalues: vec![4.0, 1.0, 0.5, 0.25, 0.25],
+            components: Vec::new(),
+            total_weight: 1.0,
+            count: 10,
+        };
+        // K = 2 drops 1.0 of variance: K δ²/12 = share · 1.0.
+        let step = f64::from(quantization_step(&pca, 2, 0.1));
+        assert!((2.0 * step * step / 12.0 - 0.1).abs() < 1e-6, "{step}");
+        assert_eq!(quantization_step(&pca, 5, 0.1), 0.0, "nothing dropped");
+        assert_eq!(quantization_step(&pca, 2, 0.0), 0.0, "share 0: per-range steps");
+        let bad = BakeConfig {
+            quantization_share: -1.0,
+            ..BakeConfig::default()
+        };
+        assert!(bad.validate().is_err());
+    }
 }
