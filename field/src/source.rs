@@ -22,7 +22,7 @@
 use glam::{DMat3, DVec3, Vec3};
 use indicatif::ProgressBar;
 use nelf_format::conventions::{LT_DIM, LatLong};
-use nelf_scene::field::{FieldError, FieldSource, ViewPolicy, check_batch};
+use nelf_scene::field::{FieldError, FieldSource, ViewPolicy, check_batch, check_density_batch};
 use nelf_scene::tracer::MAX_AVERAGED_DIRECTIONS;
 
 use crate::capture::{MM_PER_M, NetCapture};
@@ -283,17 +283,7 @@ impl FieldSource for NelfField {
     /// σ under [`NelfField::recommended_view_policy`] (the mean over its
     /// directions if it has several), without the light-transport network.
     fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
-        if density.len() != points.len() {
-            return Err(FieldError::LengthMismatch {
-                points: points.len(),
-                density: density.len(),
-                lt: 0,
-                lt_needed: points.len() * LT_DIM,
-            });
-        }
-        if let Some(index) = points.iter().position(|p| !p.is_finite()) {
-            return Err(FieldError::NotFinite { index });
-        }
+        check_density_batch(points, density)?;
         let view = self.recommended_view_policy();
         for (p, d) in points
             .chunks(self.chunk_points)

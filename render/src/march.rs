@@ -311,25 +311,22 @@ fn ray_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
     (t_near < t_far && t_far > 0.0).then_some((t_near, t_far))
 }
 
-/// The `n²` rays of pixel `(col, row)` (module docs, `pixel_grid`): the pixel centre
-/// for `n = 1`, else the centres of an `n × n` sub-pixel grid, x fastest.
+/// The `n²` rays of pixel `(col, row)` (module docs, `pixel_grid`): through the
+/// centres of an `n × n` sub-pixel grid, x fastest (for `n = 1`, exactly
+/// `PinholeCamera::pixel_ray`: the offset is `½`).
 fn pixel_rays(
     camera: &PinholeCamera,
     col: usize,
     row: usize,
     n: u32,
 ) -> impl Iterator<Item = (DVec3, DVec3)> {
+    let sub = move |p: usize, k: u32| p as f64 + (f64::from(k) + 0.5) / f64::from(n);
     (0..n).flat_map(move |j| {
         (0..n).map(move |i| {
-            if n == 1 {
-                camera.pixel_ray(col as u32, row as u32)
-            } else {
-                let sub = |p: usize, k: u32| p as f64 + (f64::from(k) + 0.5) / f64::from(n);
-                (
-                    camera.centre(),
-                    camera.ray_direction(DVec2::new(sub(col, i), sub(row, j))),
-                )
-            }
+            (
+                camera.centre(),
+                camera.ray_direction(DVec2::new(sub(col, i), sub(row, j))),
+            )
         })
     })
 }
@@ -441,14 +438,11 @@ fn render_volume_with(
                             sum[ch] += w * c[ch];
                         }
                     });
-                    if n == 1 {
-                        (pixel_rgb, pixel_alpha) = (sum, 1.0 - t_end);
-                    } else {
-                        for ch in 0..3 {
-                            pixel_rgb[ch] += share * sum[ch];
-                        }
-                        pixel_alpha += share * (1.0 - t_end);
+                    // For n = 1, share = 1 and 0 + 1·x = x: the plain render, bit for bit.
+                    for ch in 0..3 {
+                        pixel_rgb[ch] += share * sum[ch];
                     }
+                    pixel_alpha += share * (1.0 - t_end);
                 }
                 *rgb = pixel_rgb;
                 *alpha = pixel_alpha;

@@ -175,9 +175,7 @@ pub trait FieldSource: Sync {
     /// light transport; sources that can do better override it.
     fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
         const CHUNK: usize = 1024;
-        if density.len() != points.len() {
-            return Err(length_error(points.len(), density.len(), points.len() * LT_DIM));
-        }
+        check_density_batch(points, density)?;
         let mut lt = vec![0.0f32; CHUNK.min(points.len()) * LT_DIM];
         let view = ViewPolicy::Direction(Vec3::Y);
         for (p, d) in points.chunks(CHUNK).zip(density.chunks_mut(CHUNK)) {

@@ -219,17 +219,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         DVec3::from_array(asset.grid.bbox_max_m()),
     );
     let (camera, capture_envmap) = resolve_camera(args, asset_box)?;
-    let (env, envmap_name) = match args.envmap.as_ref().or(capture_envmap.as_ref()) {
-        Some(path) => (
-            nelf_scene::envmap::load_envmap(path)
-                .with_context(|| format!("cannot load environment map {}", path.display()))?,
-            path.display().to_string(),
-        ),
-        None => (
-            LatLong::constant(ENV_W, ENV_H, [1.0; 3]),
-            "constant white (radiance 1)".to_string(),
-        ),
-    };
+    let (env, envmap_name) = lighting(args, capture_envmap.as_deref())?;
     let world_from_env = rotation_y(args.rotate_deg.to_radians());
     let load_seconds = start.elapsed().as_secs_f64();
 
@@ -343,17 +333,7 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
             "the network's estimate of the capture's lighting".to_string(),
         )
     } else {
-        let (env, name) = match args.envmap.as_ref().or(capture_envmap.as_ref()) {
-            Some(path) => (
-                nelf_scene::envmap::load_envmap(path)
-                    .with_context(|| format!("cannot load environment map {}", path.display()))?,
-                path.display().to_string(),
-            ),
-            None => (
-                LatLong::constant(ENV_W, ENV_H, [1.0; 3]),
-                "constant white (radiance 1)".to_string(),
-            ),
-        };
+        let (env, name) = lighting(args, capture_envmap.as_deref())?;
         let world_from_env = rotation_y(args.rotate_deg.to_radians());
         (
             nelf_format::conventions::project_envmap(&env, world_from_env.transpose() * world_from_light)?,
@@ -435,6 +415,25 @@ fn sidecar_path(out: &Path) -> PathBuf {
     let mut name = out.as_os_str().to_owned();
     name.push(".render.json");
     PathBuf::from(name)
+}
+
+/// The lighting to render under: `--envmap`, else the capture's env map (when the
+/// camera came from a capture), else a constant white map; with its name.
+fn lighting(
+    args: &RenderArgs,
+    capture_envmap: Option<&std::path::Path>,
+) -> anyhow::Result<(LatLong, String)> {
+    Ok(match args.envmap.as_deref().or(capture_envmap) {
+        Some(path) => (
+            nelf_scene::envmap::load_envmap(path)
+                .with_context(|| format!("cannot load environment map {}", path.display()))?,
+            path.display().to_string(),
+        ),
+        None => (
+            LatLong::constant(ENV_W, ENV_H, [1.0; 3]),
+            "constant white (radiance 1)".to_string(),
+        ),
+    })
 }
 
 /// The camera from `--camera`, `--view-of` or `--orbit` (default `--orbit 0,0`), and the
