@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Accuracy / size / time of bakes (issue 4's table): two heads (the procedural head,
-# seed 0, and the scanned ../shared/data/meshes/head.off) × bake resolutions × rank
+# seed 0, and the scanned data/meshes/head.off) × bake resolutions × rank
 # policies (chosen per scene vs a fixed K), scored by the reference renderer against
 # path-traced ground truth at held-aside novel views, one per shared HDRI (8 novel
 # lights), plus the source views under the capture's lighting.
@@ -8,11 +8,11 @@
 #   cargo build --release -p nelf --bins -p nelf-bake --examples
 #   bash scripts/eval_bakes.sh [OUT_DIR]        # env: SIZE (px, 128), RESOLUTIONS ("64 96 128 160"), FIXED_RANK (16), REFERENCE_RES (128)
 #
-# Writes OUT_DIR/table.md. Needs ../shared (the HDRIs and the scan).
+# Writes OUT_DIR/table.md. Reads the HDRIs and the scan from data/ (DATA=... for another folder).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 OUT=${1:-out/eval}
-SHARED=${SHARED:-../shared}
+DATA=${DATA:-data}
 SIZE=${SIZE:-128}
 RESOLUTIONS=${RESOLUTIONS:-"64 96 128 160"}
 FIXED_RANK=${FIXED_RANK:-16}
@@ -22,12 +22,12 @@ EVAL=target/release/examples/bake_eval
 mkdir -p "$OUT"
 
 targets=()
-for env in "$SHARED"/data/envmaps/*.exr; do targets+=(--target-envmap "$env"); done
+for env in "$DATA"/envmaps/*.exr; do targets+=(--target-envmap "$env"); done
 n_targets=$(( ${#targets[@]} / 2 ))
 
 declare -A capture_args=(
   [procedural]=""
-  [scan]="--mesh $SHARED/data/meshes/head.off --mesh-rotate-y-deg 90"
+  [scan]="--mesh $DATA/meshes/head.off --mesh-rotate-y-deg 90"
 )
 for head in procedural scan; do
   cap="$OUT/capture_$head"

@@ -1,6 +1,6 @@
 //! End-to-end test of `nelf light`: a small synthetic capture is written with
 //! `nelf capture synth`, its lighting estimated with the parity fixtures' weights
-//! (`../shared/nelf-oracle/fixture_seed0.safetensors`), and the world-frame map is
+//! (`data/nelf-oracle/fixture_seed0.safetensors.zst`), and the world-frame map is
 //! checked against the raw light-frame estimate through the reported
 //! `world_from_light`; bad inputs fail with clear messages.
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.

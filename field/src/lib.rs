@@ -2,7 +2,7 @@
 //! Light-transport Field for Portrait View Synthesis and Relighting", EGSR 2021) in
 //! candle, parameter-compatible with the official PyTorch checkpoint (key names of
 //! its `state_dict`), checked against the official implementation's numbers
-//! (`../shared/nelf-oracle/`).
+//! (`data/nelf-oracle/`, from the official code; `NELF_ORACLE_FIXTURES` adds more).
 //!
 //! * [`model::Model`]: encoder ([`encoder`]), light estimate ([`light`]), per-point
 //!   networks ([`nelfnet`]), batched evaluation with visual-hull pruning;
@@ -29,6 +29,6 @@ pub mod views;
 
 pub use capture::NetCapture;
 pub use error::NetError;
-pub use model::{Model, NelfConfig, default_device, device_name};
+pub use model::{Model, NelfConfig, default_device, device_name, read_safetensors_bytes};
 pub use source::NelfField;
 pub use views::{EncodedViews, SourceViews, Stage};

@@ -4,10 +4,11 @@
 //! fixture's inputs and its paired `fixture_*.safetensors` weights, within the
 //! tolerances the fixtures' README suggests.
 //!
-//! Fixtures are read from `../shared/nelf-oracle` (beside the checkout) or from
+//! Fixtures are read from the repository's `data/nelf-oracle` or from
 //! `NELF_ORACLE_FIXTURES`: a folder, or `io_*.safetensors` files separated by `:`.
 //! Every `io_<case>.safetensors` is paired with `fixture_<case>.safetensors` in the
-//! same folder; V, image size, rays and samples are read from the tensors.
+//! same folder (either may be zstd-compressed, `*.safetensors.zst`); missing
+//! fixtures fail the tests; V, image size, rays and samples are read from the tensors.
 //! `parity_generic.rs` runs the same checks through candle's generic ops (the code
 //! path of non-CPU devices) instead of the fused CPU kernels.
 

@@ -5,7 +5,7 @@
 //! ```text
 //! cargo run --release -p nelf-scene --example envmap_preview -- OUT_DIR [MAP.exr|MAP.hdr|gen:SEED]…
 //! ```
-//! With no maps it previews `../shared/data/envmaps/*.exr` and procedural seeds 0–5.
+//! With no maps it previews `data/envmaps/*.exr` and procedural seeds 0–5.
 
 use std::path::{Path, PathBuf};
 
@@ -22,7 +22,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     std::fs::create_dir_all(&out)?;
     let mut sources: Vec<String> = args.collect();
     if sources.is_empty() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/envmaps");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/envmaps");
         let mut files: Vec<String> = std::fs::read_dir(&dir)?
             .filter_map(Result::ok)
             .map(|e| e.path())

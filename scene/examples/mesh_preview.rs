@@ -7,7 +7,7 @@
 //! cargo run --release -p nelf-scene --example mesh_preview -- MESH OUT.png [ROTATE_Y_DEG]
 //! ```
 //! `MESH` is a `.off`/`.obj` file (loaded with orientation fixed and fitted to
-//! 0.23 m; `../shared/data/meshes/head.off` is turned by its documented angle
+//! 0.23 m; `data/meshes/head.off` is turned by its documented angle
 //! unless `ROTATE_Y_DEG` is given) or `head:SEED` for a procedural head.
 
 use std::path::Path;

@@ -6,7 +6,7 @@
 //! `cargo run --release -p nelf-scene --example trace_bench [-- --size 512 --head PATH --env PATH]`
 //!
 //! Meshes: a 61k-triangle UV sphere and a procedural head (throughput),
-//! and the scanned `../shared/data/meshes/head.off` (2,918 triangles, 0.23 m,
+//! and the scanned `data/meshes/head.off` (2,918 triangles, 0.23 m,
 //! facing +z) for images and noise; the lighting is an HDR lat-long map projected
 //! onto the 8 × 16 basis.
 
@@ -251,8 +251,9 @@ fn main() -> Result<(), Error> {
             .cloned()
     };
     let size: u32 = arg("--size").map(|s| s.parse()).transpose()?.unwrap_or(512);
-    let head_path = arg("--head").unwrap_or_else(|| "../shared/data/meshes/head.off".into());
-    let env_path = arg("--env").unwrap_or_else(|| "../shared/data/envmaps/courtyard.exr".into());
+    let data = concat!(env!("CARGO_MANIFEST_DIR"), "/../data");
+    let head_path = arg("--head").unwrap_or_else(|| format!("{data}/meshes/head.off"));
+    let env_path = arg("--env").unwrap_or_else(|| format!("{data}/envmaps/courtyard.exr"));
 
     let sphere = uv_sphere(Vec3::ZERO, 0.12, 128, 240, [0.6; 3]);
     ray_throughput(&sphere, "UV sphere")?;

@@ -5,7 +5,7 @@
 //!
 //! Files are taken as stored: row 0 is the zenith and the image centre looks
 //! along −z, which is the layout of standard equirectangular HDRIs (checked on
-//! `../shared/data/envmaps/*.exr`: sky at the top). Radiance is linear; negative
+//! `data/envmaps/*.exr`: sky at the top). Radiance is linear; negative
 //! values (DWA compression leaves small ones) and NaN/∞ become 0, so every map we
 //! return is finite and non-negative.
 

@@ -11,7 +11,7 @@
 //! with the IEC 61966-2-1 transfer function; MTL `Kd` is taken as linear.
 //!
 //! Our head convention: centred near the origin, +y up, facing +z (the frontal
-//! camera sits on +z looking toward −z). `../shared/data/meshes/head.off` (CGAL's
+//! camera sits on +z looking toward −z). `data/meshes/head.off` (CGAL's
 //! scanned head, +y up) faces −x (its nose is the extreme −x point, on the
 //! midline z ≈ 0) with clockwise triangles, and is open at the neck and at both
 //! eyes (58 boundary edges): load it with [`LoadOptions::head_off`] (turn +90°
@@ -29,7 +29,7 @@ use crate::mesh::{Albedo, Mesh, Texture};
 /// meshes (and OBJ files whose MTL is missing) get unless told otherwise.
 pub const DEFAULT_SKIN_ALBEDO: [f32; 3] = [0.52, 0.36, 0.27];
 
-/// Turn about +y, in degrees, that makes `../shared/data/meshes/head.off` face +z
+/// Turn about +y, in degrees, that makes `data/meshes/head.off` face +z
 /// (its nose points along −x as stored).
 pub const HEAD_OFF_ROTATE_Y_DEG: f32 = 90.0;
 
@@ -70,7 +70,7 @@ impl Default for LoadOptions {
 }
 
 impl LoadOptions {
-    /// The options that put `../shared/data/meshes/head.off` in our head
+    /// The options that put `data/meshes/head.off` in our head
     /// convention: facing +z, +y up, 0.23 m tall (head and neck), centred at the origin.
     pub fn head_off() -> Self {
         Self {

@@ -82,7 +82,7 @@ pub struct SynthConfig {
     #[arg(long, default_value_t = 0.23)]
     pub mesh_height_m: f32,
     /// Turn a loaded mesh about +y by this many degrees so that it faces +z
-    /// (90 for `head.off` from the shared data).
+    /// (90 for `data/meshes/head.off`).
     #[arg(long, default_value_t = 0.0)]
     pub mesh_rotate_y_deg: f32,
     /// Seed of the procedural head (shape, skin tone, hair).

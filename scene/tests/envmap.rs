@@ -22,7 +22,7 @@ const SHARED_MAPS: [&str; 8] = [
 ];
 
 fn shared_map(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../../shared/data/envmaps/{name}.exr"))
+    Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("../data/envmaps/{name}.exr"))
 }
 
 fn relative_power_error(a: &LatLong, b: &LatLong) -> f64 {

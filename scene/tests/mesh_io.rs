@@ -10,7 +10,7 @@ use nelf_scene::mesh::{Albedo, Mesh};
 use nelf_scene::mesh_io::{DEFAULT_SKIN_ALBEDO, LoadOptions, load_mesh, parse_off, srgb_to_linear};
 
 fn shared_head() -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/data/meshes/head.off")
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../data/meshes/head.off")
 }
 
 fn write(dir: &Path, name: &str, text: &str) -> PathBuf {

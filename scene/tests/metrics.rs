@@ -1,4 +1,4 @@
-//! PSNR and SSIM against scikit-image 0.26 (`shared/data/metrics/README.md`), on the
+//! PSNR and SSIM against scikit-image 0.26 (`data/metrics/README.md`), on the
 //! full 512 × 512 reference pair and on a non-square crop (which also checks border
 //! handling and the masked variants), plus properties.
 
@@ -9,11 +9,11 @@ use nelf_scene::metrics::{MetricError, psnr, psnr_masked, ssim, ssim_map, ssim_m
 
 const ASTRONAUT: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/metrics/astronaut.png"
+    "/../data/metrics/astronaut.png"
 );
 const ASTRONAUT_NOISY: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../../shared/data/metrics/astronaut_noisy.png"
+    "/../data/metrics/astronaut_noisy.png"
 );
 
 /// 8-bit values / 255 (no sRGB decoding), row-major.

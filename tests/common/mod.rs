@@ -7,17 +7,17 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
 /// The parity fixtures' NeLF weights (random, from the official implementation;
-/// `../shared/nelf-oracle/README.md`). CI has `../shared` beside the checkout.
+/// `data/nelf-oracle/README.md`), zstd-compressed in the repository.
 pub const FIXTURE_WEIGHTS: &str = concat!(
     env!("CARGO_MANIFEST_DIR"),
-    "/../shared/nelf-oracle/fixture_seed0.safetensors"
+    "/data/nelf-oracle/fixture_seed0.safetensors.zst"
 );
 
 /// The fixture weights' path, failing the test (with the reason) when missing.
 pub fn fixture_weights() -> &'static str {
     assert!(
         Path::new(FIXTURE_WEIGHTS).is_file(),
-        "the parity fixtures' weights are missing at {FIXTURE_WEIGHTS}: ../shared must sit beside the checkout"
+        "the parity fixtures' weights are missing at {FIXTURE_WEIGHTS} (part of the repository)"
     );
     FIXTURE_WEIGHTS
 }

@@ -10,11 +10,21 @@ use nelf_field::light::{net_solid_angles, net_texel_direction};
 use nelf_field::model::irradiance_values;
 use nelf_field::nelfnet::NelfNet;
 use nelf_field::render::{NetRay, RayUniforms, render_rays};
-use nelf_field::{EncodedViews, Model, NelfConfig, SourceViews, Stage};
+use nelf_field::{EncodedViews, Model, NelfConfig, SourceViews, Stage, read_safetensors_bytes};
 
-const DEFAULT_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/nelf-oracle");
+/// The official fixture kept in the repository (zstd-compressed safetensors).
+const DEFAULT_DIR: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/nelf-oracle");
 
-/// `(io file, weights file)` pairs to check.
+/// The case name of a fixture file: `io_seed0.safetensors[.zst]` → `seed0.safetensors[.zst]`
+/// for `prefix` `io_`, or `None` for other files.
+fn case_of(path: &Path, prefix: &str) -> Option<String> {
+    let name = path.file_name()?.to_str()?;
+    let case = name.strip_prefix(prefix)?;
+    (case.ends_with(".safetensors") || case.ends_with(".safetensors.zst")).then(|| case.to_string())
+}
+
+/// `(io file, weights file)` pairs to check: the repository's fixture folder, or the
+/// folders and files `NELF_ORACLE_FIXTURES` names (`:`-separated). Missing data fails.
 pub fn fixture_pairs() -> Vec<(PathBuf, PathBuf)> {
     let io_files: Vec<PathBuf> = if let Some(spec) = std::env::var_os("NELF_ORACLE_FIXTURES") {
         let spec = spec.to_string_lossy().to_string();
@@ -24,38 +34,41 @@ pub fn fixture_pairs() -> Vec<(PathBuf, PathBuf)> {
             if p.is_dir() {
                 files.extend(io_files_in(&p));
             } else {
+                assert!(p.is_file(), "NELF_ORACLE_FIXTURES names {}, which does not exist", p.display());
                 files.push(p);
             }
         }
         assert!(
             !files.is_empty(),
-            "NELF_ORACLE_FIXTURES={spec} names no io_*.safetensors"
+            "NELF_ORACLE_FIXTURES={spec} names no io_*.safetensors[.zst]"
         );
         files
     } else {
         let dir = Path::new(DEFAULT_DIR);
-        if !dir.is_dir() {
-            eprintln!(
-                "no fixture folder at {DEFAULT_DIR} and NELF_ORACLE_FIXTURES unset: parity not checked"
-            );
-            return Vec::new();
-        }
+        assert!(
+            dir.is_dir(),
+            "the parity fixtures are missing: no folder {DEFAULT_DIR} (it is part of the repository)"
+        );
         let files = io_files_in(dir);
-        assert!(!files.is_empty(), "{DEFAULT_DIR} holds no io_*.safetensors");
+        assert!(!files.is_empty(), "{DEFAULT_DIR} holds no io_*.safetensors[.zst]");
         files
     };
     io_files
         .into_iter()
         .map(|io| {
-            let name = io.file_name().unwrap().to_string_lossy().to_string();
-            let case = name.strip_prefix("io_").unwrap().to_string();
-            let weights = io.with_file_name(format!("fixture_{case}"));
-            assert!(
-                weights.is_file(),
-                "{} has no weights file {}",
-                io.display(),
-                weights.display()
-            );
+            let case = case_of(&io, "io_")
+                .unwrap_or_else(|| panic!("{} is not named io_<case>.safetensors[.zst]", io.display()));
+            let stem = case.trim_end_matches(".zst");
+            let weights = [format!("fixture_{stem}"), format!("fixture_{stem}.zst")]
+                .into_iter()
+                .map(|name| io.with_file_name(name))
+                .find(|p| p.is_file())
+                .unwrap_or_else(|| {
+                    panic!(
+                        "{} has no weights file fixture_{stem}[.zst] beside it",
+                        io.display()
+                    )
+                });
             (io, weights)
         })
         .collect()
@@ -63,12 +76,9 @@ pub fn fixture_pairs() -> Vec<(PathBuf, PathBuf)> {
 
 fn io_files_in(dir: &Path) -> Vec<PathBuf> {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
+        .unwrap_or_else(|e| panic!("cannot list {}: {e}", dir.display()))
         .map(|e| e.unwrap().path())
-        .filter(|p| {
-            let n = p.file_name().unwrap().to_string_lossy();
-            n.starts_with("io_") && n.ends_with(".safetensors")
-        })
+        .filter(|p| case_of(p, "io_").is_some())
         .collect();
     files.sort();
     files
@@ -85,7 +95,7 @@ impl Fixture {
         let device = Device::Cpu;
         Self {
             name: io.file_name().unwrap().to_string_lossy().to_string(),
-            io: candle_core::safetensors::load(io, &device).unwrap(),
+            io: candle_core::safetensors::load_buffer(&read_safetensors_bytes(io).unwrap(), &device).unwrap(),
             model: Model::load(weights, NelfConfig::default(), &device).unwrap(),
         }
     }
