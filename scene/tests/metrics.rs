@@ -7,14 +7,8 @@
 
 use nelf_scene::metrics::{MetricError, psnr, psnr_masked, ssim, ssim_map, ssim_masked};
 
-const ASTRONAUT: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../data/metrics/astronaut.png"
-);
-const ASTRONAUT_NOISY: &str = concat!(
-    env!("CARGO_MANIFEST_DIR"),
-    "/../data/metrics/astronaut_noisy.png"
-);
+const ASTRONAUT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/metrics/astronaut.png");
+const ASTRONAUT_NOISY: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/metrics/astronaut_noisy.png");
 
 /// 8-bit values / 255 (no sRGB decoding), row-major.
 fn load(path: &str) -> (u32, u32, Vec<[f32; 3]>) {

@@ -34,7 +34,11 @@ pub fn fixture_pairs() -> Vec<(PathBuf, PathBuf)> {
             if p.is_dir() {
                 files.extend(io_files_in(&p));
             } else {
-                assert!(p.is_file(), "NELF_ORACLE_FIXTURES names {}, which does not exist", p.display());
+                assert!(
+                    p.is_file(),
+                    "NELF_ORACLE_FIXTURES names {}, which does not exist",
+                    p.display()
+                );
                 files.push(p);
             }
         }
