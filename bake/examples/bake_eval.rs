@@ -9,6 +9,9 @@
 //!
 //! With `--out`, sRGB previews of each render and its reference are written there;
 //! with `--json`, the rows are printed as one JSON object instead of a table.
+//! "8-bit PSNR" is the PSNR of those previews as 8-bit sRGB values (exposure putting
+//! the reference's largest value at 0.5, as written), what a person looking at the
+//! PNGs compares.
 
 use std::path::{Path, PathBuf};
 
@@ -18,6 +21,8 @@ use nelf_format::conventions::{LatLong, PinholeCamera};
 use nelf_format::read_asset;
 use nelf_scene::envmap::load_envmap;
 use nelf_scene::image_io::write_png_srgb;
+use nelf_scene::mesh_io::linear_to_srgb;
+use nelf_scene::metrics::psnr;
 
 type Error = Box<dyn std::error::Error>;
 
@@ -29,11 +34,18 @@ fn measure(
     mask: &[f32],
     name: &str,
     out: Option<&Path>,
-) -> Result<(ViewScore, ErrorBreakdown), Error> {
+) -> Result<(ViewScore, ErrorBreakdown, f64), Error> {
     let (score, image) = score_view(asset, camera, env, reference, name)?;
     let breakdown = error_breakdown(&image, reference, mask, f64::from(data_range(reference)))?;
+    let stops = (0.5 / data_range(reference)).log2();
+    let gain = stops.exp2();
+    let to_8bit = |rgb: &[[f32; 3]]| -> Vec<[f32; 3]> {
+        rgb.iter()
+            .map(|p| p.map(|v| (linear_to_srgb(v * gain) * 255.0).round()))
+            .collect()
+    };
+    let psnr_8bit = psnr(&to_8bit(&image.rgb), &to_8bit(reference), 255.0)?;
     if let Some(dir) = out {
-        let stops = (0.5 / data_range(reference)).log2();
         for (suffix, rgb) in [("render", &image.rgb[..]), ("truth", reference)] {
             write_png_srgb(
                 dir.join(format!("{name}_{suffix}.png")),
@@ -44,14 +56,16 @@ fn measure(
             )?;
         }
     }
-    Ok((score, breakdown))
+    Ok((score, breakdown, psnr_8bit))
 }
 
-fn mean(rows: &[(ViewScore, ErrorBreakdown)]) -> Option<[f64; 6]> {
+type Row = (ViewScore, ErrorBreakdown, f64);
+
+fn mean(rows: &[Row]) -> Option<[f64; 7]> {
     let n = rows.len() as f64;
     (!rows.is_empty()).then(|| {
-        let mut m = [0.0; 6];
-        for (s, b) in rows {
+        let mut m = [0.0; 7];
+        for (s, b, p8) in rows {
             let v = [
                 s.psnr_db,
                 s.ssim,
@@ -59,6 +73,7 @@ fn mean(rows: &[(ViewScore, ErrorBreakdown)]) -> Option<[f64; 6]> {
                 b.edge_share,
                 b.interior_psnr_db,
                 b.coverage_error,
+                *p8,
             ];
             for (a, x) in m.iter_mut().zip(v) {
                 *a += x / n;
@@ -122,15 +137,16 @@ fn main() -> Result<(), Error> {
         }
     }
     if json {
-        let summary = |s: &[(ViewScore, ErrorBreakdown)]| {
+        let summary = |s: &[Row]| {
             mean(s).map(|m| {
                 serde_json::json!({"psnr_db": m[0], "ssim": m[1], "render_secs": m[2],
-                    "edge_share": m[3], "interior_psnr_db": m[4], "coverage_error": m[5]})
+                    "edge_share": m[3], "interior_psnr_db": m[4], "coverage_error": m[5],
+                    "psnr_8bit_db": m[6]})
             })
         };
-        let rows = |s: &[(ViewScore, ErrorBreakdown)]| {
+        let rows = |s: &[Row]| {
             s.iter()
-                .map(|(v, b)| serde_json::json!({"score": v, "breakdown": b}))
+                .map(|(v, b, p8)| serde_json::json!({"score": v, "breakdown": b, "psnr_8bit_db": p8}))
                 .collect::<Vec<_>>()
         };
         let value = serde_json::json!({
@@ -140,19 +156,21 @@ fn main() -> Result<(), Error> {
         println!("{}", serde_json::to_string_pretty(&value)?);
         return Ok(());
     }
-    println!("| view | PSNR (dB) | SSIM | render (s) | edge share | interior PSNR (dB) | coverage error |");
-    println!("| --- | --- | --- | --- | --- | --- | --- |");
-    for (r, b) in sources.iter().chain(&targets) {
+    println!(
+        "| view | PSNR (dB) | SSIM | render (s) | edge share | interior PSNR (dB) | coverage error | 8-bit PSNR (dB) |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    for (r, b, p8) in sources.iter().chain(&targets) {
         println!(
-            "| {} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} |",
+            "| {} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} | {p8:.2} |",
             r.name, r.psnr_db, r.ssim, r.render_secs, b.edge_share, b.interior_psnr_db, b.coverage_error
         );
     }
     for (label, rows) in [("mean of sources", &sources), ("mean of targets", &targets)] {
         if let Some(m) = mean(rows) {
             println!(
-                "| {label} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} |",
-                m[0], m[1], m[2], m[3], m[4], m[5]
+                "| {label} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} | {:.2} |",
+                m[0], m[1], m[2], m[3], m[4], m[5], m[6]
             );
         }
     }

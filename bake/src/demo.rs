@@ -3,7 +3,7 @@
 //! 1. A synthetic capture of a procedural head (`nelf_scene::synth`): source views
 //!    around a frontal one, masks, cameras, ground-truth lighting, and held-aside
 //!    target views under other lighting.
-//! 2. A bake of that capture (`crate::pipeline::bake_capture`): visual hull, sparse
+//! 2. A bake of that capture (`crate::jobs::bake_capture`): visual hull, sparse
 //!    bricks, the ground-truth field, weighted PCA with the rank chosen per scene,
 //!    quantization, one `.nelf` file.
 //! 3. A turntable of the asset under several lightings, rendered by the reference
@@ -26,9 +26,11 @@ use nelf_scene::image_io::write_png_srgb;
 use nelf_scene::synth::{SynthConfig, write_synthetic_capture};
 use serde::{Deserialize, Serialize};
 
+use crate::config::BakeConfig;
 use crate::error::{BakeError, Result};
 use crate::eval::{ViewScore, data_range, read_linear_rgb, score_view};
-use crate::pipeline::{BakeConfig, BakeReport, bake_capture, write_bake};
+use crate::jobs::bake_capture;
+use crate::pipeline::{BakeReport, write_bake};
 use crate::progress::Progress;
 use crate::source::GroundTruth;
 use crate::{CaptureLoadOptions, load_capture};

@@ -12,16 +12,19 @@
 //!    `nelf_scene::field::FieldSource`; today the ground-truth mesh field.
 //! 5. **PCA** ([`pca`]) weighted by visibility in the capture's views, the **rank**
 //!    chosen per scene by rendered-image loss ([`rank`]), quantized and written
-//!    ([`pipeline`]).
+//!    ([`pipeline`]), for a capture or a mesh ([`jobs`]), with every setting in
+//!    [`config`]. Dependencies run one way: config ← source ← jobs → pipeline.
 //! 6. **Judging and showing** a bake: [`eval`] scores renders against ground truth;
 //!    [`demo`] runs the whole pipeline on a built-in procedural head (`nelf demo`).
 
 pub mod capture_in;
+pub mod config;
 pub mod demo;
 pub mod error;
 pub mod eval;
 pub mod grid;
 pub mod hull;
+pub mod jobs;
 pub mod pca;
 pub mod pipeline;
 pub mod progress;
@@ -29,11 +32,11 @@ pub mod rank;
 pub mod source;
 
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
+pub use config::{BakeConfig, EncodingChoice, ShellPlacement, TraceOverrides, ViewPolicyChoice};
 pub use error::BakeError;
+pub use jobs::{CapturePlan, bake_capture, bake_capture_field, bake_mesh, mesh_cameras, plan_capture};
 pub use pipeline::{
-    BakeConfig, BakeOutput, BakeReport, CapturePlan, EncodingChoice, FieldBake, Reference, StageTimings,
-    ViewPolicyChoice, bake_capture, bake_capture_field, bake_field, bake_mesh, mesh_cameras, plan_capture,
-    sidecar_path, write_bake,
+    BakeOutput, BakeReport, FieldBake, Reference, StageTimings, bake_field, sidecar_path, write_bake,
 };
 pub use progress::Progress;
-pub use source::{GroundTruth, ShellMeshField, ShellPlacement, ShellProfile, TraceOverrides};
+pub use source::{GroundTruth, ShellMeshField, ShellProfile};

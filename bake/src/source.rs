@@ -27,44 +27,18 @@
 use std::path::{Path, PathBuf};
 
 use glam::{DMat3, Vec3};
+use nelf_format::conventions::LT_DIM;
+use nelf_scene::bvh::ClosestPoint;
 use nelf_scene::field::{
-    DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy, check_density_batch,
+    DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy, check_batch, check_density_batch,
 };
 use nelf_scene::mesh::Mesh;
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 use nelf_scene::synth::{SynthConfig, synth_mesh};
-use nelf_scene::tracer::TraceSettings;
-use serde::{Deserialize, Serialize};
+use nelf_scene::tracer::{MAX_AVERAGED_DIRECTIONS, TraceSettings};
 
+use crate::config::{BakeConfig, ShellPlacement};
 use crate::error::{BakeError, Result};
-use crate::pipeline::BakeConfig;
-
-/// Overrides of the ground-truth path tracer's sample counts.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::Args)]
-pub struct TraceOverrides {
-    /// Ground-truth tracer: interreflection bounces (default: the capture's
-    /// `synth_config.json`, else the tracer's default, 2).
-    #[arg(long)]
-    pub bounces: Option<u32>,
-    /// Ground-truth tracer: stratified samples per light texel (default: as for `--bounces`; 16).
-    #[arg(long)]
-    pub texel_samples: Option<u32>,
-    /// Ground-truth tracer: indirect directions at the first surface point (default: as for `--bounces`; 128).
-    #[arg(long)]
-    pub indirect_samples: Option<u32>,
-}
-
-impl TraceOverrides {
-    /// `base` with the overrides applied.
-    pub fn apply(&self, base: TraceSettings) -> TraceSettings {
-        TraceSettings {
-            bounces: self.bounces.unwrap_or(base.bounces),
-            texel_samples: self.texel_samples.unwrap_or(base.texel_samples),
-            indirect_samples: self.indirect_samples.unwrap_or(base.indirect_samples),
-            ..base
-        }
-    }
-}
 
 /// Where a ground-truth mesh comes from.
 #[derive(Debug, Clone, PartialEq)]
@@ -140,19 +114,6 @@ impl GroundTruth {
             }),
         }
     }
-}
-
-/// Where the ground-truth density's shell sits relative to the mesh surface.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum ShellPlacement {
-    /// A signed linear ramp through the surface, negative outside ([`ShellProfile::Signed`]).
-    #[default]
-    Signed,
-    /// The ramp lies inside the surface ([`ShellProfile::Inside`]).
-    Inside,
-    /// The ramp is centred on the surface (`MeshField`'s own profile).
-    Centred,
 }
 
 /// How [`ShellMeshField`] turns signed distance `d` (negative inside) into density.
@@ -235,26 +196,170 @@ impl ShellProfile {
 }
 
 /// A mesh's ground-truth field with its density shaped by a [`ShellProfile`];
-/// light transport as [`MeshField`]'s.
+/// light transport as [`MeshField`]'s, shaded on the side each point sees.
+///
+/// **Open and thin surfaces.** Inside and outside come from the generalised winding
+/// number, which classifies both sides of an open sheet (a collar, a flap of cloth,
+/// a zero-volume cap over a flap) as outside: an inside/outside shell would leave
+/// such a sheet transparent. Where the surface closest to an outside point is
+/// *thin* — the point `sheet_thickness_m` behind it, seen from the query point, is
+/// outside too — the density is the profile's for a sheet of that thickness centred
+/// on the surface (signed distance `|d| − t/2`). Closed surfaces thicker than `t`
+/// are unchanged.
+///
+/// **Hollow shells.** With `hollow_depth_m = Some(D)` the inside of a closed surface
+/// is a shell `D` thick, empty beyond (its inner wall is a signed ramp like the
+/// outer one). From outside nothing changes (the outer ramp and everything within
+/// `D/2` of it are as before); through a hole in the surface (a torn shell whose
+/// winding number still says "inside") a camera sees the inner wall, shaded facing
+/// the hollow, as the two-sided path tracer shows the inside of the mesh.
+///
+/// **Sides.** A point outside the mesh behind its closest triangle (the back of a
+/// sheet, a flipped triangle) and a point in the inner half of a hollow shell are
+/// shaded with the normal turned toward them; a point within a hair of an open sheet
+/// takes the side the view policy's directions face.
 #[derive(Debug, Clone)]
 pub struct ShellMeshField {
     inner: MeshField,
     profile: ShellProfile,
+    sheet_thickness_m: f32,
+    hollow_depth_m: Option<f32>,
+}
+
+/// What [`ShellMeshField`] decides at a point.
+#[derive(Debug, Clone, Copy)]
+struct Located {
+    density: f32,
+    /// The closest surface point, when one is within the search distance.
+    closest: Option<ClosestPoint>,
+    /// Whether the point sees the closest triangle's back (normals to be turned).
+    back: bool,
+    /// Whether the side is a tie (the point lies on an open sheet).
+    tie: bool,
 }
 
 impl ShellMeshField {
-    /// The field of `inner`'s mesh with density `profile`.
-    pub fn new(inner: MeshField, profile: ShellProfile) -> Result<Self> {
+    /// The field of `inner`'s mesh with density `profile`, thin parts thickened to
+    /// `sheet_thickness_m`, closed parts hollow beyond `hollow_depth_m` (if given).
+    pub fn new(
+        inner: MeshField,
+        profile: ShellProfile,
+        sheet_thickness_m: f32,
+        hollow_depth_m: Option<f32>,
+    ) -> Result<Self> {
         profile.validate()?;
-        Ok(Self { inner, profile })
+        let positive = |v: f32| v.is_finite() && v > 0.0;
+        if !positive(sheet_thickness_m) || !hollow_depth_m.is_none_or(positive) {
+            return Err(BakeError::Settings(format!(
+                "sheet thickness {sheet_thickness_m} m and hollow depth {hollow_depth_m:?} m must be positive"
+            )));
+        }
+        Ok(Self {
+            inner,
+            profile,
+            sheet_thickness_m,
+            hollow_depth_m,
+        })
+    }
+
+    /// Distance from the surface within which the density varies.
+    fn reach_m(&self) -> f32 {
+        let sheet = 0.5 * self.sheet_thickness_m + self.profile.reach_m();
+        let hollow = self.hollow_depth_m.map_or(0.0, |d| d + self.profile.reach_m());
+        sheet.max(hollow).max(self.profile.reach_m())
     }
 
     /// Density at `x`, 1/m.
     pub fn density(&self, x: Vec3) -> f32 {
+        self.locate(x, self.reach_m()).density
+    }
+
+    /// Density, closest point (searched up to `max_distance_m`) and side at `x`.
+    ///
+    /// Near a surface (within [`Self::reach_m`]) the winding number is read on both
+    /// sides of the closest point, `sheet_thickness_m` away along its normal: across
+    /// any surface it jumps by 1, from about 0 to 1 for a closed one (inside where
+    /// it is 1, whichever way the triangle is wound) and from about −½ to ½ for an
+    /// open sheet. So the mean of the two readings says which it is (≥ ¼: closed),
+    /// robustly on both sides of a bent sheet, inside a torn shell, and next to
+    /// flipped triangles. Far from every surface, `x`'s own winding number decides.
+    fn locate(&self, x: Vec3, max_distance_m: f32) -> Located {
         let bvh = self.inner.tracer().bvh();
-        let inside = bvh.winding_number(x) >= 0.5;
-        let d = bvh.closest_point(x, self.profile.reach_m()).map(|cp| cp.distance);
-        self.profile.density(d, inside)
+        let closest = bvh.closest_point(x, max_distance_m);
+        let mut out = Located {
+            density: 0.0,
+            closest,
+            back: false,
+            tie: false,
+        };
+        let Some(cp) = closest.filter(|c| c.distance <= self.reach_m()) else {
+            // Far from every surface: solid inside (unless hollow), empty outside.
+            let inside = bvh.winding_number(x) >= 0.5;
+            out.density = self
+                .profile
+                .density(None, inside && self.hollow_depth_m.is_none());
+            out.back = inside && self.hollow_depth_m.is_some();
+            return out;
+        };
+        let normal = self.inner.tracer().mesh().face_normal(cp.triangle as usize);
+        let side = (x - cp.point).dot(normal);
+        let probe = self.sheet_thickness_m;
+        let front = bvh.winding_number(cp.point + normal * probe);
+        let behind = bvh.winding_number(cp.point - normal * probe);
+        if 0.5 * (front + behind) < 0.25 {
+            // An open sheet, or a part thinner than the sheet thickness.
+            let d = cp.distance - 0.5 * self.sheet_thickness_m;
+            out.density = self.profile.density(Some(d.abs()), d < 0.0);
+            out.back = side < 0.0;
+            out.tie = side.abs() < 0.05 * self.sheet_thickness_m;
+            return out;
+        }
+        // A closed surface; its outside is where the winding number is low.
+        let outward = if front <= behind { 1.0 } else { -1.0 };
+        let inside = side * outward < 0.0;
+        if !inside {
+            out.density = self.profile.density(Some(cp.distance), false);
+            out.back = outward < 0.0;
+            return out;
+        }
+        match self.hollow_depth_m {
+            Some(depth) if cp.distance > 0.5 * depth => {
+                // The inner half of a hollow shell: signed distance to its inner wall,
+                // shaded facing the hollow.
+                let d = depth - cp.distance;
+                out.density = self.profile.density(Some(d.abs()), d > 0.0);
+                out.back = outward > 0.0;
+            }
+            _ => {
+                out.density = self.profile.density(Some(cp.distance), true);
+                out.back = outward < 0.0;
+            }
+        }
+        out
+    }
+
+    /// Density and light transport of one point (`out` zeroed by the caller).
+    fn evaluate_point(&self, x: Vec3, view: &ViewPolicy, out: &mut [f32]) -> f32 {
+        let located = self.locate(x, f32::INFINITY);
+        let Some(cp) = located.closest else {
+            return located.density;
+        };
+        let mut sp = self.inner.tracer().surface_point(cp.triangle, cp.b1, cp.b2);
+        sp.position = cp.point;
+        let back = if located.tie {
+            // On the sheet itself: the side the view policy's directions face.
+            let mut omegas = [Vec3::ZERO; MAX_AVERAGED_DIRECTIONS];
+            let n = view.directions_at(x, sp.geometric_normal, &mut omegas);
+            omegas[..n].iter().sum::<Vec3>().dot(sp.geometric_normal) < 0.0
+        } else {
+            located.back
+        };
+        if back {
+            sp.geometric_normal = -sp.geometric_normal;
+            sp.shading_normal = -sp.shading_normal;
+        }
+        self.inner.light_transport_at(x, &sp, &cp, view, out);
+        located.density
     }
 }
 
@@ -266,13 +371,26 @@ impl FieldSource for ShellMeshField {
         density: &mut [f32],
         lt: &mut [f32],
     ) -> Result<(), FieldError> {
-        self.inner.evaluate(points, view, density, lt)?;
-        self.evaluate_density(points, density)
+        use rayon::prelude::*;
+        const CHUNK: usize = 64;
+        check_batch(points, density, lt)?;
+        view.validate()?;
+        points
+            .par_chunks(CHUNK)
+            .zip(density.par_chunks_mut(CHUNK))
+            .zip(lt.par_chunks_mut(CHUNK * LT_DIM))
+            .for_each(|((p, d), t)| {
+                for ((x, sigma), out) in p.iter().zip(d.iter_mut()).zip(t.chunks_mut(LT_DIM)) {
+                    out.fill(0.0);
+                    *sigma = self.evaluate_point(*x, view, out);
+                }
+            });
+        Ok(())
     }
 
     fn bounds(&self) -> (Vec3, Vec3) {
         let (lo, hi) = self.inner.bounds();
-        let pad = Vec3::splat(self.profile.reach_m());
+        let pad = Vec3::splat(self.reach_m());
         (lo.min(lo - pad), hi.max(hi + pad))
     }
 
@@ -292,36 +410,43 @@ impl FieldSource for ShellMeshField {
 }
 
 /// The ground-truth field of `mesh` for a grid of `voxel_size_m`: a density shell
-/// placed by `placement` (`shell_voxels` wide for `Inside`/`Centred`, a lead of
-/// `lead_voxels` for `Signed`), light transport by `trace`.
+/// placed by `placement` (`config.shell_voxels` wide for `Inside`/`Centred`, a lead
+/// of `config.lead_voxels` for `Signed`), open sheets `config.sheet_voxels` thick,
+/// closed parts hollow beyond `config.hollow_voxels` (`Signed` only; 0 keeps them
+/// solid), light transport by `trace`.
 pub fn mesh_field(
     mesh: &Mesh,
     trace: TraceSettings,
     voxel_size_m: f64,
     placement: ShellPlacement,
-    shell_voxels: f32,
-    lead_voxels: f32,
+    config: &BakeConfig,
 ) -> Result<Box<dyn FieldSource>> {
     let voxel = voxel_size_m as f32;
-    let width = shell_voxels * voxel;
+    let width = config.shell_voxels * voxel;
     if !(width.is_finite() && width > 0.0) {
         return Err(BakeError::Settings(format!(
-            "--shell-voxels {shell_voxels} must be positive"
+            "--shell-voxels {} must be positive",
+            config.shell_voxels
         )));
     }
+    let sheet = config.sheet_voxels * voxel;
     let field = MeshField::new(mesh, trace, DensityProfile::with_shell_width(width))?;
     Ok(match placement {
         ShellPlacement::Centred => Box::new(field),
         ShellPlacement::Inside => Box::new(ShellMeshField::new(
             field,
             ShellProfile::Inside { width_m: width },
+            sheet,
+            None,
         )?),
         ShellPlacement::Signed => Box::new(ShellMeshField::new(
             field,
             ShellProfile::Signed {
-                lead_m: lead_voxels * voxel,
+                lead_m: config.lead_voxels * voxel,
                 voxel_m: voxel,
             },
+            sheet,
+            (config.hollow_voxels > 0.0).then_some(config.hollow_voxels * voxel),
         )?),
     })
 }
@@ -339,6 +464,8 @@ pub fn describe_trace(trace: &TraceSettings, config: &BakeConfig) -> serde_json:
         "shell_placement": config.shell_placement,
         "shell_voxels": config.shell_voxels,
         "lead_voxels": config.lead_voxels,
+        "sheet_voxels": config.sheet_voxels,
+        "hollow_voxels": config.hollow_voxels,
     })
 }
 
@@ -387,8 +514,7 @@ mod tests {
             TraceSettings::default(),
             1e-3,
             ShellPlacement::Signed,
-            2.0,
-            0.25,
+            &BakeConfig::default(),
         )
         .unwrap();
         // A search box much deeper than the sphere (as a frontal-view hull is).

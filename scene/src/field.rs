@@ -17,7 +17,9 @@
 //!   σ_max · clamp(½ − d/w, 0, 1)`, i.e. `σ_max` deeper than `w/2` inside, a linear
 //!   ramp across the shell `|d| < w/2`, and exactly 0 beyond `w/2` outside;
 //! * light transport, `T(x) = T(p, n_p, ρ_p, ω_o)` at the closest surface point `p`
-//!   with that point's interpolated normal and albedo ([`LtTracer`]). Each point's
+//!   with that point's interpolated normal and albedo ([`LtTracer`]), the normal
+//!   turned toward `x` when `x` is outside behind `p`'s triangle (the back of an
+//!   open sheet, as the two-sided tracer shades it). Each point's
 //!   random stream is seeded from `p` (its coordinates' bits and triangle), so the
 //!   field is a deterministic function of the closest point: constant along the
 //!   normal, independent of batching and threads.
@@ -328,11 +330,41 @@ impl MeshField {
         Some((sp, cp))
     }
 
+    /// The closest surface point to `x` as seen from `x`: like [`Self::surface_point`],
+    /// but with both normals turned toward `x` when `x` lies outside the mesh
+    /// (winding number below ½) behind the closest triangle. That is the side a
+    /// camera at `x` would see, as the two-sided path tracer shades it
+    /// ([`LtTracer::surface_at_hit`]): the back of a one-sided sheet (a collar, a
+    /// flap of cloth), a flipped triangle, the inside of a torn shell. Points inside
+    /// a closed surface keep its outward normals.
+    pub fn surface_point_seen_from(&self, x: Vec3) -> Option<(SurfacePoint, ClosestPoint)> {
+        let (mut sp, cp) = self.surface_point(x)?;
+        if (x - cp.point).dot(sp.geometric_normal) < 0.0 && self.tracer.bvh().winding_number(x) < 0.5 {
+            sp.geometric_normal = -sp.geometric_normal;
+            sp.shading_normal = -sp.shading_normal;
+        }
+        Some((sp, cp))
+    }
+
     /// Adds the light transport at `x` under `view` to `out` (384 floats, zeroed by the caller).
     fn light_transport_into(&self, x: Vec3, view: &ViewPolicy, out: &mut [f32]) {
-        let Some((sp, cp)) = self.surface_point(x) else {
-            return;
-        };
+        if let Some((sp, cp)) = self.surface_point_seen_from(x) {
+            self.light_transport_at(x, &sp, &cp, view, out);
+        }
+    }
+
+    /// Adds to `out` (384 floats, zeroed by the caller) the light transport at query
+    /// point `x` under `view`, shading the surface point `sp` (the closest point `cp`,
+    /// with the normals the caller chose): the field's definition for any caller
+    /// that decides the side itself. The random stream is seeded from `cp`.
+    pub fn light_transport_at(
+        &self,
+        x: Vec3,
+        sp: &SurfacePoint,
+        cp: &ClosestPoint,
+        view: &ViewPolicy,
+        out: &mut [f32],
+    ) {
         let mut omegas = [Vec3::ZERO; MAX_AVERAGED_DIRECTIONS];
         let count = view.directions_at(x, sp.shading_normal, &mut omegas);
         let bits = |v: f32| u64::from(v.to_bits());
@@ -340,7 +372,7 @@ impl MeshField {
             ^ mix64(bits(cp.point.z) | u64::from(cp.triangle) << 32);
         let mut rng = self.tracer.rng(stream);
         self.tracer
-            .light_transport_averaged(&sp, &omegas[..count], &mut rng, out);
+            .light_transport_averaged(sp, &omegas[..count], &mut rng, out);
     }
 
     /// [`FieldSource::evaluate`] with an optional progress bar (length set to the

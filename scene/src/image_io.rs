@@ -19,7 +19,7 @@ fn io_error(path: &Path, source: std::io::Error) -> SceneError {
 }
 
 /// Encodes with `encode` into a temporary file beside `path`, then renames it.
-fn write_atomic(
+pub(crate) fn write_atomic(
     path: &Path,
     encode: impl FnOnce(&mut BufWriter<&mut tempfile::NamedTempFile>) -> Result<(), image::ImageError>,
 ) -> Result<(), SceneError> {
@@ -80,6 +80,28 @@ pub fn write_png_srgb(
     let buffer = ImageBuffer::<Rgb<u8>, _>::from_raw(width, height, data)
         .ok_or_else(|| size_error(path, width, height, rgb.len()))?;
     write_atomic(path, |w| buffer.write_to(w, ImageFormat::Png))
+}
+
+/// Writes linear RGB as an 8-bit sRGB JPEG of the given quality (1–100), as
+/// scanners ship textures.
+pub fn write_jpeg_srgb(
+    path: impl AsRef<Path>,
+    width: u32,
+    height: u32,
+    rgb: &[[f32; 3]],
+    quality: u8,
+) -> Result<(), SceneError> {
+    let path = path.as_ref();
+    let data: Vec<u8> = rgb
+        .iter()
+        .flatten()
+        .map(|&v| (linear_to_srgb(v) * 255.0).round() as u8)
+        .collect();
+    let buffer = ImageBuffer::<Rgb<u8>, _>::from_raw(width, height, data)
+        .ok_or_else(|| size_error(path, width, height, rgb.len()))?;
+    write_atomic(path, |w| {
+        image::codecs::jpeg::JpegEncoder::new_with_quality(w, quality.clamp(1, 100)).encode_image(&buffer)
+    })
 }
 
 /// Writes values in `[0, 1]` (a mask or coverage) as an 8-bit greyscale PNG.

@@ -3,6 +3,7 @@
 //! synthetic captures.
 
 pub mod bvh;
+pub mod defects;
 pub mod envgen;
 pub mod envmap;
 pub mod error;

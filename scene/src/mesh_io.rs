@@ -138,7 +138,40 @@ fn finish(mut mesh: Mesh, path: &Path, options: &LoadOptions) -> Result<Mesh, Sc
 }
 
 /// Mesh operations used by the loaders and by tests of any mesh.
+/// Largest area of a hole's cap, as a share of the area of the connected piece of
+/// the mesh around it, that [`Mesh::close_holes`] closes (¼: a head scan's neck
+/// opening is about 5 % of the head; an open sheet's rim encloses about its own area).
+pub const MAX_CAP_SHARE: f32 = 0.25;
+
 impl Mesh {
+    /// For every triangle, the surface area of the connected piece it belongs to
+    /// (triangles sharing a vertex are connected).
+    fn piece_areas(&self) -> Vec<f32> {
+        let mut parent: Vec<u32> = (0..self.positions.len() as u32).collect();
+        fn root(parent: &mut [u32], mut i: u32) -> u32 {
+            while parent[i as usize] != i {
+                let up = parent[parent[i as usize] as usize];
+                parent[i as usize] = up;
+                i = up;
+            }
+            i
+        }
+        for tri in &self.triangles {
+            let r0 = root(&mut parent, tri[0]);
+            for &v in &tri[1..] {
+                let r = root(&mut parent, v);
+                parent[r as usize] = r0;
+            }
+        }
+        let mut area = vec![0.0f32; self.positions.len()];
+        let roots: Vec<u32> = self.triangles.iter().map(|t| root(&mut parent, t[0])).collect();
+        for (t, &r) in roots.iter().enumerate() {
+            let [a, b, c] = self.corners(t);
+            area[r as usize] += 0.5 * (b - a).cross(c - a).length();
+        }
+        roots.iter().map(|&r| area[r as usize]).collect()
+    }
+
     /// Turns every position by `degrees` about +y (right-handed: +90° takes −x to +z).
     pub fn rotate_y_deg(&mut self, degrees: f32) {
         let rotation = glam::Mat3::from_rotation_y(degrees.to_radians());
@@ -168,8 +201,14 @@ impl Mesh {
     /// colours) and each cap corner's texture coordinate is copied from the
     /// neighbouring triangle's corner (the centroid's: their mean). Returns the
     /// number of loops closed. Non-manifold boundary vertices (several boundary edges
-    /// leaving one vertex) are followed one way; every boundary edge gets a cap.
+    /// leaving one vertex) are followed one way.
+    ///
+    /// Only *holes* are closed: a loop whose fan would be large next to the surface it
+    /// bounds (area above [`MAX_CAP_SHARE`] of its connected piece's) is the rim of an
+    /// open sheet — a collar, a flap of cloth, a shell torn wide open — and is left
+    /// open: a fan over it would add a lid the scan does not have.
     pub fn close_holes(&mut self) -> usize {
+        let piece_area = self.piece_areas();
         let tri_count = self.triangles.len();
         let mut directed: HashSet<(u32, u32)> = HashSet::with_capacity(3 * tri_count);
         for tri in &self.triangles {
@@ -221,6 +260,16 @@ impl Mesh {
                 .map(|e| self.positions[e.0 as usize])
                 .sum::<glam::Vec3>()
                 / n;
+            let cap_area: f32 = edges
+                .iter()
+                .map(|e| {
+                    let (a, b) = (self.positions[e.0 as usize], self.positions[e.1 as usize]);
+                    0.5 * (a - centroid).cross(b - centroid).length()
+                })
+                .sum();
+            if cap_area > MAX_CAP_SHARE * piece_area[edges[0].2 / 3] {
+                continue;
+            }
             let c = self.positions.len() as u32;
             self.positions.push(centroid);
             if let Albedo::PerVertex(colours) = &mut self.albedo {
@@ -640,6 +689,77 @@ fn read_obj(path: &Path, default_albedo: [f32; 3]) -> Result<Mesh, SceneError> {
         triangles,
         albedo,
     })
+}
+
+/// Writes `mesh` as a Wavefront OBJ at `path` (metres) with its material beside it:
+/// `<stem>.mtl`, and for a textured mesh the texture as an sRGB JPEG
+/// `<stem>_albedo.jpg` (quality 95) named by `map_Kd`, per-corner UVs as `vt`.
+/// Per-vertex colours are written as sRGB after each `v` (the common extension
+/// [`load_mesh`] reads); a uniform colour is the material's `Kd` (linear). Each file
+/// is written to a temporary name and renamed into place.
+pub fn write_obj(mesh: &Mesh, path: &Path) -> Result<(), SceneError> {
+    use std::fmt::Write as _;
+    mesh.validate()
+        .map_err(|e| SceneError::format(path, e.to_string()))?;
+    let stem = path
+        .file_stem()
+        .and_then(|s| s.to_str())
+        .ok_or_else(|| SceneError::format(path, "the OBJ path has no file name"))?;
+    let mtl_name = format!("{stem}.mtl");
+    let texture_name = format!("{stem}_albedo.jpg");
+    let sibling = |name: &str| path.with_file_name(name);
+    let mut obj = format!("# written by nelf-scene\nmtllib {mtl_name}\nusemtl albedo\n");
+    let mut mtl = String::from("newmtl albedo\n");
+    let srgb = |c: [f32; 3]| c.map(linear_to_srgb);
+    for (i, p) in mesh.positions.iter().enumerate() {
+        match &mesh.albedo {
+            Albedo::PerVertex(colours) => {
+                let [r, g, b] = srgb(colours[i]);
+                let _ = writeln!(obj, "v {} {} {} {r} {g} {b}", p.x, p.y, p.z);
+            }
+            _ => {
+                let _ = writeln!(obj, "v {} {} {}", p.x, p.y, p.z);
+            }
+        }
+    }
+    match &mesh.albedo {
+        Albedo::Texture { uvs, texture } => {
+            for uv in uvs {
+                let _ = writeln!(obj, "vt {} {}", uv.x, uv.y);
+            }
+            for (t, tri) in mesh.triangles.iter().enumerate() {
+                let [a, b, c] = tri.map(|i| i + 1);
+                let k = 3 * t as u32;
+                let _ = writeln!(obj, "f {a}/{} {b}/{} {c}/{}", k + 1, k + 2, k + 3);
+            }
+            let _ = writeln!(mtl, "Kd 1 1 1\nmap_Kd {texture_name}");
+            crate::image_io::write_jpeg_srgb(
+                sibling(&texture_name),
+                texture.width as u32,
+                texture.height as u32,
+                &texture.texels,
+                95,
+            )?;
+        }
+        albedo => {
+            for tri in &mesh.triangles {
+                let [a, b, c] = tri.map(|i| i + 1);
+                let _ = writeln!(obj, "f {a} {b} {c}");
+            }
+            let kd = match albedo {
+                Albedo::Uniform(c) => *c,
+                _ => [1.0; 3],
+            };
+            let _ = writeln!(mtl, "Kd {} {} {}", kd[0], kd[1], kd[2]);
+        }
+    }
+    let write_text = |target: &Path, text: &str| {
+        crate::image_io::write_atomic(target, |w| {
+            std::io::Write::write_all(w, text.as_bytes()).map_err(image::ImageError::IoError)
+        })
+    };
+    write_text(&sibling(&mtl_name), &mtl)?;
+    write_text(path, &obj)
 }
 
 /// A `map_Kd` value may carry options (`-bm 0.5 skin.png`): use the whole value if

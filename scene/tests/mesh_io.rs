@@ -313,3 +313,78 @@ fn obj_vertex_colours_are_used_when_there_is_no_texture() {
         Albedo::PerVertex(vec![[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]])
     );
 }
+
+#[test]
+fn write_obj_round_trips_a_textured_open_mesh() {
+    use nelf_scene::defects::{head_and_shoulders, striped_texture, textured_quad};
+    use nelf_scene::mesh_io::write_obj;
+    let dir = tempfile::tempdir().unwrap();
+    let head = nelf_scene::shapes::uv_sphere(Vec3::ZERO, 0.1, 8, 16, [0.7, 0.5, 0.4]);
+    for (name, mesh) in [
+        ("figure", head_and_shoulders(&head)),
+        (
+            "quad",
+            textured_quad(
+                Vec3::ZERO,
+                Vec3::X,
+                Vec3::Y,
+                3,
+                striped_texture(16, 16, 4, [[0.9; 3], [0.1; 3], [0.5; 3]]),
+            ),
+        ),
+    ] {
+        let path = dir.path().join(format!("{name}.obj"));
+        write_obj(&mesh, &path).unwrap();
+        assert!(dir.path().join(format!("{name}_albedo.jpg")).is_file());
+        let options = LoadOptions {
+            close_holes: false,
+            orient_outward: false,
+            ..LoadOptions::default()
+        };
+        let back = load_mesh(&path, &options).unwrap();
+        // The loader may split vertices by texture coordinate: compare corners.
+        assert_eq!(back.triangles.len(), mesh.triangles.len(), "{name}");
+        for t in 0..mesh.triangles.len() {
+            let (a, b) = (back.corners(t), mesh.corners(t));
+            assert!(
+                (0..3).all(|k| a[k].abs_diff_eq(b[k], 1e-6)),
+                "{name}: triangle {t}"
+            );
+        }
+        // Albedo at each triangle's centroid agrees within JPEG's rounding (linear).
+        let mut worst = 0.0f32;
+        for t in 0..mesh.triangles.len() {
+            let (x, y) = (
+                mesh.albedo_at(t, 1.0 / 3.0, 1.0 / 3.0),
+                back.albedo_at(t, 1.0 / 3.0, 1.0 / 3.0),
+            );
+            worst = (0..3).map(|c| (x[c] - y[c]).abs()).fold(worst, f32::max);
+        }
+        assert!(worst < 0.06, "{name}: albedo differs by {worst}");
+    }
+}
+
+#[test]
+fn close_holes_closes_holes_but_not_the_rims_of_open_sheets() {
+    use nelf_scene::defects::{open_band, torn_sphere};
+    // A UV sphere repeats its pole vertices: each pole is a zero-area loop, closed.
+    let poles = nelf_scene::shapes::uv_sphere(Vec3::ZERO, 0.1, 24, 48, [0.5; 3]).close_holes();
+    // Small holes (the neck and eyes of a scan) are closed...
+    let mut torn = torn_sphere(Vec3::ZERO, 0.1, &[(Vec3::Z, 0.3), (Vec3::X, 0.15)], [0.5; 3]);
+    assert_eq!(torn.close_holes(), poles + 2);
+    // ...a shell torn wide open (around its north pole) is a sheet: its rim stays open.
+    let mut bowl = torn_sphere(Vec3::ZERO, 0.1, &[(Vec3::Y, 1.3)], [0.5; 3]);
+    assert_eq!(bowl.close_holes(), poles - 1);
+    // So do a flat sheet and a collar band, whatever else the mesh holds.
+    let sheet = nelf_scene::shapes::quad(
+        Vec3::new(0.2, 0.0, 0.0),
+        Vec3::X * 0.1,
+        Vec3::Y * 0.1,
+        4,
+        [0.5; 3],
+    );
+    let band = open_band(Vec3::new(0.0, -0.2, 0.0), 0.06, 0.04, 0.01, 0.9, 32);
+    let head = torn_sphere(Vec3::ZERO, 0.1, &[(Vec3::NEG_Z, 0.3)], [0.5; 3]);
+    let mut figure = nelf_scene::shapes::merge(&[head, sheet, band]);
+    assert_eq!(figure.close_holes(), poles + 1, "only the head's hole");
+}

@@ -1,0 +1,265 @@
+//! Every setting of a bake, in one place: the `nelf bake` options
+//! ([`BakeConfig`], saved beside each asset), and the choices they name (view
+//! policy, coefficient encoding, where the ground-truth density shell sits, path
+//! tracer overrides). Nothing here runs a stage; the stages read it.
+
+use nelf_format::CoefficientEncoding;
+use nelf_format::conventions::LT_DIM;
+use nelf_render::MarchSettings;
+use nelf_scene::tracer::TraceSettings;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{BakeError, Result};
+
+/// Overrides of the ground-truth path tracer's sample counts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::Args)]
+pub struct TraceOverrides {
+    /// Ground-truth tracer: interreflection bounces (default: the capture's
+    /// `synth_config.json`, else the tracer's default, 2).
+    #[arg(long)]
+    pub bounces: Option<u32>,
+    /// Ground-truth tracer: stratified samples per light texel (default: as for `--bounces`; 16).
+    #[arg(long)]
+    pub texel_samples: Option<u32>,
+    /// Ground-truth tracer: indirect directions at the first surface point (default: as for `--bounces`; 128).
+    #[arg(long)]
+    pub indirect_samples: Option<u32>,
+}
+
+impl TraceOverrides {
+    /// `base` with the overrides applied.
+    pub fn apply(&self, base: TraceSettings) -> TraceSettings {
+        TraceSettings {
+            bounces: self.bounces.unwrap_or(base.bounces),
+            texel_samples: self.texel_samples.unwrap_or(base.texel_samples),
+            indirect_samples: self.indirect_samples.unwrap_or(base.indirect_samples),
+            ..base
+        }
+    }
+}
+
+/// Where the ground-truth density's shell sits relative to the mesh surface.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ShellPlacement {
+    /// A signed linear ramp through the surface, negative outside ([`ShellProfile::Signed`]).
+    #[default]
+    Signed,
+    /// The ramp lies inside the surface ([`ShellProfile::Inside`]).
+    Inside,
+    /// The ramp is centred on the surface (`MeshField`'s own profile).
+    Centred,
+}
+
+/// Which outgoing direction the light transport is baked for (a baked vector has
+/// one; the viewer cannot change it).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ViewPolicyChoice {
+    /// The mean of `T` over the directions toward every camera centre.
+    #[default]
+    AverageCameras,
+    /// `T` toward the mean of the camera centres.
+    MeanCamera,
+}
+
+/// How PCA coefficients are stored.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum EncodingChoice {
+    /// One byte per coefficient, affine per component.
+    #[default]
+    U8,
+    /// IEEE binary16 per coefficient.
+    F16,
+}
+
+impl EncodingChoice {
+    /// The file's encoding.
+    pub fn encoding(self) -> CoefficientEncoding {
+        match self {
+            Self::U8 => CoefficientEncoding::U8Affine,
+            Self::F16 => CoefficientEncoding::F16,
+        }
+    }
+}
+
+/// Every setting of a bake (the `nelf bake` options); saved beside the asset in
+/// `<asset>.bake.json` and recorded in its metadata.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct BakeConfig {
+    /// Voxels along the longest side of the region baked (hull or mesh box); ignored
+    /// when --voxel-size-m is given.
+    #[arg(long, default_value_t = 128)]
+    pub resolution: u32,
+    /// Voxel edge in metres (overrides --resolution).
+    #[arg(long)]
+    pub voxel_size_m: Option<f64>,
+    /// Visual hull: grow every mask by this many pixels (a (2r+1)² square) before carving.
+    #[arg(long, default_value_t = 2)]
+    pub dilate_px: u32,
+    /// Drop a brick whose densest voxel is less opaque than this across one voxel
+    /// (`σ_min = −ln(1 − α)/voxel_size`).
+    #[arg(long, default_value_t = 0.01)]
+    pub min_brick_opacity: f64,
+    /// Evaluate light transport only where the optical depth from outside is below
+    /// this (plus one voxel around), elsewhere the PCA mean.
+    #[arg(long, default_value_t = 10.0)]
+    pub max_optical_depth: f64,
+    /// Ground-truth field: how density follows the signed distance to the mesh (a
+    /// signed linear ramp through the surface, a ramp inside it, or one centred on it).
+    #[arg(long, value_enum, default_value_t)]
+    pub shell_placement: ShellPlacement,
+    /// Ground-truth field, `inside`/`centred` shells: ramp width, voxels.
+    #[arg(long, default_value_t = 2.0)]
+    pub shell_voxels: f32,
+    /// Ground-truth field, `signed` shell: how far outside the surface the density
+    /// crosses zero, voxels (the slope puts transmittance ½ at the surface).
+    #[arg(long, default_value_t = 0.25)]
+    pub lead_voxels: f32,
+    /// Ground-truth field: thickness, voxels, given to open sheets and parts thinner
+    /// than it (a collar, a flap of cloth, an ear's rim), so that they come out
+    /// opaque and each side keeps its own shading.
+    #[arg(long, default_value_t = 2.0)]
+    pub sheet_voxels: f32,
+    /// Ground-truth field, `signed` shell: closed parts are hollow shells this many
+    /// voxels thick (0: solid). Unchanged from outside; through a hole the inside of
+    /// the mesh shows, as in the path tracer's images, and hidden interiors cost no
+    /// bricks.
+    #[arg(long, default_value_t = 3.0)]
+    pub hollow_voxels: f32,
+    /// Outgoing direction the light transport is baked for.
+    #[arg(long, value_enum, default_value_t)]
+    pub view_policy: ViewPolicyChoice,
+    /// Longest side, pixels, of the renders that weight the PCA and choose the rank.
+    #[arg(long, default_value_t = 128)]
+    pub render_size: u32,
+    /// Ray-march step of those renders, voxels.
+    #[arg(long, default_value_t = 0.5)]
+    pub step_voxels: f32,
+    /// PCA weight floor, relative to the mean visibility weight, so unseen voxels
+    /// still count a little.
+    #[arg(long, default_value_t = 0.01)]
+    pub weight_floor: f64,
+    /// Force the PCA rank K (skip the choice; its loss is still measured).
+    #[arg(long)]
+    pub rank: Option<usize>,
+    /// Largest rank the choice may take.
+    #[arg(long, default_value_t = 64)]
+    pub max_rank: usize,
+    /// Rank choice: largest rendered-image loss accepted, dB.
+    #[arg(long, default_value_t = 0.1)]
+    pub max_loss_db: f64,
+    /// Rank choice: the signal-to-noise ratio (dB) assumed for the unquantized grid
+    /// against ground truth when the capture's lighting is unknown (no envmap in
+    /// cameras.json). The default synthetic capture measures about 13 dB at 128
+    /// voxels; 20 dB asks for more accuracy than that.
+    #[arg(long, default_value_t = 20.0)]
+    pub reference_snr_db: f64,
+    /// Coefficient storage.
+    #[arg(long, value_enum, default_value_t)]
+    pub encoding: EncodingChoice,
+    /// 8-bit coefficients: one quantization step for every component, sized so that
+    /// rounding adds this share of the PCA truncation error (0: each component's
+    /// own range over 254 steps).
+    #[arg(long, default_value_t = 0.1)]
+    pub quantization_share: f64,
+    /// Ground-truth path-tracer overrides.
+    #[command(flatten)]
+    pub trace: TraceOverrides,
+}
+
+impl Default for BakeConfig {
+    fn default() -> Self {
+        Self {
+            resolution: 128,
+            voxel_size_m: None,
+            dilate_px: 2,
+            min_brick_opacity: 0.01,
+            max_optical_depth: 10.0,
+            shell_placement: ShellPlacement::Signed,
+            shell_voxels: 2.0,
+            lead_voxels: 0.25,
+            sheet_voxels: 2.0,
+            hollow_voxels: 3.0,
+            view_policy: ViewPolicyChoice::AverageCameras,
+            render_size: 128,
+            step_voxels: 0.5,
+            weight_floor: 0.01,
+            rank: None,
+            max_rank: 64,
+            max_loss_db: 0.1,
+            reference_snr_db: 20.0,
+            encoding: EncodingChoice::U8,
+            quantization_share: 0.1,
+            trace: TraceOverrides::default(),
+        }
+    }
+}
+
+impl BakeConfig {
+    /// Checks ranges before any work.
+    pub fn validate(&self) -> Result<()> {
+        let bad = |m: String| Err(BakeError::Settings(m));
+        if let Some(k) = self.rank
+            && !(1..=LT_DIM).contains(&k)
+        {
+            return bad(format!("--rank {k} must be in 1..={LT_DIM}"));
+        }
+        if !(1..=LT_DIM).contains(&self.max_rank) {
+            return bad(format!("--max-rank {} must be in 1..={LT_DIM}", self.max_rank));
+        }
+        if !(self.max_loss_db.is_finite() && self.max_loss_db >= 0.0) {
+            return bad(format!("--max-loss-db {} must be ≥ 0", self.max_loss_db));
+        }
+        if !self.reference_snr_db.is_finite() {
+            return bad(format!(
+                "--reference-snr-db {} must be finite",
+                self.reference_snr_db
+            ));
+        }
+        if !(self.quantization_share.is_finite() && self.quantization_share >= 0.0) {
+            return bad(format!(
+                "--quantization-share {} must be ≥ 0",
+                self.quantization_share
+            ));
+        }
+        if !(self.weight_floor.is_finite() && self.weight_floor >= 0.0) {
+            return bad(format!("--weight-floor {} must be ≥ 0", self.weight_floor));
+        }
+        if !(self.max_optical_depth.is_finite() && self.max_optical_depth > 0.0) {
+            return bad(format!(
+                "--max-optical-depth {} must be positive",
+                self.max_optical_depth
+            ));
+        }
+        if !(8..=4096).contains(&self.render_size) {
+            return bad(format!("--render-size {} must be in 8..=4096", self.render_size));
+        }
+        if !(self.shell_voxels.is_finite() && self.shell_voxels > 0.0) {
+            return bad(format!("--shell-voxels {} must be positive", self.shell_voxels));
+        }
+        if !(self.sheet_voxels.is_finite() && self.sheet_voxels > 0.0) {
+            return bad(format!("--sheet-voxels {} must be positive", self.sheet_voxels));
+        }
+        if !(self.hollow_voxels.is_finite() && (self.hollow_voxels == 0.0 || self.hollow_voxels >= 2.0)) {
+            return bad(format!(
+                "--hollow-voxels {} must be 0 (solid) or at least 2",
+                self.hollow_voxels
+            ));
+        }
+        if !(self.lead_voxels.is_finite() && self.lead_voxels > 0.0 && self.lead_voxels <= 2.0) {
+            return bad(format!("--lead-voxels {} must be in (0, 2]", self.lead_voxels));
+        }
+        self.march().validate()?;
+        Ok(())
+    }
+
+    /// Ray-marching settings of the bake's renders.
+    pub fn march(&self) -> MarchSettings {
+        MarchSettings {
+            step_voxels: self.step_voxels,
+            ..MarchSettings::default()
+        }
+    }
+}
