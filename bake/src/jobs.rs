@@ -131,7 +131,7 @@ pub fn bake_capture(
     progress: &Progress,
 ) -> Result<BakeOutput> {
     let mesh = truth.mesh()?;
-    let trace = config.trace.apply(truth.trace_settings());
+    let trace = config.trace.apply_to_field(truth.trace_settings());
     // Occupancy only: any voxel size will do for the probe's shell.
     let probe = mesh_field(
         &mesh,
@@ -195,7 +195,7 @@ pub fn bake_mesh(
     let t = Instant::now();
     let (lo, hi) = mesh.bounds();
     let voxel = voxel_size_for((hi - lo).as_dvec3(), config.resolution, config.voxel_size_m)?;
-    let trace = config.trace.apply(TraceSettings::default());
+    let trace = config.trace.apply_to_field(TraceSettings::default());
     let field = mesh_field(mesh, trace, voxel, config.shell_placement, config)?;
     let (flo, fhi) = field.bounds();
     let plan = plan_all_bricks(geometry_for_box(flo.as_dvec3(), fhi.as_dvec3(), voxel)?);
@@ -207,7 +207,7 @@ pub fn bake_mesh(
     // Ground-truth references: the mesh path-traced at the (already reduced) views.
     let t = Instant::now();
     let lighting = test_environments().swap_remove(MESH_REFERENCE_ENV).map;
-    let tracer = LtTracer::new(mesh, trace)?;
+    let tracer = LtTracer::new(mesh, config.trace.apply(TraceSettings::default()))?;
     let light = light_texels(&lighting, tracer.settings().world_from_light)?;
     let bar = progress.bar("reference", cameras.len() as u64, "views");
     let mut images = Vec::with_capacity(cameras.len());

@@ -27,10 +27,9 @@
 use std::path::{Path, PathBuf};
 
 use glam::{DMat3, Vec3};
-use nelf_format::conventions::LT_DIM;
 use nelf_scene::bvh::ClosestPoint;
 use nelf_scene::field::{
-    DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy, check_batch, check_density_batch,
+    DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy, check_density_batch, evaluate_in_parallel,
 };
 use nelf_scene::mesh::Mesh;
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
@@ -371,21 +370,9 @@ impl FieldSource for ShellMeshField {
         density: &mut [f32],
         lt: &mut [f32],
     ) -> Result<(), FieldError> {
-        use rayon::prelude::*;
-        const CHUNK: usize = 64;
-        check_batch(points, density, lt)?;
-        view.validate()?;
-        points
-            .par_chunks(CHUNK)
-            .zip(density.par_chunks_mut(CHUNK))
-            .zip(lt.par_chunks_mut(CHUNK * LT_DIM))
-            .for_each(|((p, d), t)| {
-                for ((x, sigma), out) in p.iter().zip(d.iter_mut()).zip(t.chunks_mut(LT_DIM)) {
-                    out.fill(0.0);
-                    *sigma = self.evaluate_point(*x, view, out);
-                }
-            });
-        Ok(())
+        evaluate_in_parallel(points, view, density, lt, None, |x, out| {
+            self.evaluate_point(x, view, out)
+        })
     }
 
     fn bounds(&self) -> (Vec3, Vec3) {

@@ -16,15 +16,14 @@
 
 use std::path::Path;
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use nelf_bake::eval::{data_range, error_breakdown, score_view};
 use nelf_bake::{BakeConfig, Progress, TraceOverrides, bake_mesh};
 use nelf_format::conventions::PinholeCamera;
-use nelf_scene::defects::{striped_texture, textured_quad, torn_sphere, with_fin, with_flipped_triangles};
+use nelf_scene::defects::test_cases;
 use nelf_scene::envmap::{envmap_to_basis, load_envmap};
 use nelf_scene::mesh::Mesh;
 use nelf_scene::render::render_lt_image;
-use nelf_scene::shapes::{merge, quad, uv_sphere};
 use nelf_scene::tracer::{LtTracer, TraceSettings};
 
 /// Pixels along each side of the views scored.
@@ -139,74 +138,46 @@ fn check(mesh: &Mesh, name: &str, psnr_floor_db: f64, interior_floor_db: f64, co
     );
 }
 
+/// The named case of `nelf_scene::defects::test_cases`.
+fn case(name: &str) -> Mesh {
+    test_cases()
+        .into_iter()
+        .find(|(n, _)| *n == name)
+        .map(|(_, mesh)| mesh)
+        .unwrap_or_else(|| panic!("no defect case {name}"))
+}
+
 #[test]
 fn one_sided_sheet_is_opaque_and_lit_on_the_side_seen() {
-    // A bent sheet: two quads meeting at an angle, facing +z, one-sided, open edges.
-    let a = quad(
-        Vec3::new(-0.08, -0.06, 0.0),
-        Vec3::new(0.08, 0.0, 0.03),
-        Vec3::new(0.0, 0.12, 0.0),
-        6,
-        [0.8, 0.7, 0.6],
-    );
-    let b = quad(
-        Vec3::new(0.0, -0.06, 0.03),
-        Vec3::new(0.08, 0.0, -0.03),
-        Vec3::new(0.0, 0.12, 0.0),
-        6,
-        [0.8, 0.7, 0.6],
-    );
     // Measured: worst whole image 14.26 dB (the view from above, along the sheet:
     // silhouette), worst interior 29.22 dB (back; before the sheet handling 9.4 dB),
     // coverage 0.037 (a sheet baked two voxels thick at 4 mm voxels ≈ 1 px/voxel).
-    check(&merge(&[a, b]), "sheet", 13.0, 27.0, 0.045);
+    check(&case("sheet"), "sheet", 13.0, 27.0, 0.045);
 }
 
 #[test]
 fn torn_sphere_with_holes_of_three_sizes() {
-    let mesh = torn_sphere(
-        Vec3::ZERO,
-        0.08,
-        &[
-            (Vec3::new(0.3, 0.2, 1.0), 0.5),
-            (Vec3::X, 0.2),
-            (Vec3::NEG_Y, 0.08),
-        ],
-        [0.6, 0.6, 0.7],
-    );
     // Measured: worst 20.12 dB whole / 16.76 dB interior (the big hole's rim, three
     // voxels of shell), coverage 0.013; before: 15.06 dB, 11.5 dB.
-    check(&mesh, "torn sphere", 18.5, 15.0, 0.02);
+    check(&case("torn_sphere"), "torn sphere", 18.5, 15.0, 0.02);
 }
 
 #[test]
 fn closed_mesh_with_a_disconnected_piece() {
-    let body = uv_sphere(Vec3::ZERO, 0.07, 16, 32, [0.7, 0.55, 0.45]);
-    let piece = uv_sphere(Vec3::new(0.1, 0.06, 0.02), 0.02, 8, 16, [0.3, 0.4, 0.8]);
     // Measured: worst 36.30 dB whole / 35.70 dB interior, coverage 0.0064.
-    check(&merge(&[body, piece]), "disconnected piece", 34.5, 34.0, 0.01);
+    check(&case("loose_piece"), "disconnected piece", 34.5, 34.0, 0.01);
 }
 
 #[test]
 fn textured_quad_keeps_its_texture() {
-    let texture = striped_texture(16, 16, 4, [[0.9, 0.9, 0.85], [0.2, 0.3, 0.6], [0.05, 0.05, 0.1]]);
-    let mesh = textured_quad(
-        Vec3::new(-0.08, -0.08, 0.0),
-        Vec3::new(0.16, 0.0, 0.0),
-        Vec3::new(0.0, 0.16, 0.02),
-        4,
-        texture,
-    );
     // Measured: worst 14.05 dB whole (grazing views: silhouette), 12.81 dB interior,
     // coverage 0.033.
-    check(&mesh, "textured quad", 12.5, 11.5, 0.04);
+    check(&case("textured_quad"), "textured quad", 12.5, 11.5, 0.04);
 }
 
 #[test]
 fn flipped_triangles_and_a_non_manifold_fin() {
-    let sphere = uv_sphere(Vec3::ZERO, 0.07, 16, 32, [0.7, 0.6, 0.5]);
-    let mesh = with_fin(with_flipped_triangles(sphere, 13), 0.02);
     // Measured: worst 31.06 dB whole / 34.77 dB interior, coverage 0.0107; before the
     // closed/open test from both sides of the surface: 23.2 dB, 20.0 dB.
-    check(&mesh, "flipped + fin", 29.5, 33.0, 0.015);
+    check(&case("flipped_fin"), "flipped + fin", 29.5, 33.0, 0.015);
 }

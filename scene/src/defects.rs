@@ -211,6 +211,66 @@ pub fn merge_textured(parts: &[Mesh]) -> Mesh {
     }
 }
 
+/// The small defect cases the bake is tested on (`bake/tests/defects.rs`) and the
+/// `defect_meshes` example writes, by name, each about 0.16 m across:
+///
+/// * `sheet`: a bent one-sided sheet (two quads at an angle), open edges;
+/// * `torn_sphere`: a sphere torn by holes of three sizes (0.5, 0.2, 0.08 rad);
+/// * `loose_piece`: a sphere with a small sphere not connected to it;
+/// * `textured_quad`: a quad with a striped texture;
+/// * `flipped_fin`: a sphere with every 13th triangle flipped and a non-manifold fin.
+pub fn test_cases() -> Vec<(&'static str, Mesh)> {
+    let sheet_colour = [0.8, 0.7, 0.6];
+    let sheet = crate::shapes::merge(&[
+        crate::shapes::quad(
+            Vec3::new(-0.08, -0.06, 0.0),
+            Vec3::new(0.08, 0.0, 0.03),
+            Vec3::new(0.0, 0.12, 0.0),
+            6,
+            sheet_colour,
+        ),
+        crate::shapes::quad(
+            Vec3::new(0.0, -0.06, 0.03),
+            Vec3::new(0.08, 0.0, -0.03),
+            Vec3::new(0.0, 0.12, 0.0),
+            6,
+            sheet_colour,
+        ),
+    ]);
+    let torn = torn_sphere(
+        Vec3::ZERO,
+        0.08,
+        &[
+            (Vec3::new(0.3, 0.2, 1.0), 0.5),
+            (Vec3::X, 0.2),
+            (Vec3::NEG_Y, 0.08),
+        ],
+        [0.6, 0.6, 0.7],
+    );
+    let loose = crate::shapes::merge(&[
+        uv_sphere(Vec3::ZERO, 0.07, 16, 32, [0.7, 0.55, 0.45]),
+        uv_sphere(Vec3::new(0.1, 0.06, 0.02), 0.02, 8, 16, [0.3, 0.4, 0.8]),
+    ]);
+    let quad = textured_quad(
+        Vec3::new(-0.08, -0.08, 0.0),
+        Vec3::new(0.16, 0.0, 0.0),
+        Vec3::new(0.0, 0.16, 0.02),
+        4,
+        striped_texture(16, 16, 4, [[0.9, 0.9, 0.85], [0.2, 0.3, 0.6], [0.05, 0.05, 0.1]]),
+    );
+    let flipped = with_fin(
+        with_flipped_triangles(uv_sphere(Vec3::ZERO, 0.07, 16, 32, [0.7, 0.6, 0.5]), 13),
+        0.02,
+    );
+    vec![
+        ("sheet", sheet),
+        ("torn_sphere", torn),
+        ("loose_piece", loose),
+        ("textured_quad", quad),
+        ("flipped_fin", flipped),
+    ]
+}
+
 /// A shirt texture: white and pale blue stripes with a darker check line.
 fn shirt_texture() -> Texture {
     striped_texture(

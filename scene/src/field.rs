@@ -385,28 +385,46 @@ impl MeshField {
         lt: &mut [f32],
         progress: Option<&ProgressBar>,
     ) -> Result<(), FieldError> {
-        const CHUNK: usize = 64;
-        check_batch(points, density, lt)?;
-        view.validate()?;
-        if let Some(pb) = progress {
-            pb.set_length(points.len() as u64);
-        }
-        points
-            .par_chunks(CHUNK)
-            .zip(density.par_chunks_mut(CHUNK))
-            .zip(lt.par_chunks_mut(CHUNK * LT_DIM))
-            .for_each(|((p, d), t)| {
-                for ((x, sigma), out) in p.iter().zip(d.iter_mut()).zip(t.chunks_mut(LT_DIM)) {
-                    *sigma = self.density(*x);
-                    out.fill(0.0);
-                    self.light_transport_into(*x, view, out);
-                }
-                if let Some(pb) = progress {
-                    pb.inc(p.len() as u64);
-                }
-            });
-        Ok(())
+        evaluate_in_parallel(points, view, density, lt, progress, |x, out| {
+            self.light_transport_into(x, view, out);
+            self.density(x)
+        })
     }
+}
+
+/// The batch loop every mesh-based [`FieldSource`] shares: checks the buffers and
+/// the view policy, then on all cores, in fixed chunks of 64 points, zeroes each
+/// point's 384 floats and calls `point(x, out)`, which adds the light transport
+/// into `out` and returns the density. Ticks `progress` (its length set to the
+/// number of points) per chunk.
+pub fn evaluate_in_parallel(
+    points: &[Vec3],
+    view: &ViewPolicy,
+    density: &mut [f32],
+    lt: &mut [f32],
+    progress: Option<&ProgressBar>,
+    point: impl Fn(Vec3, &mut [f32]) -> f32 + Sync,
+) -> Result<(), FieldError> {
+    const CHUNK: usize = 64;
+    check_batch(points, density, lt)?;
+    view.validate()?;
+    if let Some(pb) = progress {
+        pb.set_length(points.len() as u64);
+    }
+    points
+        .par_chunks(CHUNK)
+        .zip(density.par_chunks_mut(CHUNK))
+        .zip(lt.par_chunks_mut(CHUNK * LT_DIM))
+        .for_each(|((p, d), t)| {
+            for ((x, sigma), out) in p.iter().zip(d.iter_mut()).zip(t.chunks_mut(LT_DIM)) {
+                out.fill(0.0);
+                *sigma = point(*x, out);
+            }
+            if let Some(pb) = progress {
+                pb.inc(p.len() as u64);
+            }
+        });
+    Ok(())
 }
 
 impl FieldSource for MeshField {

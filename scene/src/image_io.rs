@@ -71,15 +71,25 @@ pub fn write_png_srgb(
     exposure_stops: f32,
 ) -> Result<(), SceneError> {
     let path = path.as_ref();
-    let gain = exposure_stops.exp2();
+    let buffer = srgb8(path, width, height, rgb, exposure_stops.exp2())?;
+    write_atomic(path, |w| buffer.write_to(w, ImageFormat::Png))
+}
+
+/// Linear RGB scaled by `gain` as an 8-bit sRGB image buffer (clamped to `[0, 1]`).
+fn srgb8(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgb: &[[f32; 3]],
+    gain: f32,
+) -> Result<ImageBuffer<Rgb<u8>, Vec<u8>>, SceneError> {
     let data: Vec<u8> = rgb
         .iter()
         .flatten()
         .map(|&v| (linear_to_srgb(v * gain) * 255.0).round() as u8)
         .collect();
-    let buffer = ImageBuffer::<Rgb<u8>, _>::from_raw(width, height, data)
-        .ok_or_else(|| size_error(path, width, height, rgb.len()))?;
-    write_atomic(path, |w| buffer.write_to(w, ImageFormat::Png))
+    ImageBuffer::<Rgb<u8>, _>::from_raw(width, height, data)
+        .ok_or_else(|| size_error(path, width, height, rgb.len()))
 }
 
 /// Writes linear RGB as an 8-bit sRGB JPEG of the given quality (1–100), as
@@ -92,13 +102,7 @@ pub fn write_jpeg_srgb(
     quality: u8,
 ) -> Result<(), SceneError> {
     let path = path.as_ref();
-    let data: Vec<u8> = rgb
-        .iter()
-        .flatten()
-        .map(|&v| (linear_to_srgb(v) * 255.0).round() as u8)
-        .collect();
-    let buffer = ImageBuffer::<Rgb<u8>, _>::from_raw(width, height, data)
-        .ok_or_else(|| size_error(path, width, height, rgb.len()))?;
+    let buffer = srgb8(path, width, height, rgb, 1.0)?;
     write_atomic(path, |w| {
         image::codecs::jpeg::JpegEncoder::new_with_quality(w, quality.clamp(1, 100)).encode_image(&buffer)
     })
