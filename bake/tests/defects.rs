@@ -143,8 +143,7 @@ fn case(name: &str) -> Mesh {
     test_cases()
         .into_iter()
         .find(|(n, _)| *n == name)
-        .map(|(_, mesh)| mesh)
-        .unwrap_or_else(|| panic!("no defect case {name}"))
+        .map_or_else(|| panic!("no defect case {name}"), |(_, mesh)| mesh)
 }
 
 #[test]

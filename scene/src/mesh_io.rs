@@ -147,7 +147,6 @@ impl Mesh {
     /// For every triangle, the surface area of the connected piece it belongs to
     /// (triangles sharing a vertex are connected).
     fn piece_areas(&self) -> Vec<f32> {
-        let mut parent: Vec<u32> = (0..self.positions.len() as u32).collect();
         fn root(parent: &mut [u32], mut i: u32) -> u32 {
             while parent[i as usize] != i {
                 let up = parent[parent[i as usize] as usize];
@@ -156,6 +155,7 @@ impl Mesh {
             }
             i
         }
+        let mut parent: Vec<u32> = (0..self.positions.len() as u32).collect();
         for tri in &self.triangles {
             let r0 = root(&mut parent, tri[0]);
             for &v in &tri[1..] {
