@@ -198,13 +198,13 @@ impl ShellProfile {
 /// light transport as [`MeshField`]'s, shaded on the side each point sees.
 ///
 /// **Open and thin surfaces.** Inside and outside come from the generalised winding
-/// number, which classifies both sides of an open sheet (a collar, a flap of cloth,
-/// a zero-volume cap over a flap) as outside: an inside/outside shell would leave
-/// such a sheet transparent. Where the surface closest to an outside point is
-/// *thin* — the point `sheet_thickness_m` behind it, seen from the query point, is
-/// outside too — the density is the profile's for a sheet of that thickness centred
-/// on the surface (signed distance `|d| − t/2`). Closed surfaces thicker than `t`
-/// are unchanged.
+/// number, which puts both sides of an open sheet (a collar, a flap of cloth, a
+/// zero-volume cap over a flap) near ±½: a shell built on `w ≥ ½` would leave such
+/// a sheet transparent or fill the hollow behind a bent one. Where the surface
+/// closest to a point is open or thinner than `sheet_thickness_m` (told apart by
+/// the winding number on both sides of it, [`Self::locate`]), the density is the
+/// profile's for a sheet of that thickness centred on the surface (signed distance
+/// `|d| − t/2`). Closed surfaces thicker than `t` are unchanged.
 ///
 /// **Hollow shells.** With `hollow_depth_m = Some(D)` the inside of a closed surface
 /// is a shell `D` thick, empty beyond (its inner wall is a signed ramp like the
@@ -213,10 +213,10 @@ impl ShellProfile {
 /// winding number still says "inside") a camera sees the inner wall, shaded facing
 /// the hollow, as the two-sided path tracer shows the inside of the mesh.
 ///
-/// **Sides.** A point outside the mesh behind its closest triangle (the back of a
-/// sheet, a flipped triangle) and a point in the inner half of a hollow shell are
-/// shaded with the normal turned toward them; a point within a hair of an open sheet
-/// takes the side the view policy's directions face.
+/// **Sides.** A point behind an open sheet, a point outside a closed surface whose
+/// closest triangle is wound inward (flipped), and a point in the inner half of a
+/// hollow shell are shaded with the normal turned toward them; a point within a hair
+/// of an open sheet takes the side the view policy's directions face.
 #[derive(Debug, Clone)]
 pub struct ShellMeshField {
     inner: MeshField,
@@ -343,8 +343,7 @@ impl ShellMeshField {
         let Some(cp) = located.closest else {
             return located.density;
         };
-        let mut sp = self.inner.tracer().surface_point(cp.triangle, cp.b1, cp.b2);
-        sp.position = cp.point;
+        let sp = self.inner.surface_at(&cp);
         let back = if located.tie {
             // On the sheet itself: the side the view policy's directions face.
             let mut omegas = [Vec3::ZERO; MAX_AVERAGED_DIRECTIONS];
@@ -353,10 +352,7 @@ impl ShellMeshField {
         } else {
             located.back
         };
-        if back {
-            sp.geometric_normal = -sp.geometric_normal;
-            sp.shading_normal = -sp.shading_normal;
-        }
+        let sp = if back { sp.turned() } else { sp };
         self.inner.light_transport_at(x, &sp, &cp, view, out);
         located.density
     }

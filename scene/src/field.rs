@@ -325,9 +325,15 @@ impl MeshField {
     /// The closest surface point to `x`, with its outward normals and albedo.
     pub fn surface_point(&self, x: Vec3) -> Option<(SurfacePoint, ClosestPoint)> {
         let cp = self.tracer.bvh().closest_point(x, f32::INFINITY)?;
-        let mut sp = self.tracer.surface_point(cp.triangle, cp.b1, cp.b2);
-        sp.position = cp.point;
-        Some((sp, cp))
+        Some((self.surface_at(&cp), cp))
+    }
+
+    /// The surface at a closest point found by the caller, outward normals.
+    pub fn surface_at(&self, cp: &ClosestPoint) -> SurfacePoint {
+        SurfacePoint {
+            position: cp.point,
+            ..self.tracer.surface_point(cp.triangle, cp.b1, cp.b2)
+        }
     }
 
     /// The closest surface point to `x` as seen from `x`: like [`Self::surface_point`],
@@ -338,12 +344,13 @@ impl MeshField {
     /// flap of cloth), a flipped triangle, the inside of a torn shell. Points inside
     /// a closed surface keep its outward normals.
     pub fn surface_point_seen_from(&self, x: Vec3) -> Option<(SurfacePoint, ClosestPoint)> {
-        let (mut sp, cp) = self.surface_point(x)?;
-        if (x - cp.point).dot(sp.geometric_normal) < 0.0 && self.tracer.bvh().winding_number(x) < 0.5 {
-            sp.geometric_normal = -sp.geometric_normal;
-            sp.shading_normal = -sp.shading_normal;
+        let (sp, cp) = self.surface_point(x)?;
+        let behind = (x - cp.point).dot(sp.geometric_normal) < 0.0;
+        if behind && self.tracer.bvh().winding_number(x) < 0.5 {
+            Some((sp.turned(), cp))
+        } else {
+            Some((sp, cp))
         }
-        Some((sp, cp))
     }
 
     /// Adds the light transport at `x` under `view` to `out` (384 floats, zeroed by the caller).

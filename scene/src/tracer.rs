@@ -192,6 +192,19 @@ pub struct SurfacePoint {
     pub albedo: [f32; 3],
 }
 
+impl SurfacePoint {
+    /// The same point seen from the other side: both normals reversed (two-sided
+    /// shading of the back of a triangle).
+    #[must_use]
+    pub fn turned(self) -> Self {
+        Self {
+            geometric_normal: -self.geometric_normal,
+            shading_normal: -self.shading_normal,
+            ..self
+        }
+    }
+}
+
 /// Bounds of one light-frame texel in `(cos θ, φ)` and its solid angle.
 #[derive(Debug, Clone, Copy)]
 struct TexelPatch {
@@ -368,12 +381,12 @@ impl LtTracer {
     /// The surface seen by a ray with direction `ray_dir` at `hit`: two-sided, so the
     /// normals are flipped when the ray arrives from behind the triangle.
     pub fn surface_at_hit(&self, hit: &Hit, ray_dir: Vec3) -> SurfacePoint {
-        let mut sp = self.surface_point(hit.triangle, hit.b1, hit.b2);
+        let sp = self.surface_point(hit.triangle, hit.b1, hit.b2);
         if sp.geometric_normal.dot(ray_dir) > 0.0 {
-            sp.geometric_normal = -sp.geometric_normal;
-            sp.shading_normal = -sp.shading_normal;
+            sp.turned()
+        } else {
+            sp
         }
-        sp
     }
 
     /// The light-transport vector `T` (channel-major, `T[c·128 + k]`) at `sp` seen
