@@ -24,6 +24,13 @@ pub const FIELD_TEXEL_SAMPLES: u32 = 4;
 /// capture's images take 128); see [`FIELD_TEXEL_SAMPLES`].
 pub const FIELD_INDIRECT_SAMPLES: u32 = 32;
 
+/// Default `--lt-share-voxels`.
+pub const DEFAULT_LT_SHARE_VOXELS: f32 = 1.0;
+
+fn default_lt_share_voxels() -> f32 {
+    DEFAULT_LT_SHARE_VOXELS
+}
+
 /// Overrides of the ground-truth path tracer's sample counts.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::Args)]
 pub struct TraceOverrides {
@@ -161,6 +168,14 @@ pub struct BakeConfig {
     /// took 140 s of light transport against 35 s solid, at the same PSNR.
     #[arg(long, default_value_t = 0.0)]
     pub hollow_voxels: f32,
+    /// Ground-truth field: surface points closer than this (voxels, a cubic cell of
+    /// the world lattice) on the same triangle and side share one path-traced light
+    /// transport, traced at the point of the triangle closest to the cell's centre.
+    /// The voxels of the band around a surface have nearly the same closest point;
+    /// sharing traces each once. 0 traces every voxel's own closest point.
+    #[arg(long, default_value_t = DEFAULT_LT_SHARE_VOXELS)]
+    #[serde(default = "default_lt_share_voxels")]
+    pub lt_share_voxels: f32,
     /// Outgoing direction the light transport is baked for.
     #[arg(long, value_enum, default_value_t)]
     pub view_policy: ViewPolicyChoice,
@@ -215,6 +230,7 @@ impl Default for BakeConfig {
             lead_voxels: 0.25,
             sheet_voxels: 2.0,
             hollow_voxels: 0.0,
+            lt_share_voxels: DEFAULT_LT_SHARE_VOXELS,
             view_policy: ViewPolicyChoice::AverageCameras,
             render_size: 128,
             step_voxels: 0.5,
@@ -279,6 +295,12 @@ impl BakeConfig {
             return bad(format!(
                 "--hollow-voxels {} must be 0 (solid) or at least 2",
                 self.hollow_voxels
+            ));
+        }
+        if !(self.lt_share_voxels.is_finite() && (0.0..=4.0).contains(&self.lt_share_voxels)) {
+            return bad(format!(
+                "--lt-share-voxels {} must be in 0..=4 (0: no sharing)",
+                self.lt_share_voxels
             ));
         }
         if !(self.lead_voxels.is_finite() && self.lead_voxels > 0.0 && self.lead_voxels <= 2.0) {

@@ -23,13 +23,25 @@
 //! clips it at 0 after interpolating, so the surface lands where the mesh is, to a
 //! small fraction of a voxel. Light transport is `MeshField`'s (the closest surface
 //! point's) in every case.
+//!
+//! **Shared light transport.** The voxels of the band around a surface (two to
+//! three deep on each side) have nearly the same closest point, and path-tracing
+//! each of them was most of a bake. With `--lt-share-voxels C` (default 1) points
+//! whose closest points lie on the same triangle, on the same side, in the same
+//! world-lattice cell of `C` voxels share one trace, made at the triangle's point
+//! closest to the cell's centre and rescaled per colour channel to each point's
+//! own albedo (diffuse transport is proportional to it), so texture finer than a
+//! cell survives. On the head-and-shoulders scan this halves light transport
+//! (38 → 18 s) for 0.04 dB.
 
 use std::path::{Path, PathBuf};
 
 use glam::{DMat3, Vec3};
-use nelf_scene::bvh::ClosestPoint;
+use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
+use nelf_scene::bvh::{ClosestPoint, closest_point_on_triangle};
 use nelf_scene::field::{
-    DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy, check_density_batch, evaluate_in_parallel,
+    DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy, check_batch, check_density_batch,
+    evaluate_in_parallel,
 };
 use nelf_scene::mesh::Mesh;
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
@@ -223,6 +235,19 @@ pub struct ShellMeshField {
     profile: ShellProfile,
     sheet_thickness_m: f32,
     hollow_depth_m: Option<f32>,
+    share_cell_m: Option<f32>,
+}
+
+/// Below this traced albedo a shared vector is not rescaled to a point's own albedo.
+const ALBEDO_RATIO_FLOOR: f32 = 1e-3;
+
+/// The light transport a located point shares with others: its closest triangle,
+/// the side it sees, and the world-lattice cell its closest point lies in.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+struct ShareKey {
+    triangle: u32,
+    back: bool,
+    cell: [i32; 3],
 }
 
 /// What [`ShellMeshField`] decides at a point.
@@ -258,7 +283,19 @@ impl ShellMeshField {
             profile,
             sheet_thickness_m,
             hollow_depth_m,
+            share_cell_m: None,
         })
+    }
+
+    /// Shares light transport among points whose closest points lie on the same
+    /// triangle, seen from the same side, in the same cubic cell of edge `cell_m`
+    /// (`None` or 0: every point traces its own). Each shared value is traced at the
+    /// point of the triangle closest to the cell's centre, so it is a function of
+    /// the cell alone, whatever the batch.
+    #[must_use]
+    pub fn with_shared_transport(mut self, cell_m: Option<f32>) -> Self {
+        self.share_cell_m = cell_m.filter(|c| c.is_finite() && *c > 0.0);
+        self
     }
 
     /// Distance from the surface within which the density varies.
@@ -337,24 +374,126 @@ impl ShellMeshField {
         out
     }
 
-    /// Density and light transport of one point (`out` zeroed by the caller).
-    fn evaluate_point(&self, x: Vec3, view: &ViewPolicy, out: &mut [f32]) -> f32 {
+    /// Density at `x`, and the closest surface point with the side `x` sees (turn
+    /// the normals when `true`), if any.
+    fn side_at(&self, x: Vec3, view: &ViewPolicy) -> (f32, Option<(ClosestPoint, bool)>) {
         let located = self.locate(x, f32::INFINITY);
         let Some(cp) = located.closest else {
-            return located.density;
+            return (located.density, None);
         };
-        let sp = self.inner.surface_at(&cp);
         let back = if located.tie {
             // On the sheet itself: the side the view policy's directions face.
+            let normal = self.inner.tracer().mesh().face_normal(cp.triangle as usize);
             let mut omegas = [Vec3::ZERO; MAX_AVERAGED_DIRECTIONS];
-            let n = view.directions_at(x, sp.geometric_normal, &mut omegas);
-            omegas[..n].iter().sum::<Vec3>().dot(sp.geometric_normal) < 0.0
+            let n = view.directions_at(x, normal, &mut omegas);
+            omegas[..n].iter().sum::<Vec3>().dot(normal) < 0.0
         } else {
             located.back
         };
+        (located.density, Some((cp, back)))
+    }
+
+    /// Adds to `out` the light transport of surface point `cp` seen from `x` on the
+    /// side `back` says.
+    fn light_transport(&self, x: Vec3, cp: &ClosestPoint, back: bool, view: &ViewPolicy, out: &mut [f32]) {
+        let sp = self.inner.surface_at(cp);
         let sp = if back { sp.turned() } else { sp };
-        self.inner.light_transport_at(x, &sp, &cp, view, out);
-        located.density
+        self.inner.light_transport_at(x, &sp, cp, view, out);
+    }
+
+    /// Density and light transport of one point (`out` zeroed by the caller).
+    fn evaluate_point(&self, x: Vec3, view: &ViewPolicy, out: &mut [f32]) -> f32 {
+        let (density, side) = self.side_at(x, view);
+        if let Some((cp, back)) = side {
+            self.light_transport(x, &cp, back, view, out);
+        }
+        density
+    }
+
+    /// [`FieldSource::evaluate`] with shared light transport (see
+    /// [`Self::with_shared_transport`]): locate every point, trace each distinct
+    /// [`ShareKey`] once, copy.
+    fn evaluate_shared(
+        &self,
+        cell_m: f32,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        use rayon::prelude::*;
+        check_batch(points, density, lt)?;
+        view.validate()?;
+        let mesh = self.inner.tracer().mesh();
+        // Each point's key and its own closest point's albedo.
+        let located: Vec<Option<(ShareKey, [f32; 3])>> = points
+            .par_iter()
+            .zip(density.par_iter_mut())
+            .map(|(x, d)| {
+                let (sigma, side) = self.side_at(*x, view);
+                *d = sigma;
+                side.map(|(cp, back)| {
+                    let key = ShareKey {
+                        triangle: cp.triangle,
+                        back,
+                        cell: (cp.point / cell_m).floor().as_ivec3().to_array(),
+                    };
+                    (key, mesh.albedo_at(cp.triangle as usize, cp.b1, cp.b2))
+                })
+            })
+            .collect();
+        let mut distinct: Vec<ShareKey> = located.iter().flatten().map(|(k, _)| *k).collect();
+        distinct.par_sort_unstable();
+        distinct.dedup();
+        // One trace per key, with the albedo it was traced with.
+        let mut shared = vec![0.0f32; distinct.len() * LT_DIM];
+        let traced_albedo: Vec<[f32; 3]> = shared
+            .par_chunks_mut(LT_DIM)
+            .zip(distinct.par_iter())
+            .map(|(out, key)| {
+                let centre = (glam::IVec3::from_array(key.cell).as_vec3() + 0.5) * cell_m;
+                let (point, b1, b2) = closest_point_on_triangle(mesh.corners(key.triangle as usize), centre);
+                let cp = ClosestPoint {
+                    point,
+                    triangle: key.triangle,
+                    b1,
+                    b2,
+                    distance: 0.0,
+                };
+                self.light_transport(point, &cp, key.back, view, out);
+                mesh.albedo_at(key.triangle as usize, b1, b2)
+            })
+            .collect();
+        // Diffuse light transport is proportional to the albedo at the point, so each
+        // point rescales the shared vector to its own albedo (texture detail finer
+        // than a cell survives); the specular part, a few per cent, is shared as is.
+        lt.par_chunks_mut(LT_DIM)
+            .zip(located.par_iter())
+            .for_each(|(out, entry)| {
+                let Some((i, albedo)) =
+                    entry.and_then(|(k, a)| distinct.binary_search(&k).ok().map(|i| (i, a)))
+                else {
+                    out.fill(0.0);
+                    return;
+                };
+                let source = &shared[i * LT_DIM..(i + 1) * LT_DIM];
+                for (c, (o, s)) in out
+                    .chunks_mut(ENV_TEXELS)
+                    .zip(source.chunks(ENV_TEXELS))
+                    .enumerate()
+                {
+                    let traced = traced_albedo[i][c];
+                    let ratio = if traced > ALBEDO_RATIO_FLOOR {
+                        albedo[c] / traced
+                    } else {
+                        1.0
+                    };
+                    for (o, s) in o.iter_mut().zip(s) {
+                        *o = s * ratio;
+                    }
+                }
+            });
+        Ok(())
     }
 }
 
@@ -366,6 +505,9 @@ impl FieldSource for ShellMeshField {
         density: &mut [f32],
         lt: &mut [f32],
     ) -> Result<(), FieldError> {
+        if let Some(cell_m) = self.share_cell_m {
+            return self.evaluate_shared(cell_m, points, view, density, lt);
+        }
         evaluate_in_parallel(points, view, density, lt, None, |x, out| {
             self.evaluate_point(x, view, out)
         })
@@ -413,24 +555,26 @@ pub fn mesh_field(
         )));
     }
     let sheet = config.sheet_voxels * voxel;
+    let share = Some(config.lt_share_voxels * voxel);
     let field = MeshField::new(mesh, trace, DensityProfile::with_shell_width(width))?;
     Ok(match placement {
         ShellPlacement::Centred => Box::new(field),
-        ShellPlacement::Inside => Box::new(ShellMeshField::new(
-            field,
-            ShellProfile::Inside { width_m: width },
-            sheet,
-            None,
-        )?),
-        ShellPlacement::Signed => Box::new(ShellMeshField::new(
-            field,
-            ShellProfile::Signed {
-                lead_m: config.lead_voxels * voxel,
-                voxel_m: voxel,
-            },
-            sheet,
-            (config.hollow_voxels > 0.0).then_some(config.hollow_voxels * voxel),
-        )?),
+        ShellPlacement::Inside => Box::new(
+            ShellMeshField::new(field, ShellProfile::Inside { width_m: width }, sheet, None)?
+                .with_shared_transport(share),
+        ),
+        ShellPlacement::Signed => Box::new(
+            ShellMeshField::new(
+                field,
+                ShellProfile::Signed {
+                    lead_m: config.lead_voxels * voxel,
+                    voxel_m: voxel,
+                },
+                sheet,
+                (config.hollow_voxels > 0.0).then_some(config.hollow_voxels * voxel),
+            )?
+            .with_shared_transport(share),
+        ),
     })
 }
 
@@ -448,6 +592,7 @@ pub fn describe_trace(trace: &TraceSettings, config: &BakeConfig) -> serde_json:
         "shell_voxels": config.shell_voxels,
         "lead_voxels": config.lead_voxels,
         "sheet_voxels": config.sheet_voxels,
+        "lt_share_voxels": config.lt_share_voxels,
         "hollow_voxels": config.hollow_voxels,
     })
 }
@@ -517,5 +662,105 @@ mod tests {
                 "{a}: {box_hi}"
             );
         }
+    }
+
+    /// Sharing light transport among the band's voxels: the result is a function of
+    /// each point alone (any batch split gives the same bits), a textured sheet keeps
+    /// its texture (each point rescales to its own albedo), and the shared field
+    /// stays within a few per cent of tracing every point.
+    #[test]
+    fn shared_transport_is_per_point_and_close_to_tracing_each_point() {
+        use nelf_scene::defects::{striped_texture, textured_quad};
+        let texture = striped_texture(32, 32, 4, [[0.8, 0.2, 0.1], [0.1, 0.6, 0.9], [0.5, 0.5, 0.5]]);
+        let mesh = textured_quad(
+            Vec3::new(-0.05, -0.05, 0.0),
+            Vec3::new(0.1, 0.0, 0.0),
+            Vec3::new(0.0, 0.1, 0.0),
+            4,
+            texture,
+        );
+        let voxel = 2e-3f32;
+        let trace = TraceSettings {
+            texel_samples: 1,
+            indirect_samples: 1,
+            bounces: 0,
+            ..TraceSettings::default()
+        };
+        let config = BakeConfig::default();
+        let field = || MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
+        let profile = ShellProfile::Signed {
+            lead_m: 0.25 * voxel,
+            voxel_m: voxel,
+        };
+        let own = ShellMeshField::new(field(), profile, 2.0 * voxel, None).unwrap();
+        let shared = ShellMeshField::new(field(), profile, 2.0 * voxel, None)
+            .unwrap()
+            .with_shared_transport(Some(config.lt_share_voxels * voxel));
+        // A lattice of points in the band on both sides of the sheet.
+        let points: Vec<Vec3> = (0..40)
+            .flat_map(|i| (0..40).flat_map(move |j| (-1..=1).map(move |k| (i, j, k))))
+            .map(|(i, j, k)| {
+                Vec3::new(
+                    -0.039 + 0.002 * i as f32,
+                    -0.039 + 0.002 * j as f32,
+                    0.0007 * k as f32 + 0.0003,
+                )
+            })
+            .collect();
+        let view = ViewPolicy::AverageDirections(vec![Vec3::Z, -Vec3::Z + 0.3 * Vec3::X]);
+        let run = |f: &ShellMeshField, pts: &[Vec3]| {
+            let mut d = vec![0.0; pts.len()];
+            let mut t = vec![0.0; pts.len() * LT_DIM];
+            f.evaluate(pts, &view, &mut d, &mut t).unwrap();
+            (d, t)
+        };
+        let (d_all, t_all) = run(&shared, &points);
+        // Any batch split, any order within it: the same bits.
+        let (d_half, t_half) = run(&shared, &points[points.len() / 3..]);
+        assert_eq!(d_half, d_all[points.len() / 3..]);
+        assert_eq!(t_half, t_all[points.len() / 3 * LT_DIM..]);
+        let (d_own, t_own) = run(&own, &points);
+        assert_eq!(d_own, d_all, "sharing changes light transport only");
+        // Radiance under uniform white light, per point and channel.
+        let radiance = |t: &[f32]| -> Vec<f32> { t.chunks(ENV_TEXELS).map(|c| c.iter().sum()).collect() };
+        let (a, b) = (radiance(&t_all), radiance(&t_own));
+        let scale = b.iter().map(|v| v.abs()).sum::<f32>() / b.len() as f32;
+        let mean_abs = a.iter().zip(&b).map(|(x, y)| (x - y).abs()).sum::<f32>() / b.len() as f32;
+        assert!(scale > 0.05, "the sheet is lit: {scale}");
+        assert!(
+            mean_abs < 0.03 * scale,
+            "shared differs from own by {mean_abs} (scale {scale})"
+        );
+        // Texture survives: shared and own radiance correlate point by point across stripes.
+        let corr = {
+            let (ma, mb) = (a.iter().sum::<f32>() / a.len() as f32, scale);
+            let cov: f32 = a.iter().zip(&b).map(|(x, y)| (x - ma) * (y - mb)).sum();
+            let va: f32 = a.iter().map(|x| (x - ma).powi(2)).sum();
+            let vb: f32 = b.iter().map(|y| (y - mb).powi(2)).sum();
+            cov / (va * vb).sqrt()
+        };
+        assert!(corr > 0.99, "correlation {corr}");
+        // Sharing traced fewer points than it answered.
+        let mut keys = Vec::new();
+        for x in &points {
+            if let (_, Some((cp, back))) = shared.side_at(*x, &view) {
+                keys.push((
+                    cp.triangle,
+                    back,
+                    (cp.point / (config.lt_share_voxels * voxel))
+                        .floor()
+                        .as_ivec3()
+                        .to_array(),
+                ));
+            }
+        }
+        let answered = keys.len();
+        keys.sort_unstable();
+        keys.dedup();
+        assert!(
+            keys.len() * 3 <= answered * 2,
+            "{} traces for {answered} points",
+            keys.len()
+        );
     }
 }

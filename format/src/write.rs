@@ -5,6 +5,8 @@
 //! the same asset twice gives byte-identical files.
 
 use std::io::Write;
+
+use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 use crate::asset::{Asset, Coefficients, has_negative_density};
@@ -236,23 +238,27 @@ impl Payload {
 
 /// A reusable zstd compressor that names the section in its errors.
 struct Zstd {
+    level: i32,
     compressor: zstd::bulk::Compressor<'static>,
 }
 
 impl Zstd {
     fn new(level: i32) -> Result<Self> {
-        let compressor = zstd::bulk::Compressor::new(level).map_err(|e| FormatError::Zstd {
+        Ok(Self {
+            level,
+            compressor: Self::compressor(level)?,
+        })
+    }
+
+    fn compressor(level: i32) -> Result<zstd::bulk::Compressor<'static>> {
+        zstd::bulk::Compressor::new(level).map_err(|e| FormatError::Zstd {
             what: format!("compressor at level {level}"),
             message: e.to_string(),
-        })?;
-        Ok(Self { compressor })
+        })
     }
 
     fn compress(&mut self, what: impl Fn() -> String, data: &[u8]) -> Result<Vec<u8>> {
-        self.compressor.compress(data).map_err(|e| FormatError::Zstd {
-            what: what(),
-            message: e.to_string(),
-        })
+        compress_with(&mut self.compressor, what, data)
     }
 
     /// A whole section: zstd of the shuffled bytes, or raw if that is not smaller.
@@ -289,18 +295,37 @@ impl Zstd {
         shuffle_width: u32,
     ) -> Result<Payload> {
         let chunk_bytes = bytes_per_brick * chunk_bricks;
-        let chunks: Vec<&[u8]> = raw.chunks(chunk_bytes.max(1)).collect();
-        let mut table = Vec::with_capacity(chunks.len() * CHUNK_ENTRY_SIZE);
+        // Chunks are independent frames: compressed on all cores, one compressor per
+        // thread, laid out in order (the bytes do not depend on the thread count).
+        let level = self.level;
+        let frames: Vec<Vec<u8>> = raw
+            .par_chunks(chunk_bytes.max(1))
+            .enumerate()
+            .map_init(
+                || Self::compressor(level),
+                |compressor, (i, chunk)| {
+                    let compressor = compressor.as_mut().map_err(|e| FormatError::Zstd {
+                        what: format!("compressor at level {level}"),
+                        message: e.to_string(),
+                    })?;
+                    let shuffled = shuffle(chunk, shuffle_width as usize);
+                    compress_with(
+                        compressor,
+                        || format!("section {} chunk {i}", kind_name(kind)),
+                        &shuffled,
+                    )
+                },
+            )
+            .collect::<Result<_>>()?;
+        let mut table = Vec::with_capacity(frames.len() * CHUNK_ENTRY_SIZE);
         let mut data = Vec::new();
-        let mut offset = (chunks.len() * CHUNK_ENTRY_SIZE) as u64;
-        for (i, chunk) in chunks.iter().enumerate() {
-            let shuffled = shuffle(chunk, shuffle_width as usize);
-            let stored = self.compress(|| format!("section {} chunk {i}", kind_name(kind)), &shuffled)?;
+        let mut offset = (frames.len() * CHUNK_ENTRY_SIZE) as u64;
+        for stored in &frames {
             table.extend_from_slice(&offset.to_le_bytes());
             table.extend_from_slice(&(stored.len() as u64).to_le_bytes());
-            table.extend_from_slice(&checksum(&stored).to_le_bytes());
+            table.extend_from_slice(&checksum(stored).to_le_bytes());
             offset += stored.len() as u64;
-            data.extend_from_slice(&stored);
+            data.extend_from_slice(stored);
         }
         table.extend_from_slice(&data);
         Ok(Payload {
@@ -317,4 +342,16 @@ impl Zstd {
             stored: table,
         })
     }
+}
+
+/// Compresses `data` with `compressor`, naming `what` in the error.
+fn compress_with(
+    compressor: &mut zstd::bulk::Compressor<'static>,
+    what: impl Fn() -> String,
+    data: &[u8],
+) -> Result<Vec<u8>> {
+    compressor.compress(data).map_err(|e| FormatError::Zstd {
+        what: what(),
+        message: e.to_string(),
+    })
 }

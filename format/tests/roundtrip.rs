@@ -157,6 +157,15 @@ fn writing_twice_gives_identical_bytes() {
         assert_eq!(std::fs::read(&a).unwrap(), std::fs::read(&b).unwrap());
         // And the generator itself is deterministic.
         assert!(small_asset(encoding, 5, 9) == asset);
+        // Chunks are compressed on all cores: one thread writes the same bytes.
+        let options = WriteOptions {
+            chunk_bricks: 1,
+            ..WriteOptions::default()
+        };
+        let many = encode_asset(&asset, &options).unwrap().0;
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+        let one = pool.install(|| encode_asset(&asset, &options).unwrap().0);
+        assert_eq!(many, one);
     }
 }
 

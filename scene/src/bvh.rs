@@ -695,6 +695,19 @@ fn box_distance2(node: &Node, p: Vec3A) -> f32 {
     d.length_squared()
 }
 
+/// The closest point to `query` on the triangle with `corners`, and its barycentric
+/// weights `(b1, b2)` of the second and third corners.
+pub fn closest_point_on_triangle(corners: [Vec3; 3], query: Vec3) -> (Vec3, f32, f32) {
+    let a = Vec3A::from(corners[0]);
+    let tri = Tri {
+        a,
+        e1: Vec3A::from(corners[1]) - a,
+        e2: Vec3A::from(corners[2]) - a,
+    };
+    let (point, b1, b2) = closest_on_triangle(&tri, Vec3A::from(query));
+    (point.into(), b1, b2)
+}
+
 /// Closest point on a triangle to `p` and its barycentric weights `(b1, b2)` of the
 /// second and third corners, by the Voronoi region of `p`.
 fn closest_on_triangle(tri: &Tri, p: Vec3A) -> (Vec3A, f32, f32) {
