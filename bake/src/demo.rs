@@ -125,9 +125,11 @@ fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
-    std::fs::write(path, text + "\n").map_err(|source| BakeError::Io {
-        path: path.to_path_buf(),
-        source,
+    nelf_format::atomic::write_bytes_atomically(path, (text + "\n").as_bytes()).map_err(|source| {
+        BakeError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
     })
 }
 

@@ -464,7 +464,8 @@ pub fn write_bake(output: &mut BakeOutput, config: &BakeConfig, path: &Path) -> 
         path: sidecar.clone(),
         message: e.to_string(),
     })?;
-    std::fs::write(&sidecar, text + "\n").map_err(|e| io_error(&sidecar, e))?;
+    nelf_format::atomic::write_bytes_atomically(&sidecar, (text + "\n").as_bytes())
+        .map_err(|e| io_error(&sidecar, e))?;
     Ok(written)
 }
 

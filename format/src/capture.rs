@@ -12,7 +12,6 @@
 //! paths relative to its folder, checked to stay inside it and to exist.
 
 use std::collections::HashSet;
-use std::io::Write;
 use std::path::{Component, Path, PathBuf};
 
 use glam::{DMat3, DVec3};
@@ -795,11 +794,7 @@ impl Capture {
             source,
         };
         std::fs::create_dir_all(dir).map_err(io)?;
-        let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-        tmp.write_all(text.as_bytes()).map_err(io)?;
-        tmp.as_file().sync_all().map_err(io)?;
-        tmp.persist(&path).map_err(|e| io(e.error))?;
-        Ok(())
+        crate::atomic::write_bytes_atomically(&path, text.as_bytes()).map_err(io)
     }
 }
 

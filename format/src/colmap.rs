@@ -17,7 +17,6 @@
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
-use std::io::Write as _;
 use std::path::{Path, PathBuf};
 
 use glam::{DMat3, DQuat, DVec3};
@@ -461,18 +460,12 @@ pub fn read_colmap_text(
         .collect())
 }
 
-/// Writes `text` to `path` through a temporary file in the same folder and a rename.
+/// Writes `text` to `path` atomically ([`crate::atomic`]).
 fn write_atomically(path: &Path, text: &str) -> Result<(), ColmapError> {
-    let io = |source| ColmapError::Io {
+    crate::atomic::write_bytes_atomically(path, text.as_bytes()).map_err(|source| ColmapError::Io {
         path: path.to_path_buf(),
         source,
-    };
-    let dir = path.parent().unwrap_or_else(|| Path::new("."));
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-    tmp.write_all(text.as_bytes()).map_err(io)?;
-    tmp.as_file().sync_all().map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
+    })
 }
 
 /// Writes a COLMAP text model of `views` into `dir` (created if needed): one `PINHOLE`

@@ -4,6 +4,7 @@
 //! OpenCV pinhole cameras). No GPU, no network, no UI.
 
 pub mod asset;
+pub mod atomic;
 pub mod capture;
 pub mod colmap;
 pub mod conventions;

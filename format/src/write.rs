@@ -4,8 +4,6 @@
 //! then rename). Output depends only on the asset and the options, so writing
 //! the same asset twice gives byte-identical files.
 
-use std::io::Write;
-
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -64,27 +62,14 @@ impl WriteReport {
     }
 }
 
-/// Writes `asset` to `path` atomically: the bytes go to a temporary file in the same
-/// folder, which is flushed to disk and then renamed over `path`. On any error
-/// nothing is left under `path` (a previous file there is untouched).
+/// Writes `asset` to `path` atomically ([`crate::atomic`]): on any error nothing is
+/// left under `path` (a previous file there is untouched).
 pub fn write_asset(path: &Path, asset: &Asset, options: &WriteOptions) -> Result<WriteReport> {
     let (bytes, sections) = encode_asset(asset, options)?;
-    let io_err = |source| FormatError::Io {
+    crate::atomic::write_bytes_atomically(path, &bytes).map_err(|source| FormatError::Io {
         path: path.to_path_buf(),
         source,
-    };
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".nelf-")
-        .suffix(".tmp")
-        .tempfile_in(&dir)
-        .map_err(io_err)?;
-    tmp.write_all(&bytes).map_err(io_err)?;
-    tmp.as_file().sync_all().map_err(io_err)?;
-    tmp.persist(path).map_err(|e| io_err(e.error))?;
+    })?;
     Ok(WriteReport {
         path: path.to_path_buf(),
         file_size: bytes.len() as u64,

@@ -161,10 +161,11 @@ pub fn save_envmap_preview(
             image::imageops::FilterType::Nearest,
         );
     }
-    preview.save(path).map_err(|source| SceneError::Image {
+    let format = image::ImageFormat::from_path(path).map_err(|source| SceneError::Image {
         path: path.to_path_buf(),
         source,
-    })
+    })?;
+    crate::image_io::write_atomic(path, |w| preview.write_to(w, format))
 }
 
 #[cfg(test)]

@@ -1,8 +1,9 @@
 //! Writing images people and programs read back: linear float RGB as OpenEXR,
-//! tone-mapped sRGB previews and 8-bit masks as PNG. Every write goes to a
-//! temporary file in the destination folder and is renamed into place, so a
-//! crash never leaves a half-written file under the final name.
+//! tone-mapped sRGB previews and 8-bit masks as PNG. Every write is atomic
+//! (`nelf_format::atomic`): a crash never leaves a half-written file under the
+//! final name.
 
+use std::fs::File;
 use std::io::BufWriter;
 use std::path::Path;
 
@@ -18,26 +19,26 @@ fn io_error(path: &Path, source: std::io::Error) -> SceneError {
     }
 }
 
-/// Encodes with `encode` into a temporary file beside `path`, then renames it.
+/// Encodes with `encode` into `path` atomically (`nelf_format::atomic`).
 pub(crate) fn write_atomic(
     path: &Path,
-    encode: impl FnOnce(&mut BufWriter<&mut tempfile::NamedTempFile>) -> Result<(), image::ImageError>,
+    encode: impl FnOnce(&mut BufWriter<File>) -> Result<(), image::ImageError>,
 ) -> Result<(), SceneError> {
-    let dir = match path.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p,
-        _ => Path::new("."),
-    };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(|e| io_error(path, e))?;
-    {
-        let mut writer = BufWriter::new(&mut tmp);
-        encode(&mut writer).map_err(|source| SceneError::Image {
+    let mut image_error = None;
+    nelf_format::atomic::write_atomically(path, |w| {
+        encode(w).map_err(|e| {
+            let message = e.to_string();
+            image_error = Some(e);
+            std::io::Error::other(message)
+        })
+    })
+    .map_err(|e| match image_error.take() {
+        Some(source) => SceneError::Image {
             path: path.to_path_buf(),
             source,
-        })?;
-        std::io::Write::flush(&mut writer).map_err(|e| io_error(path, e))?;
-    }
-    tmp.persist(path).map_err(|e| io_error(path, e.error))?;
-    Ok(())
+        },
+        None => io_error(path, e),
+    })
 }
 
 fn size_error(path: &Path, width: u32, height: u32, len: usize) -> SceneError {

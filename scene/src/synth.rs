@@ -440,10 +440,12 @@ pub fn write_synthetic_capture(
         path: config_path.clone(),
         message: e.to_string(),
     })?;
-    std::fs::write(&config_path, config_json + "\n").map_err(|e| SynthError::Config {
-        path: config_path.clone(),
-        message: e.to_string(),
-    })?;
+    nelf_format::atomic::write_bytes_atomically(&config_path, (config_json + "\n").as_bytes()).map_err(
+        |e| SynthError::Config {
+            path: config_path.clone(),
+            message: e.to_string(),
+        },
+    )?;
 
     let mesh = synth_mesh(config)?;
     let tracer = LtTracer::new(&mesh, config.trace_settings())?;

@@ -255,8 +255,11 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         render_seconds,
     };
     let record_path = sidecar_path(&args.out);
-    std::fs::write(&record_path, serde_json::to_string_pretty(&record)? + "\n")
-        .with_context(|| format!("cannot write {}", record_path.display()))?;
+    nelf_format::atomic::write_bytes_atomically(
+        &record_path,
+        (serde_json::to_string_pretty(&record)? + "\n").as_bytes(),
+    )
+    .with_context(|| format!("cannot write {}", record_path.display()))?;
     println!(
         "rendered {}×{} (rank {} of {}, {} voxels, lighting: {envmap_name}) in {render_seconds:.3} s on the {} -> {}",
         image.width,
@@ -378,8 +381,11 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
         "render_seconds": render_seconds,
     });
     let record_path = sidecar_path(&args.out);
-    std::fs::write(&record_path, serde_json::to_string_pretty(&record)? + "\n")
-        .with_context(|| format!("cannot write {}", record_path.display()))?;
+    nelf_format::atomic::write_bytes_atomically(
+        &record_path,
+        (serde_json::to_string_pretty(&record)? + "\n").as_bytes(),
+    )
+    .with_context(|| format!("cannot write {}", record_path.display()))?;
     println!(
         "rendered {width}×{height} from the NeLF network over {} (lighting: {light_name}) in {render_seconds:.1} s -> {}",
         capture_dir.display(),

@@ -827,7 +827,12 @@ fn save_color_image(image: &egui::ColorImage, path: &Path) -> Result<(), String>
     {
         std::fs::create_dir_all(parent).map_err(|e| e.to_string())?;
     }
-    buffer.save(path).map_err(|e| e.to_string())
+    nelf_format::atomic::write_atomically(path, |w| {
+        buffer
+            .write_to(w, image::ImageFormat::Png)
+            .map_err(std::io::Error::other)
+    })
+    .map_err(|e| e.to_string())
 }
 
 #[cfg(test)]
