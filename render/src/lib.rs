@@ -26,6 +26,7 @@ pub mod error;
 pub mod grid;
 pub mod light;
 pub mod march;
+pub mod wgsl;
 
 pub use error::RenderError;
 pub use grid::BrickGrid;

@@ -1,0 +1,214 @@
+//! `nelf export shaders -o DIR`: the engine shaders (`nelf_export::shaders`).
+//!
+//! `nelf export vdb ASSET -o head.vdb`: writes a `.nelf` asset as one OpenVDB file
+//! (`nelf_export::write_vdb`): the `density` grid, a colour grid relit under an
+//! environment map (`color` for Blender, `--color-name Cd` for Houdini), and the PCA
+//! coefficient grids `pca_00` … with the PCA mean and basis, `world_from_light` and the
+//! env-map convention in the file metadata (`export/README.md`).
+//!
+//! Lighting of the colour grid: `--envmap FILE.exr|hdr` turned by `--rotate-deg` about
+//! +y; without it, the capture's estimated light if the asset stores one (metadata
+//! `estimated_light`), else the built-in studio map (`nelf view`'s "studio
+//! (procedural)"). `--scale 100` writes centimetres; `--rank K` keeps the first K
+//! components (the colour grid is relit with the same K). The options and the report
+//! (grids, sizes, seconds) are saved beside the file as `<out>.export.json`.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::Context;
+use nelf_export::{Compression, Lighting, VdbOptions, VdbReport, write_vdb};
+use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
+use serde::{Deserialize, Serialize};
+
+/// Options of `nelf export`.
+#[derive(Debug, clap::Args)]
+pub struct ExportArgs {
+    #[command(subcommand)]
+    pub command: ExportCommand,
+}
+
+/// Export formats.
+#[derive(Debug, clap::Subcommand)]
+pub enum ExportCommand {
+    /// One OpenVDB file (OpenVDB 10): density, relit colour, PCA coefficient grids.
+    Vdb(VdbArgs),
+    /// The relight, march and display passes as GLSL 4.50 and HLSL (translated from our
+    /// WGSL by naga), with `shaders.json` naming entry points and bindings.
+    Shaders(ShadersArgs),
+}
+
+/// Options of `nelf export shaders`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ShadersArgs {
+    /// Folder to write into (created if needed).
+    #[arg(short, long, default_value = "shaders-out")]
+    pub out: PathBuf,
+}
+
+/// Per-grid compression of `nelf export vdb`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CompressionArg {
+    /// Values stored raw (OpenVDB's "active values": only active values are stored).
+    None,
+    /// zlib per node, as OpenVDB's "zip + active values" (7–8× smaller here).
+    #[default]
+    Zip,
+}
+
+/// Options of `nelf export vdb`.
+#[derive(Debug, Clone, clap::Args, Serialize, Deserialize)]
+pub struct VdbArgs {
+    /// The .nelf asset.
+    pub asset: PathBuf,
+    /// The OpenVDB file to write (`<out>.export.json` goes beside it).
+    #[arg(short, long, default_value = "head.vdb")]
+    pub out: PathBuf,
+    /// Environment map (.exr or .hdr, lat-long, any resolution) for the colour grid;
+    /// default: the capture's estimated light stored in the asset, else a built-in studio map.
+    #[arg(long)]
+    pub envmap: Option<PathBuf>,
+    /// Turn the lighting about +y by this many degrees.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub rotate_deg: f64,
+    /// Export only the first K PCA components (default: all); the colour grid uses the same K.
+    #[arg(long)]
+    pub rank: Option<usize>,
+    /// Scene units per metre: 1 writes metres, 100 centimetres (lengths × scale, density ÷ scale).
+    #[arg(long, default_value_t = 1.0)]
+    pub scale: f64,
+    /// Name of the relit colour grid: `color` (Blender) or `Cd` (Houdini).
+    #[arg(long, default_value = nelf_export::vdb::DEFAULT_COLOR_GRID)]
+    pub color_name: String,
+    /// Per-grid compression.
+    #[arg(long, value_enum, default_value_t)]
+    pub compression: CompressionArg,
+}
+
+/// What `<out>.export.json` holds.
+#[derive(Debug, Serialize)]
+struct ExportRecord<'a> {
+    config: &'a VdbArgs,
+    report: &'a VdbReport,
+    asset_file_size: u64,
+    load_seconds: f64,
+    write_seconds: f64,
+}
+
+/// Runs `nelf export`.
+pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
+    match &args.command {
+        ExportCommand::Vdb(vdb) => run_vdb(vdb),
+        ExportCommand::Shaders(shaders) => run_shaders(shaders),
+    }
+}
+
+fn run_shaders(args: &ShadersArgs) -> anyhow::Result<()> {
+    let report = nelf_export::shaders::write_engine_shaders(&args.out)
+        .with_context(|| format!("cannot write engine shaders to {}", args.out.display()))?;
+    for pass in &report.passes {
+        let entries: Vec<String> = pass
+            .entries
+            .iter()
+            .map(|e| format!("{} ({})", e.name, e.stage))
+            .collect();
+        println!("{}: {}", pass.pass, entries.join(", "));
+    }
+    println!(
+        "GLSL {} and HLSL SM {} written to {} (bindings: {})",
+        report.glsl_version,
+        report.hlsl_shader_model,
+        args.out.display(),
+        args.out.join("shaders.json").display()
+    );
+    Ok(())
+}
+
+fn run_vdb(args: &VdbArgs) -> anyhow::Result<()> {
+    let start = Instant::now();
+    let asset = nelf_format::read_asset(&args.asset)
+        .with_context(|| format!("cannot read {}", args.asset.display()))?;
+    let lighting = lighting(args, &asset)?;
+    let load_seconds = start.elapsed().as_secs_f64();
+    let options = VdbOptions {
+        scale: args.scale,
+        rank: args.rank,
+        color_name: args.color_name.clone(),
+        compression: match args.compression {
+            CompressionArg::None => Compression::None,
+            CompressionArg::Zip => Compression::Zip,
+        },
+    };
+    let start = Instant::now();
+    let report = write_vdb(&args.out, &asset, &lighting, &options)
+        .with_context(|| format!("cannot export {} to {}", args.asset.display(), args.out.display()))?;
+    let write_seconds = start.elapsed().as_secs_f64();
+    let asset_file_size = std::fs::metadata(&args.asset)
+        .with_context(|| format!("cannot stat {}", args.asset.display()))?
+        .len();
+    let record = ExportRecord {
+        config: args,
+        report: &report,
+        asset_file_size,
+        load_seconds,
+        write_seconds,
+    };
+    let record_path = sidecar_path(&args.out);
+    nelf_format::atomic::write_bytes_atomically(
+        &record_path,
+        (serde_json::to_string_pretty(&record)? + "\n").as_bytes(),
+    )
+    .with_context(|| format!("cannot write {}", record_path.display()))?;
+    let voxels = report.grids.first().map_or(0, |g| g.active_voxels);
+    println!(
+        "exported {} ({} voxels, {} grids: density, {}, pca_00..pca_{:02}; rank {} of {}) in {write_seconds:.2} s -> {} ({} bytes; asset {} bytes)",
+        args.asset.display(),
+        voxels,
+        report.grids.len(),
+        args.color_name,
+        report.rank.saturating_sub(1),
+        report.rank,
+        report.stored_rank,
+        args.out.display(),
+        report.file_size,
+        asset_file_size,
+    );
+    println!("  colour lit by: {}", report.lighting);
+    println!("  settings and report: {}", record_path.display());
+    Ok(())
+}
+
+/// `--envmap` turned by `--rotate-deg`; else the asset's stored estimated light; else
+/// the built-in studio map.
+fn lighting(args: &VdbArgs, asset: &nelf_format::Asset) -> anyhow::Result<Lighting> {
+    if let Some(path) = &args.envmap {
+        let env = nelf_scene::envmap::load_envmap(path)
+            .with_context(|| format!("cannot load environment map {}", path.display()))?;
+        return Ok(Lighting::world(env, args.rotate_deg, &path.display().to_string()));
+    }
+    if let Some(stored) = Lighting::stored(asset, args.rotate_deg)
+        .with_context(|| format!("{}: stored lighting", args.asset.display()))?
+    {
+        return Ok(stored);
+    }
+    let studio = procedural_envmap(
+        1,
+        &EnvGenParams {
+            family: Some(EnvFamily::Studio),
+            ..EnvGenParams::default()
+        },
+    );
+    Ok(Lighting::world(
+        studio,
+        args.rotate_deg,
+        "built-in studio map (procedural, seed 1)",
+    ))
+}
+
+/// `<out>.export.json` beside the file.
+fn sidecar_path(out: &Path) -> PathBuf {
+    let mut name = out.as_os_str().to_owned();
+    name.push(".export.json");
+    PathBuf::from(name)
+}
