@@ -1,7 +1,10 @@
 //! Shared helpers for the `.nelf` integration tests: small synthetic assets, and
 //! surgery on encoded files (re-laying out sections, re-signing the header) so that
-//! tests can build hostile files that get past the checksums.
+//! tests can build hostile files that get past the checksums; [`damage`] generates
+//! every damaged file the Rust and C reader tests share.
 #![allow(dead_code, clippy::unwrap_used)]
+
+pub mod damage;
 
 use nelf_format::spec::{
     CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry,

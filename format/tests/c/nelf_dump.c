@@ -1,0 +1,348 @@
+/*
+ * Test driver for include/nelf.h, run by format/tests/c_reader.rs (compiled there
+ * with -std=c99 -Wall -Wextra -Werror and AddressSanitizer + UBSan).
+ *
+ *   nelf_dump dump FILE LIGHT mem|path full|hashed
+ *       Opens FILE (from memory or by path), verifies it, and prints the header, the
+ *       section table, the metadata, the PCA model, then every brick's voxels
+ *       (full: one line per voxel with density, centre, coefficients, T and the
+ *       relit radiance under LIGHT both ways; hashed: one line per brick with XXH3
+ *       hashes of the same numbers). Floats are printed as their bit patterns in hex
+ *       so that the Rust side compares them exactly. Exit 1 with "error NAME detail"
+ *       if the file is refused.
+ *   nelf_dump check BUNDLE SCRATCH
+ *       BUNDLE holds many files (u32 name length, name, u64 length, bytes). For each,
+ *       prints one tab-separated line: index, the result of open + verify from memory
+ *       ("whole"), of open + reading every brick + verify ("random"), of open + verify
+ *       by path (the bytes written to SCRATCH first), the peak bytes the reader
+ *       allocated, and the detail message of the whole read.
+ */
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+/* Count what the reader allocates: a size header in front of every block. */
+static size_t g_current, g_peak;
+static void *counting_malloc(size_t n) {
+    unsigned char *p = (unsigned char *)malloc(n + 16);
+    if (!p) return NULL;
+    memcpy(p, &n, sizeof n);
+    g_current += n;
+    if (g_current > g_peak) g_peak = g_current;
+    return p + 16;
+}
+static void counting_free(void *q) {
+    size_t n;
+    unsigned char *p;
+    if (!q) return;
+    p = (unsigned char *)q - 16;
+    memcpy(&n, p, sizeof n);
+    g_current -= n;
+    free(p);
+}
+#define NELF_MALLOC(n) counting_malloc(n)
+#define NELF_FREE(p) counting_free(p)
+#define NELF_IMPLEMENTATION
+#include "nelf.h"
+
+static void die(const char *what) {
+    fprintf(stderr, "nelf_dump: %s\n", what);
+    exit(2);
+}
+
+static unsigned char *read_file(const char *path, size_t *size) {
+    FILE *f = fopen(path, "rb");
+    unsigned char *data;
+    long n;
+    if (!f) die("cannot open input");
+    if (fseek(f, 0, SEEK_END) != 0 || (n = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) die("cannot size input");
+    data = (unsigned char *)malloc((size_t)n + 1);
+    if (!data) die("out of memory");
+    if (n && fread(data, 1, (size_t)n, f) != (size_t)n) die("short read");
+    fclose(f);
+    *size = (size_t)n;
+    return data;
+}
+
+static uint32_t fbits(float f) {
+    uint32_t u;
+    memcpy(&u, &f, sizeof u);
+    return u;
+}
+static uint64_t dbits(double d) {
+    uint64_t u;
+    memcpy(&u, &d, sizeof u);
+    return u;
+}
+
+/* XXH3 of a float array's little-endian bytes. */
+static uint64_t hash_floats(const float *v, size_t n) {
+    unsigned char *bytes = (unsigned char *)malloc(4 * n + 1);
+    size_t i;
+    uint64_t h;
+    if (!bytes) die("out of memory");
+    for (i = 0; i < n; i++) {
+        uint32_t u = fbits(v[i]);
+        bytes[4 * i] = (unsigned char)u;
+        bytes[4 * i + 1] = (unsigned char)(u >> 8);
+        bytes[4 * i + 2] = (unsigned char)(u >> 16);
+        bytes[4 * i + 3] = (unsigned char)(u >> 24);
+    }
+    h = XXH3_64bits(bytes, 4 * n);
+    free(bytes);
+    return h;
+}
+
+/* XXH3 of a double array's little-endian bytes. */
+static uint64_t hash_doubles(const double *v, size_t n) {
+    unsigned char *bytes = (unsigned char *)malloc(8 * n + 1);
+    size_t i;
+    int k;
+    uint64_t h;
+    if (!bytes) die("out of memory");
+    for (i = 0; i < n; i++) {
+        uint64_t u = dbits(v[i]);
+        for (k = 0; k < 8; k++) bytes[8 * i + k] = (unsigned char)(u >> (8 * k));
+    }
+    h = XXH3_64bits(bytes, 8 * n);
+    free(bytes);
+    return h;
+}
+
+static void print_floats(const char *tag, const float *v, size_t n) {
+    size_t i;
+    printf("%s", tag);
+    for (i = 0; i < n; i++) printf(" %08lx", (unsigned long)fbits(v[i]));
+    printf("\n");
+}
+
+static int dump(int argc, char **argv) {
+    const char *path, *mode;
+    unsigned char *data = NULL;
+    size_t size = 0, meta_length, i;
+    float light[NELF_ENV_TEXELS * 3];
+    nelf_reader *r;
+    nelf_result rc;
+    const nelf_header *h;
+    nelf_projected_light *projected;
+    const char *meta;
+    int full;
+    uint32_t b, k, rank;
+    if (argc != 6) die("usage: dump FILE LIGHT mem|path full|hashed");
+    path = argv[2];
+    mode = argv[4];
+    full = strcmp(argv[5], "full") == 0;
+    {
+        FILE *f = fopen(argv[3], "r");
+        if (!f) die("cannot open light");
+        for (i = 0; i < NELF_ENV_TEXELS * 3; i++) {
+            unsigned long u;
+            uint32_t u32;
+            if (fscanf(f, "%lx", &u) != 1) die("bad light file");
+            u32 = (uint32_t)u;
+            memcpy(&light[i], &u32, sizeof u32);
+        }
+        fclose(f);
+    }
+    r = nelf_create();
+    if (!r) die("out of memory");
+    if (strcmp(mode, "mem") == 0) {
+        data = read_file(path, &size);
+        rc = nelf_open_memory(r, data, size);
+    } else {
+        rc = nelf_open_path(r, path);
+    }
+    if (rc == NELF_OK) rc = nelf_verify(r);
+    if (rc != NELF_OK) {
+        printf("error %s %s\n", nelf_error_name(rc), nelf_error_detail(r));
+        nelf_destroy(r);
+        free(data);
+        return 1;
+    }
+    h = nelf_get_header(r);
+    rank = h->pca_rank;
+    printf("header %u %u %lu %016llx", h->version_major, h->version_minor, (unsigned long)h->section_count,
+           (unsigned long long)h->flags);
+    for (i = 0; i < 3; i++) printf(" %016llx", (unsigned long long)dbits(h->bbox_min_m[i]));
+    for (i = 0; i < 3; i++) printf(" %016llx", (unsigned long long)dbits(h->bbox_max_m[i]));
+    printf(" %016llx %lu %lu %lu %lu %lu", (unsigned long long)dbits(h->voxel_size_m), (unsigned long)h->grid_bricks[0],
+           (unsigned long)h->grid_bricks[1], (unsigned long)h->grid_bricks[2], (unsigned long)h->brick_count,
+           (unsigned long)h->chunk_bricks);
+    for (i = 0; i < 9; i++) printf(" %016llx", (unsigned long long)dbits(h->world_from_light[i]));
+    printf(" %u %u %lu %lu %llu %016llx\n", h->env_height, h->env_width, (unsigned long)rank,
+           (unsigned long)h->coefficient_encoding, (unsigned long long)h->file_size,
+           (unsigned long long)h->header_checksum);
+    for (i = 0; i < nelf_section_count(r); i++) {
+        const nelf_section *s = nelf_get_section(r, (uint32_t)i);
+        printf("section %lu %02x%02x%02x%02x %u %u %lu %llu %llu %llu %016llx\n", (unsigned long)i,
+               (unsigned char)s->kind[0], (unsigned char)s->kind[1], (unsigned char)s->kind[2],
+               (unsigned char)s->kind[3], s->flags, s->codec, (unsigned long)s->shuffle,
+               (unsigned long long)s->offset, (unsigned long long)s->stored_length,
+               (unsigned long long)s->raw_length, (unsigned long long)s->checksum);
+    }
+    meta = nelf_metadata(r, &meta_length);
+    printf("meta ");
+    for (i = 0; i < meta_length; i++) printf("%02x", (unsigned char)meta[i]);
+    printf("\n");
+    if (full) {
+        print_floats("mean", nelf_pca_mean(r), NELF_LT_DIM);
+        print_floats("basis", nelf_pca_basis(r), (size_t)NELF_LT_DIM * rank);
+    } else {
+        printf("mean %016llx\n", (unsigned long long)hash_floats(nelf_pca_mean(r), NELF_LT_DIM));
+        printf("basis %016llx\n", (unsigned long long)hash_floats(nelf_pca_basis(r), (size_t)NELF_LT_DIM * rank));
+    }
+    if (nelf_quant_scale(r)) {
+        print_floats("scale", nelf_quant_scale(r), rank);
+        print_floats("offset", nelf_quant_offset(r), rank);
+    }
+    projected = (nelf_projected_light *)malloc(sizeof *projected);
+    if (!projected) die("out of memory");
+    if (nelf_project_light(r, light, projected) != NELF_OK) die("projection failed");
+    print_floats("light_mean", projected->mean_rgb, 3);
+    print_floats("light_components", &projected->component_rgb[0][0], 3 * (size_t)rank);
+    for (b = 0; b < h->brick_count; b++) {
+        nelf_brick brick;
+        float *lt = (float *)malloc(sizeof(float) * NELF_LT_DIM * NELF_BRICK_VOXELS);
+        float *relit = (float *)malloc(sizeof(float) * 6 * NELF_BRICK_VOXELS);
+        double *centre = (double *)malloc(sizeof(double) * 3 * NELF_BRICK_VOXELS);
+        float check[NELF_LT_DIM];
+        uint32_t v;
+        if (!lt || !relit || !centre) die("out of memory");
+        rc = nelf_read_brick(r, b, &brick);
+        if (rc != NELF_OK) {
+            printf("error %s %s\n", nelf_error_name(rc), nelf_error_detail(r));
+            free(lt);
+            free(relit);
+            free(centre);
+            break;
+        }
+        if (nelf_find_brick(r, brick.coord[0], brick.coord[1], brick.coord[2]) != (int64_t)b) die("find_brick disagrees");
+        for (v = 0; v < NELF_BRICK_VOXELS; v++) {
+            const float *c = brick.coefficients + (size_t)v * rank;
+            float *t = lt + (size_t)v * NELF_LT_DIM;
+            nelf_reconstruct(r, c, rank, t);
+            nelf_relight(projected, c, rank, relit + 6 * v);
+            nelf_shade(t, light, relit + 6 * v + 3);
+            if (nelf_voxel_center(r, b, v % 8, (v / 8) % 8, v / 64, centre + 3 * v) != NELF_OK) die("voxel_center failed");
+        }
+        /* nelf_voxel_transport gives the same T (it re-reads the cached brick). */
+        if (nelf_voxel_transport(r, b, 137, check) != NELF_OK) die("voxel_transport failed");
+        if (memcmp(check, lt + 137 * NELF_LT_DIM, sizeof check) != 0) die("voxel_transport disagrees");
+        if (nelf_read_brick(r, b, &brick) != NELF_OK) die("re-read failed");
+        if (full) {
+            printf("brick %lu %u %u %u\n", (unsigned long)b, brick.coord[0], brick.coord[1], brick.coord[2]);
+            for (v = 0; v < NELF_BRICK_VOXELS; v++) {
+                printf("v %lu %08lx %016llx %016llx %016llx", (unsigned long)((uint64_t)b * NELF_BRICK_VOXELS + v),
+                       (unsigned long)fbits(brick.density[v]), (unsigned long long)dbits(centre[3 * v]),
+                       (unsigned long long)dbits(centre[3 * v + 1]), (unsigned long long)dbits(centre[3 * v + 2]));
+                for (k = 0; k < rank; k++) printf(" %08lx", (unsigned long)fbits(brick.coefficients[(size_t)v * rank + k]));
+                printf(" |");
+                for (k = 0; k < NELF_LT_DIM; k++) printf(" %08lx", (unsigned long)fbits(lt[(size_t)v * NELF_LT_DIM + k]));
+                printf(" |");
+                for (k = 0; k < 6; k++) printf(" %08lx", (unsigned long)fbits(relit[6 * v + k]));
+                printf("\n");
+            }
+        } else {
+            printf("brick %lu %u %u %u %016llx %016llx %016llx %016llx %016llx\n", (unsigned long)b, brick.coord[0],
+                   brick.coord[1], brick.coord[2], (unsigned long long)hash_floats(brick.density, NELF_BRICK_VOXELS),
+                   (unsigned long long)hash_doubles(centre, 3 * NELF_BRICK_VOXELS),
+                   (unsigned long long)hash_floats(brick.coefficients, (size_t)NELF_BRICK_VOXELS * rank),
+                   (unsigned long long)hash_floats(lt, (size_t)NELF_LT_DIM * NELF_BRICK_VOXELS),
+                   (unsigned long long)hash_floats(relit, 6 * NELF_BRICK_VOXELS));
+        }
+        free(lt);
+        free(relit);
+        free(centre);
+    }
+    if (rc == NELF_OK) { /* misuse is refused, not undefined */
+        nelf_brick brick;
+        if (nelf_read_brick(r, h->brick_count, &brick) != NELF_ERR_BRICK_OUT_OF_RANGE) die("out-of-range brick accepted");
+        if (nelf_find_brick(r, 70000, 0, 0) != -1) die("find_brick found a brick outside the grid");
+        printf("end\n");
+    }
+    free(projected);
+    nelf_destroy(r);
+    free(data);
+    return rc == NELF_OK ? 0 : 1;
+}
+
+/* open + verify ("whole"), or open + every brick + verify ("random"). */
+static nelf_result check_one(nelf_reader *r, const unsigned char *data, size_t size, const char *path, int random,
+                             char *detail) {
+    nelf_result rc = path ? nelf_open_path(r, path) : nelf_open_memory(r, data, size);
+    if (rc == NELF_OK && random) {
+        const nelf_header *h = nelf_get_header(r);
+        uint32_t b;
+        for (b = 0; b < h->brick_count && rc == NELF_OK; b++) {
+            nelf_brick brick;
+            rc = nelf_read_brick(r, b, &brick);
+        }
+    }
+    if (rc == NELF_OK) rc = nelf_verify(r);
+    if (detail) {
+        strncpy(detail, nelf_error_detail(r), NELF_DETAIL_SIZE - 1);
+        detail[NELF_DETAIL_SIZE - 1] = '\0';
+    }
+    return rc;
+}
+
+static int check(int argc, char **argv) {
+    size_t size, at = 0, index = 0;
+    unsigned char *bundle;
+    nelf_reader *r;
+    if (argc != 4) die("usage: check BUNDLE SCRATCH");
+    bundle = read_file(argv[2], &size);
+    r = nelf_create();
+    if (!r) die("out of memory");
+    while (at < size) {
+        uint32_t name_length;
+        uint64_t length;
+        unsigned char *copy;
+        char detail[NELF_DETAIL_SIZE];
+        nelf_result whole, random, by_path;
+        size_t peak;
+        FILE *f;
+        if (size - at < 4) die("bad bundle");
+        name_length = nelf__u32(bundle + at);
+        at += 4 + name_length;
+        if (at > size || size - at < 8) die("bad bundle");
+        length = nelf__u64(bundle + at);
+        at += 8;
+        if (length > size - at) die("bad bundle");
+        /* An exact-size copy, so that ASan sees any read past the end. */
+        copy = (unsigned char *)malloc((size_t)length + (length == 0));
+        if (!copy) die("out of memory");
+        memcpy(copy, bundle + at, (size_t)length);
+        at += (size_t)length;
+        g_peak = g_current;
+        whole = check_one(r, copy, (size_t)length, NULL, 0, detail);
+        random = check_one(r, copy, (size_t)length, NULL, 1, NULL);
+        peak = g_peak - g_current;
+        f = fopen(argv[3], "wb");
+        if (!f || (length && fwrite(copy, 1, (size_t)length, f) != (size_t)length) || fclose(f) != 0) die("cannot write scratch");
+        by_path = check_one(r, NULL, 0, argv[3], 0, NULL);
+        /* A failed open leaves the reader closed; destroy and recreate now and then
+         * so that reuse and fresh readers are both exercised. */
+        if (index % 7 == 0) {
+            nelf_destroy(r);
+            r = nelf_create();
+            if (!r) die("out of memory");
+        }
+        printf("%lu\t%s\t%s\t%s\t%lu\t%s\n", (unsigned long)index, nelf_error_name(whole), nelf_error_name(random),
+               nelf_error_name(by_path), (unsigned long)peak, detail);
+        free(copy);
+        index++;
+    }
+    nelf_destroy(r);
+    free(bundle);
+    if (g_current != 0) die("the reader leaked memory");
+    return 0;
+}
+
+int main(int argc, char **argv) {
+    if (argc >= 2 && strcmp(argv[1], "dump") == 0) return dump(argc, argv);
+    if (argc >= 2 && strcmp(argv[1], "check") == 0) return check(argc, argv);
+    die("usage: nelf_dump dump|check ...");
+    return 2;
+}

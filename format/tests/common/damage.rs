@@ -1,0 +1,708 @@
+//! The damage generator: every damaged and hostile `.nelf` file the tests feed to a
+//! reader, each with what the reader must answer. `damage.rs` checks the Rust reader
+//! against these cases; `c_reader.rs` runs the same cases through the C reader
+//! (`include/nelf.h`) and checks it fails with the same error.
+//!
+//! Cases: truncations at every boundary and at random offsets, bit flips in every
+//! section and in the header and table, hand-made hostile headers and sections, and a
+//! seeded mini-fuzzer (truncations, bit flips, extreme header values, insertions and
+//! deletions). Every generator is deterministic (fixed seeds).
+
+use super::{FileParts, boundaries, chunked_payload, resign, small_asset};
+use nelf_format::spec::{
+    BRICK_VOXELS, HEADER_SIZE, KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA,
+    KIND_QUANT_PARAMS, SECTION_ENTRY_SIZE, SectionCodec,
+};
+use nelf_format::{Asset, CoefficientEncoding, Coefficients, FormatError, WriteOptions, encode_asset};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// What a reader must answer for a damaged file.
+pub enum Expect {
+    /// An error for which the predicate holds.
+    Error(Box<dyn Fn(&FormatError) -> bool>),
+    /// Any answer: a mutation may happen to leave the file valid (mini-fuzzer).
+    Anything,
+}
+
+impl Expect {
+    /// Any error at all.
+    pub fn any_error() -> Self {
+        Self::Error(Box::new(|_| true))
+    }
+
+    /// An error for which `f` holds.
+    pub fn error(f: impl Fn(&FormatError) -> bool + 'static) -> Self {
+        Self::Error(Box::new(f))
+    }
+}
+
+/// One damaged file.
+pub struct Damaged {
+    /// What was done to it (for messages).
+    pub what: String,
+    /// Its bytes.
+    pub bytes: Vec<u8>,
+    /// What a reader must answer.
+    pub expect: Expect,
+}
+
+impl Damaged {
+    fn new(what: impl Into<String>, bytes: Vec<u8>, expect: Expect) -> Self {
+        Self {
+            what: what.into(),
+            bytes,
+            expect,
+        }
+    }
+}
+
+/// Bricks per chunk of the files the generators damage (several chunks per section).
+pub const CHUNK_BRICKS: usize = 3;
+
+/// Write options of the files the generators damage.
+pub fn options() -> WriteOptions {
+    WriteOptions {
+        chunk_bricks: CHUNK_BRICKS as u32,
+        ..WriteOptions::default()
+    }
+}
+
+/// The intact asset and file every generator starts from (rank 4, about 8 bricks).
+pub fn encoded(encoding: CoefficientEncoding) -> (Asset, Vec<u8>) {
+    let asset = small_asset(encoding, 4, 21);
+    let bytes = encode_asset(&asset, &options()).unwrap().0;
+    (asset, bytes)
+}
+
+const ENCODINGS: [CoefficientEncoding; 2] = [CoefficientEncoding::U8Affine, CoefficientEncoding::F16];
+
+/// Truncations at (and next to) every boundary and at 200 random offsets, per encoding:
+/// each must be reported as [`FormatError::Truncated`].
+pub fn truncations() -> Vec<Damaged> {
+    let mut rng = Pcg64::seed_from_u64(1);
+    let mut out = Vec::new();
+    for encoding in ENCODINGS {
+        let (_, bytes) = encoded(encoding);
+        let mut cuts: Vec<usize> = boundaries(&bytes)
+            .into_iter()
+            .flat_map(|b| [b.saturating_sub(1), b, b + 1])
+            .filter(|&c| c < bytes.len())
+            .collect();
+        cuts.extend((0..200).map(|_| rng.random_range(0..bytes.len())));
+        for cut in cuts {
+            out.push(Damaged::new(
+                format!("{encoding:?} truncation at {cut} of {}", bytes.len()),
+                bytes[..cut].to_vec(),
+                Expect::error(|e| matches!(e, FormatError::Truncated { .. })),
+            ));
+        }
+    }
+    out
+}
+
+/// Single bit flips: 40 in every section (the error must name the section), every
+/// bit position of the header and table (some bit per byte), and 300 anywhere.
+pub fn bit_flips() -> Vec<Damaged> {
+    let mut rng = Pcg64::seed_from_u64(2);
+    let mut out = Vec::new();
+    for encoding in ENCODINGS {
+        let (_, bytes) = encoded(encoding);
+        let parts = FileParts::parse(&bytes);
+        for (entry, _) in &parts.sections {
+            for _ in 0..40 {
+                let at = entry.offset as usize + rng.random_range(0..entry.stored_length as usize);
+                let mut damaged = bytes.clone();
+                damaged[at] ^= 1 << rng.random_range(0..8);
+                let name = entry.name();
+                out.push(Damaged::new(
+                    format!("{encoding:?} flip at {at} in {name}"),
+                    damaged,
+                    Expect::error(move |e| e.to_string().contains(&name)),
+                ));
+            }
+        }
+        // Header and table: caught by the header checksum (or earlier field checks).
+        let table_end = HEADER_SIZE + parts.sections.len() * SECTION_ENTRY_SIZE;
+        for at in 0..table_end {
+            let mut damaged = bytes.clone();
+            damaged[at] ^= 1 << (at % 8);
+            out.push(Damaged::new(
+                format!("{encoding:?} flip at {at} in header/table"),
+                damaged,
+                Expect::any_error(),
+            ));
+        }
+        // Anywhere at all, padding included.
+        for _ in 0..300 {
+            let at = rng.random_range(0..bytes.len());
+            let mut damaged = bytes.clone();
+            damaged[at] ^= 1 << rng.random_range(0..8);
+            out.push(Damaged::new(
+                format!("{encoding:?} flip at {at}"),
+                damaged,
+                Expect::any_error(),
+            ));
+        }
+    }
+    out
+}
+
+fn field(bytes: &mut [u8], offset: usize, value: &[u8]) {
+    bytes[offset..offset + value.len()].copy_from_slice(value);
+}
+
+/// Offset of the table entry of section `kind`.
+fn entry_offset(bytes: &[u8], kind: [u8; 4]) -> usize {
+    let count = u32::from_le_bytes(bytes[16..20].try_into().unwrap()) as usize;
+    (0..count)
+        .map(|i| HEADER_SIZE + i * SECTION_ENTRY_SIZE)
+        .find(|&o| bytes[o..o + 4] == kind)
+        .unwrap()
+}
+
+/// Hand-made hostile header fields and section-table entries, re-signed so that they
+/// reach the field checks, each with the error it must give.
+pub fn hostile_headers() -> Vec<Damaged> {
+    let (_, bytes) = encoded(CoefficientEncoding::U8Affine);
+    let nan = f64::NAN.to_le_bytes();
+    let len = bytes.len() as u64;
+    let mut out = Vec::new();
+    macro_rules! expect {
+        ($edit:expr, $pat:pat) => {{
+            let mut b = bytes.clone();
+            let edit: &dyn Fn(&mut Vec<u8>) = &$edit;
+            edit(&mut b);
+            resign(&mut b);
+            out.push(Damaged::new(
+                format!("hostile header {}", stringify!($edit)),
+                b,
+                Expect::error(|e| matches!(e, $pat)),
+            ));
+        }};
+    }
+    expect!(|b| field(b, 0, b"NELF\0\0\0\0"), FormatError::BadMagic { .. });
+    expect!(
+        |b| field(b, 8, &2u16.to_le_bytes()),
+        FormatError::UnsupportedVersion { major: 2, .. }
+    );
+    expect!(
+        |b| field(b, 12, &512u32.to_le_bytes()),
+        FormatError::InvalidHeader {
+            field: "header_size",
+            ..
+        }
+    );
+    expect!(
+        |b| field(b, 16, &100_000u32.to_le_bytes()),
+        FormatError::TooManySections { .. }
+    );
+    // Bit 0 (signed density) is known; bit 1 is not.
+    expect!(
+        |b| field(b, 24, &3u64.to_le_bytes()),
+        FormatError::UnsupportedFeature { flags: 2 }
+    );
+    expect!(|b| field(b, 32, &nan), FormatError::NonFinite { .. });
+    expect!(|b| field(b, 80, &nan), FormatError::NonFinite { .. });
+    expect!(
+        |b| field(b, 80, &(-1.0f64).to_le_bytes()),
+        FormatError::InvalidHeader { field: "grid", .. }
+    );
+    expect!(
+        |b| field(b, 56, &5.0f64.to_le_bytes()),
+        FormatError::InvalidHeader {
+            field: "bbox_max",
+            ..
+        }
+    );
+    expect!(
+        |b| field(b, 88, &0u32.to_le_bytes()),
+        FormatError::InvalidHeader { field: "grid", .. }
+    );
+    expect!(
+        |b| field(b, 88, &u32::MAX.to_le_bytes()),
+        FormatError::InvalidHeader { field: "grid", .. }
+    );
+    expect!(
+        |b| field(b, 100, &16u32.to_le_bytes()),
+        FormatError::InvalidHeader {
+            field: "brick_size",
+            ..
+        }
+    );
+    expect!(
+        |b| field(b, 104, &u32::MAX.to_le_bytes()),
+        FormatError::SectionLength { .. }
+    );
+    expect!(
+        |b| field(b, 108, &0u32.to_le_bytes()),
+        FormatError::InvalidHeader {
+            field: "chunk_bricks",
+            ..
+        }
+    );
+    expect!(
+        |b| field(b, 108, &u32::MAX.to_le_bytes()),
+        FormatError::CountTooLarge { .. }
+    );
+    expect!(
+        |b| field(b, 112, &f64::INFINITY.to_le_bytes()),
+        FormatError::NonFinite { .. }
+    );
+    expect!(
+        |b| field(b, 112, &(-1.0f64).to_le_bytes()),
+        FormatError::InvalidHeader {
+            field: "world_from_light",
+            ..
+        }
+    );
+    expect!(
+        |b| field(b, 184, &16u16.to_le_bytes()),
+        FormatError::InvalidHeader {
+            field: "env_size",
+            ..
+        }
+    );
+    expect!(
+        |b| field(b, 188, &0u32.to_le_bytes()),
+        FormatError::BadRank { rank: 0, .. }
+    );
+    expect!(
+        |b| field(b, 188, &385u32.to_le_bytes()),
+        FormatError::BadRank { rank: 385, .. }
+    );
+    expect!(
+        |b| field(b, 188, &5u32.to_le_bytes()),
+        FormatError::SectionLength { .. }
+    );
+    expect!(
+        |b| field(b, 192, &9u32.to_le_bytes()),
+        FormatError::InvalidHeader {
+            field: "coefficient_encoding",
+            ..
+        }
+    );
+    expect!(
+        |b| field(b, 200, &(len + 8).to_le_bytes()),
+        FormatError::Truncated { .. }
+    );
+    expect!(
+        |b| field(b, 200, &(len - 8).to_le_bytes()),
+        FormatError::FileSizeMismatch { .. }
+    );
+
+    // Section table entries.
+    let brck = entry_offset(&bytes, KIND_BRICKS);
+    let dens = entry_offset(&bytes, KIND_DENSITY);
+    let pcab = entry_offset(&bytes, KIND_PCA);
+    let coef = entry_offset(&bytes, KIND_COEFFICIENTS);
+    let meta = entry_offset(&bytes, KIND_METADATA);
+    expect!(
+        |b| field(b, dens + 16, &(len.next_multiple_of(8) + 8).to_le_bytes()),
+        FormatError::SectionOutOfBounds { .. }
+    );
+    expect!(
+        |b| field(b, dens + 16, &8u64.to_le_bytes()),
+        FormatError::SectionOutOfBounds { .. }
+    );
+    expect!(
+        |b| field(b, dens + 16, &(u64::MAX - 7).to_le_bytes()),
+        FormatError::SectionOutOfBounds { .. }
+    );
+    expect!(
+        |b| field(b, dens + 24, &u64::MAX.to_le_bytes()),
+        FormatError::SectionOutOfBounds { .. }
+    );
+    expect!(
+        |b| {
+            let brick_offset = b[brck + 16..brck + 24].to_vec();
+            field(b, dens + 16, &brick_offset);
+        },
+        FormatError::SectionsOverlap { .. }
+    );
+    expect!(
+        |b| {
+            let o = u64::from_le_bytes(b[dens + 16..dens + 24].try_into().unwrap());
+            field(b, dens + 16, &(o + 4).to_le_bytes());
+        },
+        FormatError::Misaligned { .. }
+    );
+    expect!(|b| field(b, pcab, b"BRCK"), FormatError::DuplicateSection { .. });
+    expect!(
+        |b| field(b, pcab, b"ZZZZ"),
+        FormatError::UnknownRequiredSection { .. }
+    );
+    expect!(
+        |b| field(b, coef + 32, &u64::MAX.to_le_bytes()),
+        FormatError::SectionLength { .. }
+    );
+    expect!(
+        |b| field(b, coef + 6, &1u16.to_le_bytes()),
+        FormatError::BadCodec { .. }
+    );
+    expect!(
+        |b| field(b, coef + 6, &9u16.to_le_bytes()),
+        FormatError::BadCodec { .. }
+    );
+    expect!(
+        |b| field(b, brck + 6, &1u16.to_le_bytes()),
+        FormatError::BadCodec { .. }
+    );
+    expect!(
+        |b| field(b, coef + 8, &3u32.to_le_bytes()),
+        FormatError::BadCodec { .. }
+    );
+    expect!(
+        |b| field(b, brck + 8, &6u32.to_le_bytes()),
+        FormatError::BadCodec { .. }
+    );
+    expect!(
+        |b| field(b, pcab + 32, &(1u64 << 40).to_le_bytes()),
+        FormatError::SectionLength { .. }
+    );
+    expect!(
+        |b| field(b, meta + 32, &(1u64 << 40).to_le_bytes()),
+        FormatError::CountTooLarge { .. }
+    );
+    expect!(
+        |b| field(b, brck + 40, &0u64.to_le_bytes()),
+        FormatError::ChecksumMismatch { .. }
+    );
+    out
+}
+
+/// Hand-made hostile sections with valid checksums (missing sections, unsorted bricks,
+/// NaNs, bad zstd, bad quantization parameters, bad densities and coefficients, bad
+/// chunk tables, bad metadata, non-zero padding), each with the error it must give.
+pub fn hostile_sections() -> Vec<Damaged> {
+    let (asset, bytes) = encoded(CoefficientEncoding::U8Affine);
+    let (f16_asset, f16_bytes) = encoded(CoefficientEncoding::F16);
+    let mut out = Vec::new();
+    let mut push = |parts: FileParts, what: &str, expect: Expect| {
+        out.push(Damaged::new(what, parts.build(), expect));
+    };
+    let raw_pca = |a: &Asset| -> Vec<u8> {
+        a.pca
+            .mean
+            .iter()
+            .chain(&a.pca.basis)
+            .flat_map(|v| v.to_le_bytes())
+            .collect()
+    };
+
+    // Missing required section.
+    let mut p = FileParts::parse(&bytes);
+    p.sections.retain(|(e, _)| e.kind != KIND_DENSITY);
+    push(
+        p,
+        "missing DENS",
+        Expect::error(|e| matches!(e, FormatError::MissingSection { section } if section == "DENS")),
+    );
+    let mut p = FileParts::parse(&bytes);
+    p.sections.retain(|(e, _)| e.kind != KIND_QUANT_PARAMS);
+    push(
+        p,
+        "missing QPRM",
+        Expect::error(|e| matches!(e, FormatError::MissingSection { section } if section == "QPRM")),
+    );
+
+    // Unsorted bricks.
+    let mut p = FileParts::parse(&bytes);
+    let mut raw = p.section_mut(KIND_BRICKS).1.clone();
+    raw[..12].rotate_left(6);
+    let n = raw.len() as u64;
+    p.replace(KIND_BRICKS, SectionCodec::Raw, 0, raw, n);
+    push(
+        p,
+        "unsorted bricks",
+        Expect::error(|e| matches!(e, FormatError::InvalidBricks(_))),
+    );
+
+    // NaN in the PCA basis (stored raw).
+    let mut p = FileParts::parse(&bytes);
+    let mut raw = raw_pca(&asset);
+    raw[4 * 400..4 * 401].copy_from_slice(&f32::NAN.to_le_bytes());
+    let n = raw.len() as u64;
+    p.replace(KIND_PCA, SectionCodec::Raw, 0, raw, n);
+    push(
+        p,
+        "NaN basis",
+        Expect::error(|e| matches!(e, FormatError::NonFinite { what } if what.contains("PCA basis"))),
+    );
+
+    // zstd garbage with a valid checksum, and zstd data of the wrong length.
+    let mut p = FileParts::parse(&bytes);
+    let n = raw_pca(&asset).len() as u64;
+    p.replace(
+        KIND_PCA,
+        SectionCodec::Zstd,
+        0,
+        vec![0x28, 0xb5, 0x2f, 0xfd, 1, 2, 3, 4, 5],
+        n,
+    );
+    push(
+        p,
+        "zstd garbage",
+        Expect::error(|e| matches!(e, FormatError::Zstd { what, .. } if what.contains("PCAB"))),
+    );
+    let mut p = FileParts::parse(&bytes);
+    let short = zstd::bulk::compress(&raw_pca(&asset)[..1000], 3).unwrap();
+    p.replace(KIND_PCA, SectionCodec::Zstd, 0, short, n);
+    push(
+        p,
+        "short zstd",
+        Expect::error(|e| matches!(e, FormatError::Zstd { .. })),
+    );
+    let mut p = FileParts::parse(&bytes);
+    let long = zstd::bulk::compress(&[raw_pca(&asset), vec![0; 64]].concat(), 3).unwrap();
+    p.replace(KIND_PCA, SectionCodec::Zstd, 0, long, n);
+    push(
+        p,
+        "long zstd",
+        Expect::error(|e| matches!(e, FormatError::Zstd { .. })),
+    );
+
+    // Quantization parameters: NaN and negative scale.
+    for (value, name) in [(f32::NAN, "NaN scale"), (-1.0, "negative scale")] {
+        let mut p = FileParts::parse(&bytes);
+        let mut raw = vec![0u8; 8 * 4];
+        raw[..4].copy_from_slice(&value.to_le_bytes());
+        p.replace(KIND_QUANT_PARAMS, SectionCodec::Raw, 0, raw, 32);
+        push(
+            p,
+            name,
+            Expect::error(|e| {
+                matches!(
+                    e,
+                    FormatError::NonFinite { .. } | FormatError::InvalidValue { .. }
+                )
+            }),
+        );
+    }
+
+    // Densities: negative and NaN, in validly compressed chunks.
+    for (bits, name) in [(0xBC00u16, "negative density"), (0x7E00, "NaN density")] {
+        let mut p = FileParts::parse(&bytes);
+        let mut raw: Vec<u8> = asset
+            .density
+            .iter()
+            .flat_map(|d| d.to_bits().to_le_bytes())
+            .collect();
+        raw[2 * 700..2 * 701].copy_from_slice(&bits.to_le_bytes());
+        let n = raw.len() as u64;
+        p.replace(
+            KIND_DENSITY,
+            SectionCodec::ChunkedZstd,
+            2,
+            chunked_payload(&raw, 2 * BRICK_VOXELS, CHUNK_BRICKS, 2),
+            n,
+        );
+        push(
+            p,
+            name,
+            Expect::error(
+                |e| matches!(e, FormatError::NonFinite { what } | FormatError::InvalidValue { what, .. } if what.contains("voxel 700")),
+            ),
+        );
+    }
+
+    // NaN f16 coefficient.
+    let mut p = FileParts::parse(&f16_bytes);
+    let Coefficients::F16 { values, .. } = &f16_asset.coefficients else {
+        unreachable!()
+    };
+    let mut raw: Vec<u8> = values.iter().flat_map(|v| v.to_bits().to_le_bytes()).collect();
+    raw[2 * 4 * 600 + 2..2 * 4 * 600 + 4].copy_from_slice(&0x7C00u16.to_le_bytes());
+    let n = raw.len() as u64;
+    p.replace(
+        KIND_COEFFICIENTS,
+        SectionCodec::ChunkedZstd,
+        8,
+        chunked_payload(&raw, 8 * BRICK_VOXELS, CHUNK_BRICKS, 8),
+        n,
+    );
+    push(
+        p,
+        "inf coefficient",
+        Expect::error(
+            |e| matches!(e, FormatError::NonFinite { what } if what.contains("voxel 600 component 1")),
+        ),
+    );
+
+    // A QPRM section in an f16 file.
+    let mut p = FileParts::parse(&f16_bytes);
+    let qprm = FileParts::parse(&bytes).section_mut(KIND_QUANT_PARAMS).clone();
+    p.sections.push(qprm);
+    push(
+        p,
+        "QPRM with f16",
+        Expect::error(|e| {
+            matches!(
+                e,
+                FormatError::InvalidHeader {
+                    field: "coefficient_encoding",
+                    ..
+                }
+            )
+        }),
+    );
+
+    // Chunk tables: a lying chunk length, a gap, and an implausibly small chunk.
+    let coef = |p: &mut FileParts| p.section_mut(KIND_COEFFICIENTS).1.clone();
+    let mut p = FileParts::parse(&bytes);
+    let mut table = coef(&mut p);
+    table[8..16].copy_from_slice(&u64::MAX.to_le_bytes());
+    let n = asset.coefficients.len() as u64;
+    p.replace(KIND_COEFFICIENTS, SectionCodec::ChunkedZstd, 4, table, n);
+    push(
+        p,
+        "chunk length",
+        Expect::error(|e| matches!(e, FormatError::BadChunkTable { section, .. } if section == "COEF")),
+    );
+    let mut p = FileParts::parse(&bytes);
+    let mut table = coef(&mut p);
+    let first = u64::from_le_bytes(table[..8].try_into().unwrap());
+    table[..8].copy_from_slice(&(first + 1).to_le_bytes());
+    p.replace(KIND_COEFFICIENTS, SectionCodec::ChunkedZstd, 4, table, n);
+    push(
+        p,
+        "chunk gap",
+        Expect::error(|e| matches!(e, FormatError::BadChunkTable { .. })),
+    );
+    let mut p = FileParts::parse(&bytes);
+    let chunks = asset.bricks.len().div_ceil(CHUNK_BRICKS);
+    let mut table = Vec::new();
+    // Empty chunks that claim to decode to whole bricks.
+    for _ in 0..chunks {
+        table.extend_from_slice(&((24 * chunks) as u64).to_le_bytes());
+        table.extend_from_slice(&0u64.to_le_bytes());
+        table.extend_from_slice(&nelf_format::spec::checksum(&[]).to_le_bytes());
+    }
+    p.replace(KIND_COEFFICIENTS, SectionCodec::ChunkedZstd, 4, table, n);
+    push(
+        p,
+        "empty chunk",
+        Expect::error(|e| matches!(e, FormatError::ImplausibleLength { .. })),
+    );
+
+    // Metadata: not JSON, not an object.
+    for (text, name) in [(&b"{not json"[..], "bad JSON"), (&b"[1, 2]"[..], "JSON array")] {
+        let mut p = FileParts::parse(&bytes);
+        p.replace(
+            KIND_METADATA,
+            SectionCodec::Raw,
+            0,
+            text.to_vec(),
+            text.len() as u64,
+        );
+        push(
+            p,
+            name,
+            Expect::error(|e| matches!(e, FormatError::Json(_) | FormatError::MetadataNotObject { .. })),
+        );
+    }
+
+    // Non-zero padding between sections.
+    let mut b = bytes.clone();
+    let p = FileParts::parse(&b);
+    let mut gaps: Vec<(u64, u64)> = p
+        .sections
+        .iter()
+        .map(|(e, _)| (e.offset, e.offset + e.stored_length))
+        .collect();
+    gaps.sort_unstable();
+    let gap = gaps.windows(2).find(|w| w[1].0 > w[0].1).map(|w| w[0].1).unwrap();
+    b[gap as usize] = 1;
+    out.push(Damaged::new(
+        "padding",
+        b,
+        Expect::error(move |e| matches!(e, FormatError::NonZeroPadding { offset } if *offset == gap)),
+    ));
+    out
+}
+
+/// Number of files [`mutations`] makes.
+pub const MUTATIONS: usize = 1500;
+
+/// The mini-fuzzer: 1500 files with one to three random mutations each (byte
+/// overwrites, extreme values in header and table fields, truncations, bit flips,
+/// insertions and deletions), half of them re-signed so that the mutation reaches the
+/// field checks. A few mutations are harmless, so any answer is allowed.
+pub fn mutations() -> Vec<Damaged> {
+    let mut rng = Pcg64::seed_from_u64(0x5eed);
+    let files: Vec<Vec<u8>> = ENCODINGS.into_iter().map(|e| encoded(e).1).collect();
+    let extremes: [u64; 8] = [
+        0,
+        1,
+        7,
+        255,
+        0xFFFF,
+        u64::from(u32::MAX),
+        u64::MAX,
+        f64::NAN.to_bits(),
+    ];
+    let mut out = Vec::with_capacity(MUTATIONS);
+    for iteration in 0..MUTATIONS {
+        let mut b = files[iteration % 2].clone();
+        let table_end = HEADER_SIZE + 6 * SECTION_ENTRY_SIZE;
+        let mutations = rng.random_range(1..4);
+        for _ in 0..mutations {
+            match rng.random_range(0..5) {
+                0 => {
+                    let at = rng.random_range(0..b.len());
+                    b[at] = rng.random();
+                }
+                1 => {
+                    // An extreme value in an aligned header/table field.
+                    let at = rng.random_range(0..table_end.min(b.len()) / 4) * 4;
+                    let v = extremes[rng.random_range(0..extremes.len())].to_le_bytes();
+                    let width = if rng.random_bool(0.5) { 4 } else { 8 };
+                    let end = (at + width).min(b.len());
+                    b[at..end].copy_from_slice(&v[..end - at]);
+                }
+                2 => {
+                    let cut = rng.random_range(0..b.len());
+                    b.truncate(cut);
+                }
+                3 => {
+                    let at = rng.random_range(0..b.len());
+                    b[at] ^= 1 << rng.random_range(0..8);
+                }
+                _ => {
+                    // Insert or delete a run of bytes.
+                    let at = rng.random_range(0..b.len());
+                    if rng.random_bool(0.5) {
+                        let run: Vec<u8> = (0..rng.random_range(1..64)).map(|_| rng.random()).collect();
+                        b.splice(at..at, run);
+                    } else {
+                        let end = (at + rng.random_range(1..64)).min(b.len());
+                        b.drain(at..end);
+                    }
+                }
+            }
+            if b.is_empty() {
+                break;
+            }
+        }
+        // Half the time, re-sign so the mutation reaches the field checks.
+        if rng.random_bool(0.5) && b.len() >= HEADER_SIZE {
+            resign(&mut b);
+        }
+        out.push(Damaged::new(
+            format!("fuzz iteration {iteration}"),
+            b,
+            Expect::Anything,
+        ));
+    }
+    out
+}
+
+/// Every case of every generator.
+pub fn all() -> Vec<Damaged> {
+    let mut out = truncations();
+    out.extend(bit_flips());
+    out.extend(hostile_headers());
+    out.extend(hostile_sections());
+    out.extend(mutations());
+    out
+}

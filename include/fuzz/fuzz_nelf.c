@@ -1,0 +1,73 @@
+/*
+ * libFuzzer target for the C reader (include/nelf.h): whole-file and random-access
+ * reads of arbitrary bytes, then every accessor, reconstruction and relighting on
+ * whatever was accepted. Build and run with include/fuzz/run.sh:
+ *
+ *   clang -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all \
+ *         -I include include/fuzz/fuzz_nelf.c -o fuzz_nelf -lzstd -lxxhash
+ *
+ * Checksum mismatches are ignored (NELF_FUZZING_IGNORE_CHECKSUMS) so that mutated
+ * inputs reach the decoders and value checks behind the checksums; define
+ * NELF_FUZZ_WITH_CHECKSUMS to fuzz the reader exactly as shipped.
+ */
+#ifndef NELF_FUZZ_WITH_CHECKSUMS
+#define NELF_FUZZING_IGNORE_CHECKSUMS
+#endif
+#define NELF_IMPLEMENTATION
+#include "nelf.h"
+
+#include <stdint.h>
+#include <stdlib.h>
+#include <string.h>
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size);
+
+/* Uses every value it is given, so that reads of uninitialised or freed memory and
+ * non-finite arithmetic on accepted files are reached. */
+static volatile float g_sink;
+
+static void exercise(nelf_reader *r) {
+    static nelf_projected_light light;
+    float map[NELF_ENV_TEXELS * 3], lt[NELF_LT_DIM], rgb[3];
+    const nelf_header *h = nelf_get_header(r);
+    const uint16_t *coords = nelf_brick_coords(r);
+    size_t meta_length = 0, i;
+    const char *meta = nelf_metadata(r, &meta_length);
+    uint32_t b, s, n;
+    for (i = 0; i < meta_length; i++) g_sink += (float)meta[i];
+    for (s = 0; s < nelf_section_count(r); s++) g_sink += (float)nelf_get_section(r, s)->raw_length;
+    for (i = 0; i < NELF_ENV_TEXELS * 3; i++) map[i] = (float)(i % 5) - 1.0f;
+    if (nelf_project_light(r, map, &light) != NELF_OK) abort();
+    /* Random access: the last brick, the first, then up to 64 in order. */
+    n = h->brick_count < 64 ? h->brick_count : 64;
+    for (b = 0; b < n + 2 && h->brick_count > 0; b++) {
+        uint32_t index = b == 0 ? h->brick_count - 1 : b == 1 ? 0 : b - 2;
+        nelf_brick brick;
+        double centre[3];
+        if (nelf_read_brick(r, index, &brick) != NELF_OK) break;
+        if (nelf_find_brick(r, coords[3 * index], coords[3 * index + 1], coords[3 * index + 2]) != (int64_t)index) abort();
+        for (i = 0; i < NELF_BRICK_VOXELS; i += 73) {
+            const float *c = brick.coefficients + i * h->pca_rank;
+            nelf_reconstruct(r, c, h->pca_rank, lt);
+            nelf_relight(&light, c, h->pca_rank, rgb);
+            nelf_shade(lt, map, rgb);
+            g_sink += brick.density[i] + rgb[0] + lt[NELF_LT_DIM - 1];
+            if (nelf_voxel_center(r, index, (unsigned)(i % 8), (unsigned)(i / 8 % 8), (unsigned)(i / 64), centre) != NELF_OK)
+                abort();
+            g_sink += (float)centre[0];
+        }
+    }
+    if (h->brick_count > 0) (void)nelf_voxel_transport(r, h->brick_count / 2, 511, lt);
+    (void)nelf_verify(r);
+}
+
+int LLVMFuzzerTestOneInput(const uint8_t *data, size_t size) {
+    nelf_reader *r = nelf_create();
+    if (!r) return 0;
+    if (nelf_open_memory(r, data, size) == NELF_OK) exercise(r);
+    /* Reuse after a failure or success: open again, verify first this time. */
+    if (nelf_open_memory(r, data, size) == NELF_OK && nelf_verify(r) == NELF_OK) exercise(r);
+    g_sink += (float)strlen(nelf_error_detail(r)) + (float)strlen(nelf_error_name(nelf_last_result(r)));
+    nelf_destroy(r);
+    return 0;
+}
