@@ -13,7 +13,7 @@
 //! components (the colour grid is relit with the same K). The options and the report
 //! (grids, sizes, seconds) are saved beside the file as `<out>.export.json`.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
@@ -154,12 +154,7 @@ fn run_vdb(args: &VdbArgs) -> anyhow::Result<()> {
         load_seconds,
         write_seconds,
     };
-    let record_path = sidecar_path(&args.out);
-    nelf_format::atomic::write_bytes_atomically(
-        &record_path,
-        (serde_json::to_string_pretty(&record)? + "\n").as_bytes(),
-    )
-    .with_context(|| format!("cannot write {}", record_path.display()))?;
+    let record_path = super::save_record(&args.out, "export", &record)?;
     let voxels = report.grids.first().map_or(0, |g| g.active_voxels);
     println!(
         "exported {} ({} voxels, {} grids: density, {}, pca_00..pca_{:02}; rank {} of {}) in {write_seconds:.2} s -> {} ({} bytes; asset {} bytes)",
@@ -204,11 +199,4 @@ fn lighting(args: &VdbArgs, asset: &nelf_format::Asset) -> anyhow::Result<Lighti
         args.rotate_deg,
         "built-in studio map (procedural, seed 1)",
     ))
-}
-
-/// `<out>.export.json` beside the file.
-fn sidecar_path(out: &Path) -> PathBuf {
-    let mut name = out.as_os_str().to_owned();
-    name.push(".export.json");
-    PathBuf::from(name)
 }

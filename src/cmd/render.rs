@@ -254,12 +254,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         load_seconds,
         render_seconds,
     };
-    let record_path = sidecar_path(&args.out);
-    nelf_format::atomic::write_bytes_atomically(
-        &record_path,
-        (serde_json::to_string_pretty(&record)? + "\n").as_bytes(),
-    )
-    .with_context(|| format!("cannot write {}", record_path.display()))?;
+    super::save_record(&args.out, "render", &record)?;
     println!(
         "rendered {}×{} (rank {} of {}, {} voxels, lighting: {envmap_name}) in {render_seconds:.3} s on the {} -> {}",
         image.width,
@@ -380,12 +375,7 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
         "load_seconds": load_seconds,
         "render_seconds": render_seconds,
     });
-    let record_path = sidecar_path(&args.out);
-    nelf_format::atomic::write_bytes_atomically(
-        &record_path,
-        (serde_json::to_string_pretty(&record)? + "\n").as_bytes(),
-    )
-    .with_context(|| format!("cannot write {}", record_path.display()))?;
+    super::save_record(&args.out, "render", &record)?;
     println!(
         "rendered {width}×{height} from the NeLF network over {} (lighting: {light_name}) in {render_seconds:.1} s -> {}",
         capture_dir.display(),
@@ -414,13 +404,6 @@ impl OutputKind {
             _ => bail!("output {} must end in .png or .exr", path.display()),
         }
     }
-}
-
-/// `<out>.render.json` beside the image.
-fn sidecar_path(out: &Path) -> PathBuf {
-    let mut name = out.as_os_str().to_owned();
-    name.push(".render.json");
-    PathBuf::from(name)
 }
 
 /// The lighting to render under: `--envmap`, else the capture's env map (when the
