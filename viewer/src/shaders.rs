@@ -7,7 +7,8 @@
 //! agree; a test compares sizes and offsets with the layout naga computes.
 
 pub use nelf_render::wgsl::{
-    COMMON_WGSL, DENSE_MARCH_WGSL, DISPLAY_WGSL, LIBRARY, MARCH_WGSL, PASSES, PreprocessError, RELIGHT_WGSL, preprocess,
+    COMMON_WGSL, DENSE_MARCH_WGSL, DISPLAY_WGSL, LIBRARY, MARCH_WGSL, PASSES, PreprocessError, RELIGHT_WGSL,
+    preprocess,
 };
 
 /// Uniform of the relight pass (`RelightParams` in `relight.wgsl`).
