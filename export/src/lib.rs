@@ -12,6 +12,7 @@
 pub mod error;
 pub mod openvdb;
 pub mod shaders;
+pub mod unreal;
 pub mod vdb;
 
 use std::path::Path;

@@ -84,6 +84,20 @@ pub struct VdbArgs {
     /// Per-grid compression.
     #[arg(long, value_enum, default_value_t)]
     pub compression: CompressionArg,
+    /// `unreal`: instead of one file, Sparse Volume Texture files of at most 8
+    /// channels each (density + PCA coefficients) named `<out stem>_svtN.vdb`, with
+    /// `<stem>.unreal.json` (channel map), `<stem>.relight.hlsl` (Custom node) and
+    /// `<stem>.projected_light.exr` (export/UNREAL.md).
+    #[arg(long, value_enum)]
+    pub preset: Option<PresetArg>,
+}
+
+/// Target presets of `nelf export vdb`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PresetArg {
+    /// Unreal Engine's Sparse Volume Texture importer.
+    Unreal,
 }
 
 /// What `<out>.export.json` holds.
@@ -140,6 +154,24 @@ fn run_vdb(args: &VdbArgs) -> anyhow::Result<()> {
             CompressionArg::Zip => Compression::Zip,
         },
     };
+    if args.preset == Some(PresetArg::Unreal) {
+        let start = Instant::now();
+        let report = nelf_export::unreal::write_unreal(&args.out, &asset, &lighting, &options)
+            .with_context(|| format!("cannot export {} for Unreal", args.asset.display()))?;
+        let files: Vec<&str> = report.files.iter().map(|f| f.file.as_str()).collect();
+        println!(
+            "exported {} for Unreal (density + {} PCA channels in {} SVT files: {}) in {:.2} s; channel map, HLSL and projected light beside them ({}, {}, {})",
+            args.asset.display(),
+            report.rank,
+            files.len(),
+            files.join(", "),
+            start.elapsed().as_secs_f64(),
+            report.hlsl_file,
+            report.projected_light_file,
+            report.manifest_file,
+        );
+        return Ok(());
+    }
     let start = Instant::now();
     let report = write_vdb(&args.out, &asset, &lighting, &options)
         .with_context(|| format!("cannot export {} to {}", args.asset.display(), args.out.display()))?;
