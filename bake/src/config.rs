@@ -25,7 +25,7 @@ pub const FIELD_TEXEL_SAMPLES: u32 = 4;
 pub const FIELD_INDIRECT_SAMPLES: u32 = 32;
 
 /// Default `--lt-share-voxels`.
-pub const DEFAULT_LT_SHARE_VOXELS: f32 = 1.0;
+pub const DEFAULT_LT_SHARE_VOXELS: f32 = 2.0;
 
 fn default_lt_share_voxels() -> f32 {
     DEFAULT_LT_SHARE_VOXELS
