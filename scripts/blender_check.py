@@ -5,7 +5,7 @@ Not part of CI (Blender as a Python module is ~950 MB): run it by hand.
     python3 -m venv V && V/bin/pip install bpy==4.5.3
     nelf export vdb head.nelf -o head.vdb --envmap data/envmaps/studio.exr
     nelf render head.nelf --orbit 0,0 --envmap data/envmaps/studio.exr --width 128 --height 128 -o ref.exr
-    V/bin/python export/blender/render_check.py head.vdb ref.exr.render.json ref.exr blender.exr [SHIFT]
+    NELF_BLENDER_SAMPLES=16 V/bin/python scripts/blender_check.py head.vdb ref.exr.render.json ref.exr blender.exr [SHIFT]
 
 The camera is the render record's (an orbit at elevation 0 only: Blender's default camera
 orientation, looking along -z with +y up; the file is +y up and not turned). The volume
@@ -15,6 +15,7 @@ Prints the PSNR of the linear RGB (peak 1 and peak = the reference's maximum).
 """
 
 import json
+import os
 import math
 import sys
 import time
@@ -80,7 +81,7 @@ scene.camera = camera_object
 
 scene.render.engine = "CYCLES"
 scene.cycles.device = "CPU"
-scene.cycles.samples = 16
+scene.cycles.samples = int(os.environ.get("NELF_BLENDER_SAMPLES", "16"))
 scene.cycles.max_bounces = 0
 scene.cycles.volume_bounces = 0
 scene.cycles.volume_step_rate = 0.5
