@@ -9,7 +9,7 @@ Not part of CI (Blender as a Python module is ~950 MB): run it by hand.
 
 The camera is the render record's (an orbit at elevation 0 only: Blender's default camera
 orientation, looking along -z with +y up; the file is +y up and not turned). The volume
-object is moved by SHIFT voxels on each axis (default -0.5: Cycles samples voxel i at
+object is moved by SHIFT voxels on each axis, or X,Y,Z voxels (default -0.5: Cycles samples voxel i at
 index i + 1/2, OpenVDB centres it on i). Material and settings as export/README.md says.
 Prints the PSNR of the linear RGB (peak 1 and peak = the reference's maximum).
 """
@@ -24,7 +24,8 @@ import bpy
 import numpy as np
 
 vdb, record, reference, out = sys.argv[1:5]
-shift = float(sys.argv[5]) if len(sys.argv) > 5 else -0.5
+shift_arg = sys.argv[5] if len(sys.argv) > 5 else "-0.5"
+shift = [float(v) for v in shift_arg.split(",")] * (3 if "," not in shift_arg else 1)
 cam = json.load(open(record))["camera"]
 rotation = cam["world_to_camera"]["rotation"]
 if [[round(v) for v in row] for row in rotation] != [[1, 0, 0], [0, -1, 0], [0, 0, -1]]:
@@ -37,7 +38,7 @@ obj = bpy.context.active_object
 volume = obj.data
 volume.grids.load()
 voxel = volume.grids["density"].matrix_object[0][0]
-obj.location = (shift * voxel,) * 3
+obj.location = tuple(s * voxel for s in shift)
 volume.render.precision = "FULL"
 color_name = next(g.name for g in volume.grids if g.data_type == "VECTOR_FLOAT")
 
