@@ -8,6 +8,7 @@ pub mod envgen;
 pub mod envmap;
 pub mod error;
 pub mod field;
+pub mod flip;
 pub mod head;
 pub mod image_io;
 pub mod mesh;

@@ -1,4 +1,5 @@
-//! PSNR and SSIM against scikit-image 0.26 (`data/metrics/README.md`), on the
+//! PSNR and SSIM against scikit-image 0.26 and ꟻLIP against NVIDIA's flip-evaluator
+//! (`data/metrics/README.md`), on the
 //! full 512 × 512 reference pair and on a non-square crop (which also checks border
 //! handling and the masked variants), plus properties.
 
@@ -204,4 +205,43 @@ fn rejects_invalid_inputs() {
         ssim_masked(&a, &b, &border, 12, 11, 1.0),
         Err(MetricError::EmptyMask(_))
     ));
+}
+
+/// ꟻLIP (LDR) against NVIDIA's own Python package, flip-evaluator 1.7
+/// (`flip_evaluator.evaluate(reference, test, "LDR")`: mean 0.10292140 at 67.0206 ppd),
+/// on the 8-bit sRGB bytes of the reference pair; and a mask pools the same map.
+#[test]
+fn flip_reproduces_nvidia_flip_evaluator_on_the_reference_pair() {
+    use nelf_scene::flip::{DEFAULT_PIXELS_PER_DEGREE, flip_map_srgb8, pooled_mean};
+    let bytes = |path: &str| {
+        let image = image::open(path).unwrap().to_rgb8();
+        (image.width(), image.height(), image.into_raw())
+    };
+    let (w, h, a) = bytes(ASTRONAUT);
+    let (_, _, b) = bytes(ASTRONAUT_NOISY);
+    assert!((DEFAULT_PIXELS_PER_DEGREE - 67.020_645).abs() < 1e-4);
+    let map = flip_map_srgb8(&a, &b, w, h, DEFAULT_PIXELS_PER_DEGREE).unwrap();
+    let mean = pooled_mean(&map, None).unwrap().unwrap();
+    eprintln!("astronaut vs astronaut_noisy: FLIP {mean:.8} (flip-evaluator 1.7: 0.10292140)");
+    // nv-flip bundles an older FLIP C++ release than flip-evaluator 1.7 and pools in
+    // f64 here: they agree to 1e-6; 1e-5 leaves room for either to change rounding.
+    assert!((mean - 0.102_921_40).abs() < 1e-5, "FLIP {mean}");
+    // Identical images: zero error everywhere.
+    assert!(
+        flip_map_srgb8(&a, &a, w, h, DEFAULT_PIXELS_PER_DEGREE)
+            .unwrap()
+            .iter()
+            .all(|&e| e == 0.0)
+    );
+    // Foreground-only: the left half as a mask is the left half's mean.
+    let mask: Vec<f32> = (0..w * h)
+        .map(|i| if i % w < w / 2 { 1.0 } else { 0.0 })
+        .collect();
+    let left = pooled_mean(&map, Some(&mask)).unwrap().unwrap();
+    let direct = (0..(w * h) as usize)
+        .filter(|i| (*i as u32) % w < w / 2)
+        .map(|i| f64::from(map[i]))
+        .sum::<f64>()
+        / f64::from(w / 2 * h);
+    assert!((left - direct).abs() < 1e-12);
 }
