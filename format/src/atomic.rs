@@ -26,9 +26,14 @@ pub fn write_atomically(
         Some(p) if !p.as_os_str().is_empty() => p,
         _ => Path::new("."),
     };
-    let name = path
+    // The temporary name starts with (at most 64 characters of) the final one, so a
+    // left-over file says what it was, and a 255-byte name still leaves room.
+    let name: String = path
         .file_name()
-        .map_or_else(|| "out".into(), |n| n.to_string_lossy());
+        .map_or_else(|| "out".into(), |n| n.to_string_lossy())
+        .chars()
+        .take(64)
+        .collect();
     let prefix = format!(".{name}.");
     let mut builder = tempfile::Builder::new();
     builder.prefix(&prefix).suffix(".tmp");
@@ -88,6 +93,10 @@ mod tests {
         // Replacing works.
         write_bytes_atomically(&path, b"second").unwrap();
         assert_eq!(std::fs::read(&path).unwrap(), b"second");
+        // The longest name a file system takes still has room for the temporary name.
+        let long = dir.path().join(format!("{}.nelf", "a".repeat(250)));
+        write_bytes_atomically(&long, b"long").unwrap();
+        assert_eq!(std::fs::read(&long).unwrap(), b"long");
         // A missing folder is an error, not a panic.
         assert!(write_bytes_atomically(&dir.path().join("no/such/file"), b"x").is_err());
     }
