@@ -21,7 +21,7 @@ use nelf_format::conventions::{LatLong, PinholeCamera};
 use nelf_format::read_asset;
 use nelf_scene::envmap::load_envmap;
 use nelf_scene::image_io::write_png_srgb;
-use nelf_scene::mesh_io::linear_to_srgb;
+use nelf_scene::mesh_io::linear_to_srgb8;
 use nelf_scene::metrics::psnr;
 
 type Error = Box<dyn std::error::Error>;
@@ -41,7 +41,7 @@ fn measure(
     let gain = stops.exp2();
     let to_8bit = |rgb: &[[f32; 3]]| -> Vec<[f32; 3]> {
         rgb.iter()
-            .map(|p| p.map(|v| (linear_to_srgb(v * gain) * 255.0).round()))
+            .map(|p| p.map(|v| f32::from(linear_to_srgb8(v * gain))))
             .collect()
     };
     let psnr_8bit = psnr(&to_8bit(&image.rgb), &to_8bit(reference), 255.0)?;

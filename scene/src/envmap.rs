@@ -14,7 +14,7 @@ use std::path::Path;
 use nelf_format::conventions::{ENV_H, ENV_W, LatLong, project_envmap, rotation_y};
 
 use crate::error::SceneError;
-use crate::mesh_io::linear_to_srgb;
+use crate::mesh_io::linear_to_srgb8;
 
 /// A radiance value made usable: NaN, ±∞ and negatives become 0.
 pub fn sanitize_radiance(value: f32) -> f32 {
@@ -137,7 +137,7 @@ pub fn envmap_preview_rgb8(env: &LatLong, exposure_stops: f32) -> image::RgbImag
     let gain = exposure_stops.exp2();
     let mut out = image::RgbImage::new(env.width() as u32, env.height() as u32);
     for (pixel, texel) in out.pixels_mut().zip(env.texels()) {
-        pixel.0 = texel.map(|v| (linear_to_srgb(v * gain) * 255.0).round() as u8);
+        pixel.0 = texel.map(|v| linear_to_srgb8(v * gain));
     }
     out
 }
@@ -171,6 +171,7 @@ pub fn save_envmap_preview(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mesh_io::linear_to_srgb;
 
     #[test]
     fn sanitize_clamps_bad_values() {

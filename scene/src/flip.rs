@@ -11,7 +11,7 @@
 //! Checked against NVIDIA's Python package (`pip install flip-evaluator`) on the
 //! committed metric fixture (`data/metrics`, see its README).
 
-use crate::mesh_io::linear_to_srgb;
+use crate::mesh_io::linear_to_srgb8;
 use crate::metrics::MetricError;
 
 /// Pixels per degree of visual angle the error is computed for: ꟻLIP's default
@@ -49,10 +49,7 @@ pub fn flip_map_srgb8(
 
 /// Linear RGB → 8-bit sRGB bytes (rounded, clamped), as previews are written.
 pub fn to_srgb8(rgb: &[[f32; 3]]) -> Vec<u8> {
-    rgb.iter()
-        .flatten()
-        .map(|&v| (linear_to_srgb(v) * 255.0).round().clamp(0.0, 255.0) as u8)
-        .collect()
+    rgb.iter().flatten().map(|&v| linear_to_srgb8(v)).collect()
 }
 
 /// The ꟻLIP error map of two linear RGB images, each shown as 8-bit sRGB.

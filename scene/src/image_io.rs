@@ -10,7 +10,7 @@ use std::path::Path;
 use image::{ImageBuffer, ImageFormat, Luma, Rgb};
 
 use crate::error::SceneError;
-use crate::mesh_io::linear_to_srgb;
+use crate::mesh_io::linear_to_srgb8;
 
 fn io_error(path: &Path, source: std::io::Error) -> SceneError {
     SceneError::Io {
@@ -84,11 +84,7 @@ fn srgb8(
     rgb: &[[f32; 3]],
     gain: f32,
 ) -> Result<ImageBuffer<Rgb<u8>, Vec<u8>>, SceneError> {
-    let data: Vec<u8> = rgb
-        .iter()
-        .flatten()
-        .map(|&v| (linear_to_srgb(v * gain) * 255.0).round() as u8)
-        .collect();
+    let data: Vec<u8> = rgb.iter().flatten().map(|&v| linear_to_srgb8(v * gain)).collect();
     ImageBuffer::<Rgb<u8>, _>::from_raw(width, height, data)
         .ok_or_else(|| size_error(path, width, height, rgb.len()))
 }

@@ -370,6 +370,12 @@ pub fn linear_to_srgb(linear: f32) -> f32 {
     }
 }
 
+/// Linear value to an 8-bit sRGB code (rounded; clamped like [`linear_to_srgb`]): the
+/// byte every preview, JPEG texture and ꟻLIP input holds.
+pub fn linear_to_srgb8(linear: f32) -> u8 {
+    (linear_to_srgb(linear) * 255.0).round() as u8
+}
+
 /// Which optional per-vertex fields an OFF header announces (`[ST][C][N]OFF`).
 #[derive(Debug, Clone, Copy, Default)]
 struct OffLayout {
