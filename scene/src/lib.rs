@@ -1,6 +1,9 @@
 //! `nelf-scene`: ground truth for every accuracy figure in the project — meshes,
 //! procedural heads, environment maps, a CPU light-transport path tracer and
 //! synthetic captures.
+//!
+//! `shot`: the cameras (camera files, capture views, orbits) and lightings (env-map
+//! files, constant white) a render is made with, for every command that renders.
 
 pub mod bvh;
 pub mod defects;
@@ -16,5 +19,6 @@ pub mod mesh_io;
 pub mod metrics;
 pub mod render;
 pub mod shapes;
+pub mod shot;
 pub mod synth;
 pub mod tracer;

@@ -19,6 +19,7 @@ use std::time::Instant;
 use anyhow::Context;
 use nelf_export::{Compression, Lighting, VdbOptions, VdbReport, write_vdb};
 use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
+use nelf_scene::shot::{LightingArgs, load_lighting};
 use serde::{Deserialize, Serialize};
 
 /// Options of `nelf export`.
@@ -59,19 +60,20 @@ pub enum CompressionArg {
 
 /// Options of `nelf export vdb`.
 #[derive(Debug, Clone, clap::Args, Serialize, Deserialize)]
+#[command(mut_arg("envmap", |envmap| envmap.help(
+    "Environment map (.exr or .hdr, lat-long, any resolution) for the colour grid; \
+     default: the capture's estimated light stored in the asset, else a built-in studio map"
+)))]
 pub struct VdbArgs {
     /// The .nelf asset.
     pub asset: PathBuf,
     /// The OpenVDB file to write (`<out>.export.json` goes beside it).
     #[arg(short, long, default_value = "head.vdb")]
     pub out: PathBuf,
-    /// Environment map (.exr or .hdr, lat-long, any resolution) for the colour grid;
-    /// default: the capture's estimated light stored in the asset, else a built-in studio map.
-    #[arg(long)]
-    pub envmap: Option<PathBuf>,
-    /// Turn the lighting about +y by this many degrees.
-    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
-    pub rotate_deg: f64,
+    /// The colour grid's environment map (`--envmap`) and its rotation (`--rotate-deg`).
+    #[command(flatten)]
+    #[serde(flatten)]
+    pub lighting: LightingArgs,
     /// Export only the first K PCA components (default: all); the colour grid uses the same K.
     #[arg(long)]
     pub rank: Option<usize>,
@@ -209,12 +211,12 @@ fn run_vdb(args: &VdbArgs) -> anyhow::Result<()> {
 /// `--envmap` turned by `--rotate-deg`; else the asset's stored estimated light; else
 /// the built-in studio map.
 fn lighting(args: &VdbArgs, asset: &nelf_format::Asset) -> anyhow::Result<Lighting> {
-    if let Some(path) = &args.envmap {
-        let env = nelf_scene::envmap::load_envmap(path)
-            .with_context(|| format!("cannot load environment map {}", path.display()))?;
-        return Ok(Lighting::world(env, args.rotate_deg, &path.display().to_string()));
+    let rotate_deg = args.lighting.rotate_deg;
+    if let Some(path) = &args.lighting.envmap {
+        let (env, name) = load_lighting(Some(path), None)?;
+        return Ok(Lighting::world(env, rotate_deg, &name));
     }
-    if let Some(stored) = Lighting::stored(asset, args.rotate_deg)
+    if let Some(stored) = Lighting::stored(asset, rotate_deg)
         .with_context(|| format!("{}: stored lighting", args.asset.display()))?
     {
         return Ok(stored);
@@ -228,7 +230,7 @@ fn lighting(args: &VdbArgs, asset: &nelf_format::Asset) -> anyhow::Result<Lighti
     );
     Ok(Lighting::world(
         studio,
-        args.rotate_deg,
+        rotate_deg,
         "built-in studio map (procedural, seed 1)",
     ))
 }
