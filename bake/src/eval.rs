@@ -149,3 +149,91 @@ pub fn error_breakdown(
         coverage_error: coverage / (w * h) as f64,
     })
 }
+
+/// A capture's held-aside target views, decoded: what a bake is judged by on views
+/// and lightings it never saw (`cameras.json` `targets`).
+#[derive(Debug, Clone)]
+pub struct HeldAside {
+    /// Target names.
+    pub names: Vec<String>,
+    /// Their cameras.
+    pub cameras: Vec<PinholeCamera>,
+    /// Ground-truth images, linear RGB over black (as a capture stores them).
+    pub images: Vec<Vec<[f32; 3]>>,
+    /// Masks in `[0, 1]` (the mask file when there is one, else pixels that are not black).
+    pub masks: Vec<Vec<f32>>,
+    /// The lighting of each target, lat-long in the world frame.
+    pub envs: Vec<LatLong>,
+}
+
+impl HeldAside {
+    /// Number of views.
+    pub fn len(&self) -> usize {
+        self.cameras.len()
+    }
+
+    /// Whether there is none.
+    pub fn is_empty(&self) -> bool {
+        self.cameras.is_empty()
+    }
+}
+
+/// Loads the held-aside target views of the capture in `dir` described by
+/// `capture`; an error names the file that fails. Empty when there are none.
+pub fn load_held_aside(capture: &nelf_format::capture::Capture, dir: &Path) -> Result<HeldAside> {
+    let mut held = HeldAside {
+        names: Vec::new(),
+        cameras: Vec::new(),
+        images: Vec::new(),
+        masks: Vec::new(),
+        envs: Vec::new(),
+    };
+    for t in &capture.targets {
+        let path = t.image_path(dir);
+        let (w, h, image) = read_linear_rgb(&path)?;
+        if (w, h) != (t.camera.width, t.camera.height) {
+            return Err(BakeError::Settings(format!(
+                "{}: the image is {w}×{h} but its camera is {}×{}",
+                path.display(),
+                t.camera.width,
+                t.camera.height
+            )));
+        }
+        let mask: Vec<f32> = match t.mask_path(dir) {
+            Some(p) => {
+                let m = image::open(&p)
+                    .map_err(|source| BakeError::Image {
+                        path: p.clone(),
+                        source,
+                    })?
+                    .to_luma32f();
+                if (m.width(), m.height()) != (w, h) {
+                    return Err(BakeError::Settings(format!(
+                        "{}: the mask is {}×{} but its image is {w}×{h}",
+                        p.display(),
+                        m.width(),
+                        m.height()
+                    )));
+                }
+                m.into_raw()
+            }
+            None => image
+                .iter()
+                .map(|p| if p.iter().any(|&c| c > 0.0) { 1.0 } else { 0.0 })
+                .collect(),
+        };
+        let env_path = t.envmap_path(dir);
+        let env = nelf_scene::envmap::load_envmap(&env_path).map_err(|e| {
+            BakeError::Settings(format!(
+                "{}: cannot load the environment map: {e}",
+                env_path.display()
+            ))
+        })?;
+        held.names.push(t.name.clone());
+        held.cameras.push(t.camera);
+        held.images.push(image);
+        held.masks.push(mask);
+        held.envs.push(env);
+    }
+    Ok(held)
+}

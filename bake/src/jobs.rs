@@ -74,19 +74,19 @@ pub fn plan_capture(
     })
 }
 
-/// Bakes any field source over a capture's plan: the capture's cameras are the
-/// views the PCA is weighted by and the rank is judged at; its images under its
-/// lighting (when the capture names an env map) measure the grid's own error.
-/// `field_provenance` describes the field in the metadata.
-pub fn bake_capture_field(
+/// The bake job of any field source over a capture's plan: the capture's cameras
+/// are the views the PCA is weighted by and the rank is judged at; its images under
+/// its lighting (when the capture names an env map) measure the grid's own error.
+/// `field_provenance` describes the field in the metadata. Returns the job and the
+/// seconds already spent (the hull).
+pub fn capture_field_job<'a>(
     capture: &LoadedCapture,
     planned: CapturePlan,
-    field: &dyn FieldSource,
+    field: &'a dyn FieldSource,
     view_policy: ViewPolicy,
     field_provenance: &serde_json::Value,
     config: &BakeConfig,
-    progress: &Progress,
-) -> Result<BakeOutput> {
+) -> Result<(FieldBake<'a>, StageTimings)> {
     let reference = match capture.source_envmap_path() {
         Some(path) => Reference::Images {
             images: capture.images.clone(),
@@ -119,17 +119,34 @@ pub fn bake_capture_field(
         hull_secs: planned.hull_secs,
         ..StageTimings::default()
     };
+    Ok((job, prior))
+}
+
+/// Bakes any field source over a capture's plan ([`capture_field_job`], then
+/// [`bake_field`]).
+pub fn bake_capture_field(
+    capture: &LoadedCapture,
+    planned: CapturePlan,
+    field: &dyn FieldSource,
+    view_policy: ViewPolicy,
+    field_provenance: &serde_json::Value,
+    config: &BakeConfig,
+    progress: &Progress,
+) -> Result<BakeOutput> {
+    let (job, prior) = capture_field_job(capture, planned, field, view_policy, field_provenance, config)?;
     bake_field(&job, config, progress, prior)
 }
 
-/// Bakes a capture's ground-truth field: visual hull of its masks, the mesh of
-/// `truth` as the field, the capture's cameras as the views.
-pub fn bake_capture(
+/// Runs `run` on the ground-truth bake job of a capture: visual hull of its masks,
+/// the mesh of `truth` as the field (at `config`'s voxel size), the capture's
+/// cameras as the views.
+pub fn with_capture_job<R>(
     capture: &LoadedCapture,
     truth: &GroundTruth,
     config: &BakeConfig,
     progress: &Progress,
-) -> Result<BakeOutput> {
+    run: impl FnOnce(&FieldBake<'_>, StageTimings) -> Result<R>,
+) -> Result<R> {
     let mesh = truth.mesh()?;
     let trace = config.trace.apply_to_field(truth.trace_settings());
     // Occupancy only: any voxel size will do for the probe's shell.
@@ -148,15 +165,28 @@ pub fn bake_capture(
         "ground_truth": truth.describe(),
         "field": describe_trace(&trace, config),
     });
-    bake_capture_field(
+    let (job, prior) = capture_field_job(
         capture,
         planned,
         field.as_ref(),
         view_policy,
         &field_provenance,
         config,
-        progress,
-    )
+    )?;
+    run(&job, prior)
+}
+
+/// Bakes a capture's ground-truth field: visual hull of its masks, the mesh of
+/// `truth` as the field, the capture's cameras as the views.
+pub fn bake_capture(
+    capture: &LoadedCapture,
+    truth: &GroundTruth,
+    config: &BakeConfig,
+    progress: &Progress,
+) -> Result<BakeOutput> {
+    with_capture_job(capture, truth, config, progress, |job, prior| {
+        bake_field(job, config, progress, prior)
+    })
 }
 
 /// The synthetic cameras a mesh bake is judged by: the frontal cone of a default

@@ -14,10 +14,13 @@
 //!    chosen per scene by rendered-image loss ([`rank`]), quantized and written
 //!    ([`pipeline`]), for a capture or a mesh ([`jobs`]), with every setting in
 //!    [`config`]. Dependencies run one way: config ← source ← jobs → pipeline.
-//! 6. **Judging and showing** a bake: [`eval`] scores renders against ground truth;
+//! 6. **Choosing** the smallest asset that meets a PSNR target or a byte budget on
+//!    the capture's held-aside views ([`choose`], `--target-psnr`, `--max-bytes`).
+//! 7. **Judging and showing** a bake: [`eval`] scores renders against ground truth;
 //!    [`demo`] runs the whole pipeline on a built-in procedural head (`nelf demo`).
 
 pub mod capture_in;
+pub mod choose;
 pub mod config;
 pub mod demo;
 pub mod error;
@@ -32,11 +35,16 @@ pub mod rank;
 pub mod source;
 
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
+pub use choose::{ChoiceArgs, ChoiceReport, bake_capture_to_target};
 pub use config::{BakeConfig, EncodingChoice, ShellPlacement, TraceOverrides, ViewPolicyChoice};
 pub use error::BakeError;
-pub use jobs::{CapturePlan, bake_capture, bake_capture_field, bake_mesh, mesh_cameras, plan_capture};
+pub use jobs::{
+    CapturePlan, bake_capture, bake_capture_field, bake_mesh, capture_field_job, mesh_cameras, plan_capture,
+    with_capture_job,
+};
 pub use pipeline::{
-    BakeOutput, BakeReport, FieldBake, Reference, StageTimings, bake_field, sidecar_path, write_bake,
+    BakeOutput, BakeReport, FieldBake, Reference, SampledField, StageTimings, bake_field, finish_bake,
+    sample_field, sidecar_path, write_bake,
 };
 pub use progress::Progress;
 pub use source::{GroundTruth, ShellMeshField, ShellProfile};

@@ -192,15 +192,84 @@ fn policy_json(policy: &ViewPolicy, choice: ViewPolicyChoice) -> serde_json::Val
     serde_json::json!({ "choice": choice, "policy": detail })
 }
 
-/// Bakes `job` with `config`: density, weights, light transport, PCA, rank, asset.
-/// `prior` holds the seconds of the stages the caller ran (planning the grid,
-/// rendering references); the others are filled in.
-pub fn bake_field(
+/// A field sampled on its grid: everything a bake computes before it chooses the
+/// rank and the encoding (density, visibility, light transport on the band, the
+/// weighted PCA, the coefficients at the largest rank allowed). Any number of
+/// assets (rank × encoding) can be made from one, with no further field
+/// evaluation ([`SampledField::asset`]): `nelf bake --target-psnr` and
+/// `nelf eval pareto` try many.
+#[derive(Debug, Clone)]
+pub struct SampledField {
+    /// Kept bricks, densities and the brick-drop figures.
+    pub dense: crate::grid::DensityGrid,
+    /// Density as the file stores it (f16).
+    pub stored_density: Vec<half::f16>,
+    /// The capture's views at the reduced resolution of the weights and rank renders.
+    pub views: Vec<PinholeCamera>,
+    /// `(reduced camera, factor)` per capture view.
+    pub reduced: Vec<(PinholeCamera, u32)>,
+    /// Voxels whose light transport was evaluated.
+    pub lt_voxels: Vec<usize>,
+    /// Their light transport, `LT_DIM` floats each.
+    pub lt: Vec<f32>,
+    /// The weighted PCA of `lt`.
+    pub pca: WeightedPca,
+    /// The data's numerical rank.
+    pub data_rank: usize,
+    /// Rank of [`Self::coefficients`]: `--rank` when forced, else `min(--max-rank, data rank)`.
+    pub top_rank: usize,
+    /// Coefficients at `top_rank`, `voxels × top_rank` (zero outside the band).
+    pub coefficients: Vec<f32>,
+    /// The 8-bit step floor for `top_rank` ([`quantization_step`]).
+    pub min_step: f32,
+    /// Rotation from the light frame to the world.
+    pub world_from_light: glam::DMat3,
+    /// Seconds per stage so far (rank and write still 0).
+    pub timings: StageTimings,
+}
+
+impl SampledField {
+    /// The asset holding the first `rank` components (`rank ≤ top_rank`) in
+    /// `encoding`, with empty metadata: exactly what a bake with that rank and
+    /// encoding writes, less its metadata.
+    pub fn asset(&self, rank: usize, encoding: nelf_format::CoefficientEncoding) -> Result<Asset> {
+        if rank == 0 || rank > self.top_rank {
+            return Err(BakeError::Settings(format!(
+                "rank {rank} is outside 1..={} (the rank the field was sampled for)",
+                self.top_rank
+            )));
+        }
+        let truncated: Vec<f32> = if rank == self.top_rank {
+            self.coefficients.clone()
+        } else {
+            self.coefficients
+                .chunks_exact(self.top_rank)
+                .flat_map(|c| c[..rank].iter().copied())
+                .collect()
+        };
+        let asset = Asset {
+            grid: *self.dense.grid.geometry(),
+            world_from_light: self.world_from_light,
+            bricks: self.dense.grid.bricks().to_vec(),
+            density: self.stored_density.clone(),
+            pca: self.pca.model(self.top_rank).truncated(rank),
+            coefficients: Coefficients::quantize_with_min_step(&truncated, rank, encoding, self.min_step)?,
+            metadata: serde_json::json!({}),
+        };
+        Ok(asset)
+    }
+}
+
+/// Samples `job`'s field with `config`: density and brick drop, visibility weights,
+/// light transport on the band, weighted PCA, coefficients at the top rank. `prior`
+/// holds the seconds of the stages the caller ran (planning the grid, rendering
+/// references).
+pub fn sample_field(
     job: &FieldBake<'_>,
     config: &BakeConfig,
     progress: &Progress,
     prior: StageTimings,
-) -> Result<BakeOutput> {
+) -> Result<SampledField> {
     config.validate()?;
     let mut timings = prior;
 
@@ -262,27 +331,77 @@ pub fn bake_field(
         coefficients[v * top_rank..(v + 1) * top_rank]
             .copy_from_slice(&compact[i * top_rank..(i + 1) * top_rank]);
     }
-    let encoding = config.encoding.encoding();
     let min_step = quantization_step(&pca, top_rank, config.quantization_share);
     let world_from_light = job.field.world_from_light();
     let stored_density = encode_density(density)?;
-    let full = Asset {
-        grid: *grid.geometry(),
-        world_from_light,
-        bricks: grid.bricks().to_vec(),
-        density: stored_density.clone(),
-        pca: model.clone(),
-        coefficients: Coefficients::quantize_with_min_step(&coefficients, top_rank, encoding, min_step)?,
-        metadata: serde_json::json!({}),
-    };
     timings.pca_secs = t.elapsed().as_secs_f64();
+    Ok(SampledField {
+        dense,
+        stored_density,
+        views,
+        reduced,
+        lt_voxels,
+        lt,
+        pca,
+        data_rank,
+        top_rank,
+        coefficients,
+        min_step,
+        world_from_light,
+        timings,
+    })
+}
+
+/// Bakes `job` with `config`: [`sample_field`], then the rank chosen by rendered
+/// loss ([`crate::rank`]) and the asset at that rank.
+pub fn bake_field(
+    job: &FieldBake<'_>,
+    config: &BakeConfig,
+    progress: &Progress,
+    prior: StageTimings,
+) -> Result<BakeOutput> {
+    let sampled = sample_field(job, config, progress, prior)?;
+    finish_bake(job, config, progress, &sampled)
+}
+
+/// The rank choice and the asset at the chosen rank, from a sampled field.
+pub fn finish_bake(
+    job: &FieldBake<'_>,
+    config: &BakeConfig,
+    progress: &Progress,
+    sampled: &SampledField,
+) -> Result<BakeOutput> {
+    let SampledField {
+        dense,
+        views,
+        reduced,
+        lt_voxels,
+        lt,
+        pca,
+        data_rank,
+        top_rank,
+        min_step,
+        world_from_light,
+        timings,
+        ..
+    } = sampled;
+    let (data_rank, top_rank, min_step, world_from_light) =
+        (*data_rank, *top_rank, *min_step, *world_from_light);
+    let mut timings = *timings;
+    let grid = &dense.grid;
+    let density = &dense.density;
+    let voxels = grid.voxel_count();
+    let march = config.march();
+    let encoding = config.encoding.encoding();
+    let model = pca.model(top_rank);
+    let full = sampled.asset(top_rank, encoding)?;
 
     // Rank choice.
     let t = Instant::now();
     let scene = RankScene {
         grid,
         density,
-        views: &views,
+        views,
         march,
         world_from_light,
     };
@@ -293,11 +412,11 @@ pub fn bake_field(
             lighting,
         } => {
             let light = light_texels(lighting, world_from_light)?;
-            let radiance = unquantized_radiance(voxels, &lt_voxels, &lt, &model.mean, &light);
+            let radiance = unquantized_radiance(voxels, lt_voxels, lt, &model.mean, &light);
             let mut small_images = Vec::with_capacity(images.len());
             let mut small_masks = Vec::with_capacity(images.len());
             for ((img, mask), (cam, (_, factor))) in
-                images.iter().zip(masks).zip(job.cameras.iter().zip(&reduced))
+                images.iter().zip(masks).zip(job.cameras.iter().zip(reduced))
             {
                 small_images.push(box_downsample(img, cam.width, cam.height, *factor));
                 let m: Vec<[f32; 1]> = mask.iter().map(|&x| [x]).collect();
@@ -338,7 +457,7 @@ pub fn bake_field(
             map: lighting.clone(),
         });
     }
-    let references = reference_renders(&scene, &envs, &lt_voxels, &lt, &model.mean)?;
+    let references = reference_renders(&scene, &envs, lt_voxels, lt, &model.mean)?;
     let components = component_images(&scene, &full)?;
     let ranks = match config.rank {
         Some(k) => vec![k],
@@ -369,10 +488,6 @@ pub fn bake_field(
     timings.rank_secs = t.elapsed().as_secs_f64();
 
     // The asset at the chosen rank.
-    let truncated: Vec<f32> = coefficients
-        .chunks_exact(top_rank)
-        .flat_map(|c| c[..rank].iter().copied())
-        .collect();
     let report = BakeReport {
         voxel_size_m: grid.geometry().voxel_size_m,
         grid_bricks: grid.geometry().grid_bricks,
@@ -429,11 +544,8 @@ pub fn bake_field(
         },
     });
     let asset = Asset {
-        pca: model.truncated(rank),
-        coefficients: Coefficients::quantize_with_min_step(&truncated, rank, encoding, min_step)?,
         metadata,
-        density: stored_density,
-        ..full
+        ..sampled.asset(rank, encoding)?
     };
     asset.validate()?;
     Ok(BakeOutput { asset, report })
@@ -458,6 +570,7 @@ pub fn write_bake(output: &mut BakeOutput, config: &BakeConfig, path: &Path) -> 
         "asset": path.display().to_string(),
         "config": config,
         "source": output.asset.metadata.get("source"),
+        "choice": output.asset.metadata.get("choice"),
         "report": output.report,
     });
     let text = serde_json::to_string_pretty(&json).map_err(|e| BakeError::Json {

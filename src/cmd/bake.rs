@@ -7,8 +7,9 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use nelf_bake::{
-    BakeConfig, BakeOutput, CaptureFormat, CaptureLoadOptions, GroundTruth, LoadedCapture, Progress,
-    bake_capture, bake_capture_field, bake_mesh, load_capture, plan_capture, sidecar_path, write_bake,
+    BakeConfig, BakeOutput, CaptureFormat, CaptureLoadOptions, ChoiceArgs, ChoiceReport, GroundTruth,
+    LoadedCapture, Progress, bake_capture, bake_capture_field, bake_mesh, load_capture, plan_capture,
+    sidecar_path, write_bake,
 };
 use nelf_field::capture::default_net_from_world;
 use nelf_field::{Model, NelfConfig, NelfField, NetCapture};
@@ -75,6 +76,8 @@ pub struct CaptureBakeArgs {
     pub metres_per_unit: f64,
     #[command(flatten)]
     pub config: BakeConfig,
+    #[command(flatten)]
+    pub choice: ChoiceArgs,
 }
 
 /// Options of `nelf bake mesh`.
@@ -116,6 +119,11 @@ fn run_capture(args: &CaptureBakeArgs) -> anyhow::Result<()> {
     };
     let capture = load_capture(&args.dir, &options)
         .with_context(|| format!("loading the capture in {}", args.dir.display()))?;
+    if args.choice.is_active() && args.weights.is_some() {
+        anyhow::bail!(
+            "--target-psnr/--max-bytes choose among ground-truth bakes; with --weights bake at a given --resolution and --rank"
+        );
+    }
     if let Some(weights) = &args.weights {
         let mut output =
             bake_network(&capture, weights, &args.config, progress(&args.output)).with_context(|| {
@@ -143,9 +151,47 @@ fn run_capture(args: &CaptureBakeArgs) -> anyhow::Result<()> {
             )
         })?,
     };
+    if args.choice.is_active() {
+        let (mut output, report) = nelf_bake::bake_capture_to_target(
+            &capture,
+            &truth,
+            &args.config,
+            &args.choice,
+            &progress(&args.output),
+        )
+        .with_context(|| format!("choosing and baking {}", args.dir.display()))?;
+        if !args.output.json {
+            print_choice(&report);
+        }
+        return finish(&mut output, &args.config, &args.output);
+    }
     let mut output = bake_capture(&capture, &truth, &args.config, &progress(&args.output))
         .with_context(|| format!("baking {}", args.dir.display()))?;
     finish(&mut output, &args.config, &args.output)
+}
+
+/// The candidates a choice tried (those with measured bytes) and what it chose.
+fn print_choice(report: &ChoiceReport) {
+    println!(
+        "choice over {} held-aside views, resolutions sampled {:?}, {:.1} s:",
+        report.views.len(),
+        report.resolutions_sampled,
+        report.secs
+    );
+    println!("  resolution  rank  encoding  est. PSNR (dB)  bytes");
+    for (i, c) in report.candidates.iter().enumerate() {
+        if let Some(bytes) = c.bytes {
+            println!(
+                "  {:>10}  {:>4}  {:>8}  {:>14.2}  {bytes}{}",
+                c.resolution,
+                c.rank,
+                format!("{:?}", c.encoding).to_lowercase(),
+                c.psnr_db,
+                if i == report.chosen { "  <- chosen" } else { "" }
+            );
+        }
+    }
+    println!("  chose {}", report.reason);
 }
 
 /// The network's field over the capture's hull: the views are encoded once, then
