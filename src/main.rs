@@ -27,6 +27,8 @@ enum Command {
     Light(cmd::light::LightArgs),
     /// Render a .nelf asset under an environment map (CPU reference renderer).
     Render(cmd::render::RenderArgs),
+    /// Measure: `pareto` (accuracy against bytes and frame time over resolution × rank × encoding) and `stability` (where quality breaks).
+    Eval(cmd::eval::EvalArgs),
     /// Export a .nelf asset for other tools: `vdb` (OpenVDB: density, relit colour, PCA grids).
     Export(cmd::export::ExportArgs),
     /// Open the interactive viewer (wgpu + egui): orbit, relight, rank, debug views.
@@ -42,6 +44,7 @@ fn main() -> anyhow::Result<()> {
         Command::Bake(args) => cmd::bake::run(&args),
         Command::Light(args) => cmd::light::run(&args),
         Command::Render(args) => cmd::render::run(&args),
+        Command::Eval(args) => cmd::eval::run(&args),
         Command::Export(args) => cmd::export::run(&args),
         Command::View(args) => cmd::view::run(&args),
     }

@@ -3,6 +3,7 @@
 pub mod bake;
 pub mod capture;
 pub mod demo;
+pub mod eval;
 pub mod export;
 pub mod inspect;
 pub mod light;

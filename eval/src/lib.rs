@@ -1,0 +1,27 @@
+//! `nelf-eval`: what `nelf eval` measures and how it reports it.
+//!
+//! * [`input`]: what is evaluated (a capture, a mesh, a procedural head) and the
+//!   synthetic captures made from it.
+//! * [`measure`]: scoring an asset (PSNR, SSIM, ꟻLIP, baseline) and timing it.
+//! * [`pareto`]: `nelf eval pareto`, resolution × rank × encoding against accuracy.
+//! * [`stability`]: `nelf eval stability`, accuracy along axes where methods fail.
+//! * [`error`]: the errors.
+//! * [`front`]: Pareto fronts of cost against quality.
+//! * [`perturb`]: the stability axes' building blocks (pose noise, mask edits, a sun
+//!   of shrinking size, target views at an angle from the sources).
+//! * [`report`]: CSV, JSON, SVG charts and the self-contained HTML report.
+//! * [`rows`]: the measured rows (one per sweep setting or stability point).
+
+pub mod error;
+pub mod front;
+pub mod input;
+pub mod measure;
+pub mod pareto;
+pub mod perturb;
+pub mod report;
+pub mod rows;
+pub mod stability;
+
+pub use error::{EvalError, Result};
+pub use pareto::{ParetoConfig, ParetoResults, run_pareto};
+pub use stability::{StabilityConfig, StabilityResults, run_stability};
