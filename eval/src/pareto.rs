@@ -48,6 +48,10 @@ pub struct ParetoConfig {
     /// Coefficient encodings (default u8,f16).
     #[arg(long, value_delimiter = ',', value_enum)]
     pub encodings: Vec<EncodingChoice>,
+    /// Image side of a synthesized capture's views and targets, pixels (default 256;
+    /// quick 64).
+    #[arg(long)]
+    pub image_size: Option<u32>,
     /// Height a mesh input is scaled to, metres.
     #[arg(long, default_value_t = 0.23)]
     pub mesh_height_m: f32,
@@ -100,6 +104,7 @@ impl ParetoConfig {
         CaptureSetup {
             mesh_height_m: self.mesh_height_m,
             mesh_rotate_y_deg: self.mesh_rotate_y_deg,
+            image_size: self.image_size.unwrap_or(base.image_size),
             ..base
         }
     }
@@ -140,6 +145,8 @@ fn earlier_rows(path: &Path, config: &ParetoConfig) -> Vec<ParetoRow> {
             r.config.input == config.input
                 && r.config.quick == config.quick
                 && r.config.mesh_height_m == config.mesh_height_m
+                && r.config.mesh_rotate_y_deg == config.mesh_rotate_y_deg
+                && r.config.image_size == config.image_size
         })
         .map(|r| r.rows)
         .unwrap_or_default()

@@ -66,6 +66,10 @@ pub struct StabilityConfig {
     /// Only these axes (default: all).
     #[arg(long, value_delimiter = ',')]
     pub axes: Vec<String>,
+    /// Image side of the synthesized captures and held-aside views, pixels
+    /// (default 128; quick 64).
+    #[arg(long)]
+    pub image_size: Option<u32>,
     /// Grid resolution of every bake (default 96; quick 32).
     #[arg(long)]
     pub resolution: Option<u32>,
@@ -573,9 +577,12 @@ pub fn run_stability(config: &StabilityConfig) -> Result<StabilityResults> {
     for dir in [out.clone(), out.join("captures"), out.join("gallery")] {
         create_dir(&dir)?;
     }
+    // Every point is scored at views rendered here, so the captures need no targets.
     let setup = CaptureSetup {
         mesh_height_m: config.mesh_height_m,
         mesh_rotate_y_deg: config.mesh_rotate_y_deg,
+        image_size: config.image_size.unwrap_or(if config.quick { 64 } else { 128 }),
+        targets: 0,
         ..if config.quick {
             CaptureSetup::quick()
         } else {
@@ -610,6 +617,9 @@ pub fn run_stability(config: &StabilityConfig) -> Result<StabilityResults> {
             r.config.input == config.input
                 && r.config.quick == config.quick
                 && r.config.resolution == config.resolution
+                && r.config.image_size == config.image_size
+                && r.config.mesh_height_m == config.mesh_height_m
+                && r.config.mesh_rotate_y_deg == config.mesh_rotate_y_deg
         })
         .map(|r| r.points)
         .unwrap_or_default();
