@@ -15,7 +15,7 @@
 
 use std::path::{Path, PathBuf};
 
-use nelf_bake::eval::{ErrorBreakdown, ViewScore, data_range, error_breakdown, read_linear_rgb, score_view};
+use nelf_bake::eval::{ErrorBreakdown, ViewScore, data_range, error_breakdown, load_held_aside, score_view};
 use nelf_bake::{CaptureLoadOptions, load_capture};
 use nelf_format::conventions::{LatLong, PinholeCamera};
 use nelf_format::read_asset;
@@ -115,23 +115,15 @@ fn main() -> Result<(), Error> {
     }
     let mut targets = Vec::new();
     if let Some(desc) = capture.description() {
-        for t in &desc.targets {
-            let env = load_envmap(t.envmap_path(&dir))?;
-            let (_, _, img) = read_linear_rgb(&t.image_path(&dir))?;
-            let mask: Vec<f32> = match t.mask_path(&dir) {
-                Some(p) => image::open(&p)?.to_luma32f().into_raw(),
-                None => img
-                    .iter()
-                    .map(|p| if p.iter().any(|&c| c > 0.0) { 1.0 } else { 0.0 })
-                    .collect(),
-            };
+        let held = load_held_aside(desc, &dir)?;
+        for i in 0..held.len() {
             targets.push(measure(
                 &asset,
-                &t.camera,
-                &env,
-                &img,
-                &mask,
-                &t.name,
+                &held.cameras[i],
+                &held.envs[i],
+                &held.images[i],
+                &held.masks[i],
+                &held.names[i],
                 out.as_deref(),
             )?);
         }

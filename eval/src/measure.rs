@@ -281,13 +281,20 @@ pub fn write_gallery_png(path: &Path, truth: &[[f32; 3]], view: &ViewResult) -> 
     })
 }
 
-/// Writes `ours` alone as an sRGB PNG at the truth's exposure (report thumbnails).
+/// Longest side of a report thumbnail, pixels.
+pub const THUMBNAIL_SIDE: u32 = 128;
+
+/// Writes `ours` alone as an sRGB PNG at the truth's exposure, box-filtered to at
+/// most [`THUMBNAIL_SIDE`] pixels a side (report thumbnails).
 pub fn write_thumbnail_png(path: &Path, truth: &[[f32; 3]], view: &ViewResult) -> Result<()> {
+    let (w, h) = (view.render.width, view.render.height);
+    let factor = w.max(h).div_ceil(THUMBNAIL_SIDE).max(1);
+    let small = nelf_bake::rank::box_downsample(&view.render.rgb, w, h, factor);
     nelf_scene::image_io::write_png_srgb(
         path,
-        view.render.width,
-        view.render.height,
-        &view.render.rgb,
+        (w / factor).max(1),
+        (h / factor).max(1),
+        &small,
         exposure_stops(truth),
     )
     .map_err(|e| EvalError::Io {

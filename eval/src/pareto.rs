@@ -291,6 +291,7 @@ pub fn run_pareto(config: &ParetoConfig) -> Result<ParetoResults> {
     crate::report::write_csv(&out.join("results.csv"), &results.rows)?;
     let mut sections = crate::report::pareto_sections(&results.rows, &results.input, out);
     sections.insert(0, about_section(&results, &held));
+    crate::report::write_chart_files(&out.join("charts"), &sections)?;
     crate::report::write_html_report(
         &out.join("report.html"),
         &format!("nelf eval pareto: {}", results.input),
@@ -344,12 +345,19 @@ fn measure_setting(
     let cpu_ms = cpu_render_ms(&asset, &held.cameras[0], &held.envs[0], step)?;
     let thumbnail = format!("thumbnails/{id}.png");
     write_thumbnail_png(&out.join(&thumbnail), &held.images[0], &views[0])?;
+    // A GPU that cannot hold the asset (a binding limit) leaves its times empty.
     let (gpu_512, gpu_1080, adapter) = match gpu {
-        Some(g) => (
-            Some(g.frame_ms(&asset, &held.envs[0], 512, 512, config.gpu_frames)?),
-            Some(g.frame_ms(&asset, &held.envs[0], 1920, 1080, config.gpu_frames)?),
-            Some(g.adapter().to_string()),
-        ),
+        Some(g) => {
+            let mut time = |w: u32, h: u32| match g.frame_ms(&asset, &held.envs[0], w, h, config.gpu_frames) {
+                Ok(ms) => Some(ms),
+                Err(e) => {
+                    eprintln!("{id}: no GPU frame time at {w}×{h}: {e}");
+                    None
+                }
+            };
+            let (a, b) = (time(512, 512), time(1920, 1080));
+            (a, b, Some(g.adapter().to_string()))
+        }
         None => (None, None, None),
     };
     Ok(ParetoRow {

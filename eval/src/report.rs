@@ -810,6 +810,47 @@ pub fn write_html_report(path: &Path, title: &str, sections: &[Section]) -> Resu
     write_file(path, html.as_bytes())
 }
 
+/// Writes every chart of `sections` as its own SVG file in `dir` (created), named
+/// after its section's heading (`quality-against-size.svg`,
+/// `flip-against-size.svg`, `stability-views.svg`, …; a second chart of a section
+/// gets `-2`): for documents that show one chart without
+/// the whole report. Returns the paths written.
+pub fn write_chart_files(dir: &Path, sections: &[Section]) -> Result<Vec<std::path::PathBuf>, ReportError> {
+    std::fs::create_dir_all(dir).map_err(|source| ReportError::Write {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut written = Vec::new();
+    for section in sections {
+        let title = section.heading.replace('ꟻ', "f");
+        let slug: String = title
+            .chars()
+            .map(|c| {
+                if c.is_ascii_alphanumeric() {
+                    c.to_ascii_lowercase()
+                } else {
+                    '-'
+                }
+            })
+            .collect::<String>()
+            .split('-')
+            .filter(|w| !w.is_empty())
+            .collect::<Vec<_>>()
+            .join("-");
+        for (i, svg) in section.charts.iter().enumerate() {
+            let name = if i == 0 {
+                format!("{slug}.svg")
+            } else {
+                format!("{slug}-{}.svg", i + 1)
+            };
+            let path = dir.join(name);
+            write_file(&path, svg.as_bytes())?;
+            written.push(path);
+        }
+    }
+    Ok(written)
+}
+
 // ---------------------------------------------------------------------------------
 // The report's sections
 // ---------------------------------------------------------------------------------
@@ -927,7 +968,7 @@ pub fn pareto_sections(rows: &[ParetoRow], input_name: &str, report_dir: &Path) 
         &mut text,
     );
     sections.push(Section {
-        heading: format!("Quality against size: {input_name}"),
+        heading: "Quality against size".into(),
         text,
         charts,
         ..Section::default()

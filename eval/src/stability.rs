@@ -665,6 +665,7 @@ pub fn run_stability(config: &StabilityConfig) -> Result<StabilityResults> {
     crate::report::write_json(&results_path, &results)?;
     crate::report::write_stability_csv(&out.join("stability.csv"), &results.points)?;
     let sections = crate::report::stability_sections(&results.points, config.threshold_db, out);
+    crate::report::write_chart_files(&out.join("charts"), &sections)?;
     crate::report::write_html_report(
         &out.join("report.html"),
         &format!("nelf eval stability: {}", results.input),
