@@ -6,17 +6,42 @@
 //! * bilinear lookup at `g` with `align_corners = false` and zero padding:
 //!   `ix = ((g_x + 1)·W − 1)/2`, the four neighbours weighted by their opposite areas,
 //!   neighbours outside the image contributing 0;
-//! * masks are dilated by a 7 × 7 max filter (stride 1, padding 3) before the
-//!   visual-hull test `Σ_v mask_v(g_v) = V` (tested as `> V − 1e-5`, README).
+//! * masks (floats in `[0, 1]`, soft values kept) are dilated by a 7 × 7 max
+//!   filter (stride 1, padding 3) before the visual-hull test [`hull_inside`].
+//!
+//! **The hull test** is the official one, `Σ_v sample_v == V` with exact `f32`
+//! equality, `sample_v` the lookup above of view `v`'s dilated mask, summed in view
+//! order. In exact arithmetic a view's sample is `1 − Σ_k w_k·(1 − m_k)` (weights
+//! summing to 1, `m_k = 0` for zero padding), so the sum is `V` exactly when every
+//! neighbour with a weight is inside the image and holds 1.0: a soft value below 1
+//! excludes the point. In `f32` the official sum differs from that only by
+//! rounding: an interior sample can come out as `1 − 2⁻²⁴`, which the sum absorbs
+//! (the oracle README), and a deficit below about half an ulp of the running sum
+//! (`w·(1 − m) ≲ 10⁻⁷`, a point within ~10⁻⁷ px of the edge of the full region) is
+//! absorbed too. Equality is exact here because the lookups reproduce the official
+//! ones bit for bit: `((g + 1)·W − 1)/2` equals PyTorch's `(g + 1)·(W/2) − 0.5`
+//! (scaling by 2 commutes with rounding), `(x₀ + 1) − ix` equals its `1 − (ix − x₀)`
+//! for `ix ≥ 0` (`ix − x₀` is exact), and the corners are summed in its order
+//! (north-west, north-east, south-west, south-east); the seed-0 fixture's
+//! projections and samples match with error 0 (a PyTorch build that fused the
+//! multiply-adds could differ in the last ulp of a soft sample, which matters only
+//! inside that ~10⁻⁷ band). The earlier test `Σ > V − 10⁻⁵`
+//! (the README's suggestion, exact on its 0/1 masks, whose worst outside sum is
+//! `V − 1.3·10⁻³`) let soft deficits up to 10⁻⁵ through, e.g. a 0.99 neighbour
+//! with weight below 10⁻³ or a mask value of 0.999995, where the official model
+//! gives σ = 0 (`tests/hull_soft_masks.rs`).
 
 use glam::{DMat3, DVec3};
 use nelf_format::conventions::PinholeCamera;
 
 use crate::error::NetError;
 
-/// Tolerance of the visual-hull test: a point is inside when its dilated-mask
-/// samples sum to more than `V − HULL_EPSILON`.
-pub const HULL_EPSILON: f32 = 1e-5;
+/// The official visual-hull decision from one point's dilated-mask samples (one per
+/// view): their `f32` sum, accumulated in view order, equals the number of views
+/// exactly (module documentation).
+pub fn hull_inside(samples: &[f32]) -> bool {
+    samples.iter().fold(0.0f32, |sum, &s| sum + s) == samples.len() as f32
+}
 
 /// A pinhole camera as the network sees it: `K` and world-to-camera `[R|t]` in
 /// millimetres (OpenCV axes), `f32`, and the image size.
@@ -265,6 +290,37 @@ mod tests {
         assert!((v - 0.5 * 7.0).abs() < 1e-6, "{v}");
         assert_eq!(Taps::bilinear(f32::NAN, 0.0, 4, 4), Taps::NONE);
         assert_eq!(Taps::bilinear(1.5, 0.0, 4, 4), Taps::NONE);
+    }
+
+    #[test]
+    fn hull_needs_every_sample_to_be_one() {
+        // Pooled mask: columns 0–3 hold 1.0, column 4 holds 0.99.
+        let (w, h) = (6usize, 4usize);
+        let plane: Vec<f32> = (0..w * h)
+            .map(|i| [1.0, 1.0, 1.0, 1.0, 0.99, 0.3][i % w])
+            .collect();
+        let sample = |ix: f32, iy: f32| {
+            let g = [
+                (2.0 * ix + 1.0) / w as f32 - 1.0,
+                (2.0 * iy + 1.0) / h as f32 - 1.0,
+            ];
+            Taps::bilinear(g[0], g[1], w, h).sample_scalar(&plane)
+        };
+        let full = sample(3.0, 1.5);
+        assert_eq!(full, 1.0);
+        assert!(hull_inside(&[full; 4]));
+        // 1/1024 px toward column 4: 1 − 0.01/1024 ≈ 1 − 9.8e-6. The old tolerance
+        // (Σ > V − 1e-5) let it through; the official equality does not.
+        let soft = sample(3.0 + 1.0 / 1024.0, 1.5);
+        assert!((soft - (1.0 - 0.01 / 1024.0)).abs() < 1e-7, "{soft}");
+        assert!([full, full, soft].iter().sum::<f32>() > 3.0 - 1e-5);
+        assert!(!hull_inside(&[full, full, soft]) && !hull_inside(&[soft, full, full]));
+        assert!(!hull_inside(&[full, 0.999_995]) && !hull_inside(&[full, sample(4.5, 1.5)]));
+        // Half a pixel past the last row, half of the footprint is zero padding.
+        assert!((sample(1.0, 3.5) - 0.5).abs() < 1e-6);
+        // Interior samples of 1 − 2⁻²⁴ vanish in the f32 sum, as in the official model.
+        let below = 1.0 - f32::EPSILON / 2.0;
+        assert!(hull_inside(&[1.0, 1.0, 1.0, below]) && hull_inside(&[1.0, below]));
     }
 
     #[test]

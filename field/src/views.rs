@@ -1,16 +1,17 @@
 //! Source views as the network takes them and the encoded state it keeps: images,
 //! masks and cameras (millimetres, the network's world frame); after encoding, the
 //! channel-last feature maps, dilated masks and the light estimate. Per point it
-//! projects into every view, applies the visual-hull test and gathers the network's
-//! inputs (colour, latent, directions) with bilinear `grid_sample` lookups
-//! ([`crate::geometry`]).
+//! projects into every view, applies the visual-hull test (the official
+//! `Σ_v sample_v == V` on the dilated masks, soft masks included:
+//! [`crate::geometry::hull_inside`]) and gathers the network's inputs (colour,
+//! latent, directions) with bilinear `grid_sample` lookups ([`crate::geometry`]).
 
 use candle_core::{Device, Tensor};
 use rayon::prelude::*;
 
 use crate::encoder::SOURCE_FEATURE_CHANNELS;
 use crate::error::NetError;
-use crate::geometry::{HULL_EPSILON, NetCamera, Taps, project_normalized};
+use crate::geometry::{NetCamera, Taps, hull_inside, project_normalized};
 use crate::light::LightAggregation;
 use crate::nelfnet::{LATENT_CHANNELS, PointInputs};
 
@@ -103,9 +104,11 @@ impl SourceViews {
 pub struct HullTest {
     /// `(N, V, 2)`: normalised projections.
     pub pix: Vec<f32>,
-    /// `(N, V)`: dilated-mask samples.
+    /// `(N, V)`: dilated-mask samples (`grid_sample`, zero padding).
     pub samples: Vec<f32>,
-    /// `(N)`: inside the hull (`Σ_v samples > V − 1e-5`).
+    /// `(N)`: inside the hull (`Σ_v samples == V` in `f32`, view order, as the
+    /// official model; a soft mask value below 1 under a weighted neighbour
+    /// excludes the point).
     pub inside: Vec<bool>,
 }
 
@@ -190,7 +193,6 @@ impl EncodedViews {
     /// Whether `x` (mm) is inside the visual hull, writing the projections and mask samples.
     fn hull_one(&self, x: [f32; 3], pix: &mut [f32], samples: &mut [f32]) -> bool {
         let plane = self.width * self.height;
-        let mut total = 0.0f32;
         for (v, proj) in self.projections.iter().enumerate() {
             let g = project_normalized(proj, self.width, self.height, x);
             pix[2 * v] = g[0];
@@ -198,9 +200,8 @@ impl EncodedViews {
             let taps = Taps::bilinear(g[0], g[1], self.width, self.height);
             let s = taps.sample_scalar(&self.masks_dilated[v * plane..(v + 1) * plane]);
             samples[v] = s;
-            total += s;
         }
-        total > self.views() as f32 - HULL_EPSILON
+        hull_inside(samples)
     }
 
     /// Whether `x` (mm) is inside the visual hull.

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use candle_core::{DType, Device, Tensor};
-use nelf_field::geometry::NetCamera;
+use nelf_field::geometry::{NetCamera, hull_inside};
 use nelf_field::light::{net_solid_angles, net_texel_direction};
 use nelf_field::model::irradiance_values;
 use nelf_field::nelfnet::NelfNet;
@@ -303,6 +303,19 @@ pub fn check_points(fx: &Fixture) {
         fx.check("output.points.hull_sample", &by_view, 1e-5, 0.0);
         let mask: Vec<f32> = hull.inside.iter().map(|&b| f32::from(u8::from(b))).collect();
         fx.check("output.points.hull_mask", &mask, 0.0, 0.0);
+        // The official rule on the fixture's own numbers: inside iff the f32 sum of its
+        // samples, view 0 first, == V (what `geometry::hull_inside` computes on ours).
+        let official = fx.f32s("output.points.hull_sample");
+        let official_mask = fx.f32s("output.points.hull_mask");
+        for i in 0..n_all {
+            let samples: Vec<f32> = (0..v).map(|k| official[k * n_all + i]).collect();
+            assert_eq!(
+                hull_inside(&samples),
+                official_mask[i] == 1.0,
+                "{}: point {i}: official samples {samples:?}",
+                fx.name
+            );
+        }
 
         let index: Vec<usize> = (0..n_all).filter(|&i| hull.inside[i]).collect();
         let p: Vec<[f32; 3]> = index.iter().map(|&i| pos[i]).collect();
