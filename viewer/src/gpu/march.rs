@@ -1,0 +1,377 @@
+//! The ray-march pass (`shaders/march.wgsl`), run every frame: one ray per pixel through
+//! the relit brick atlas, mirroring the CPU reference `nelf_render::march` step for step.
+//!
+//! Each pixel centre's ray of the pinhole camera is clipped against the grid box and
+//! sampled at `t_i = t_entry + (i + o)Δ` (`o = 0.5`, or per pixel and frame in `[0, 1)`
+//! with jitter); trilinear `σ_i` and radiance `L_i` come from the atlas (hardware filtering
+//! inside a brick's slot, exact thanks to the aprons), and the samples are composited
+//! front to back (emission–absorption, Max 1995):
+//!
+//! ```text
+//! α_i = 1 − exp(−σ_i Δ),   C = Σ_i T_i α_i L_i,   T_{i+1} = T_i (1 − α_i),
+//! ```
+//!
+//! stopping right after `T < min_transmittance`; the output is `C` (premultiplied, over
+//! black) and alpha `1 − T_end` in an RGBA32F target. Empty space is skipped through the
+//! indirection grid without leaving the reference's sample lattice.
+//!
+//! Two pipelines run the same `march_pixel`: a compute dispatch writing a storage texture
+//! (`march`; a second build with `COUNT_SAMPLES` counts samples into a buffer) and a
+//! full-screen triangle rasterised into a colour target (`march_vs`/`march_fs`).
+
+use nelf_format::conventions::PinholeCamera;
+use nelf_format::spec::BRICK_SIZE;
+use nelf_render::MarchSettings;
+
+use super::common::{
+    compute_pipeline, shader_module, storage_entry, storage_texture_entry, texture_entry, uniform_entry,
+};
+use super::{GpuAsset, GpuRenderer, Target};
+use crate::error::ViewerError;
+use crate::shaders::{MARCH_WGSL, MarchParams};
+
+/// What the march shows.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum MarchView {
+    /// Relit radiance, composited (premultiplied rgb, alpha).
+    #[default]
+    Shaded,
+    /// Largest density along the ray, grey, with `sigma_white_per_m` shown as white.
+    Density {
+        /// Density (1/m) mapped to 1.
+        sigma_white_per_m: f32,
+    },
+    /// Final alpha `1 − T_end`, grey.
+    Alpha,
+    /// Cost per pixel: `rgb` = (trilinear samples taken, loop iterations, lattice samples
+    /// between box entry and exit); alpha 1. Raw counts, for benchmarks and the app's
+    /// heat map (the display pass scales them by [`DisplaySettings`]'s exposure).
+    ///
+    /// [`DisplaySettings`]: super::DisplaySettings
+    Cost,
+}
+
+/// Per-frame march settings.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct ViewSettings {
+    /// Step and early termination, as for the CPU reference.
+    pub march: MarchSettings,
+    /// Jitter each ray's first sample in `[0, 1)` steps (per pixel and frame) against
+    /// banding; off reproduces the CPU reference's lattice `t_entry + (i + 0.5)Δ`.
+    pub jitter: bool,
+    /// Frame number, the jitter seed.
+    pub frame_index: u32,
+    /// What to show.
+    pub view: MarchView,
+    /// Which pass marches (the same `march_pixel` either way).
+    pub pass: MarchPass,
+}
+
+/// How the march runs: both give the same image; which is faster depends on the device
+/// (the benchmark measures both).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum MarchPass {
+    /// A compute dispatch writing a storage texture.
+    Compute,
+    /// A full-screen triangle rasterised into a colour target.
+    #[default]
+    Fragment,
+}
+
+/// Format of the march's output: linear premultiplied rgb and alpha.
+pub(super) const MARCH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
+
+/// The march's bind group layouts, pipelines and atlas sampler, created once per device.
+pub(super) struct MarchPipelines {
+    layout: wgpu::BindGroupLayout,
+    compute: wgpu::ComputePipeline,
+    counting: wgpu::ComputePipeline,
+    fragment_layout: wgpu::BindGroupLayout,
+    fragment: wgpu::RenderPipeline,
+    sampler: wgpu::Sampler,
+}
+
+impl MarchPipelines {
+    pub(super) fn new(device: &wgpu::Device) -> Result<Self, ViewerError> {
+        use wgpu::ShaderStages as S;
+        use wgpu::TextureViewDimension as D;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("march"),
+            entries: &[
+                uniform_entry(0, S::COMPUTE),
+                texture_entry(
+                    1,
+                    wgpu::TextureSampleType::Float { filterable: true },
+                    D::D3,
+                    S::COMPUTE,
+                ),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: S::COMPUTE,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+                texture_entry(3, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
+                storage_texture_entry(4, wgpu::TextureFormat::Rgba32Float, D::D2),
+                storage_entry(5, false, S::COMPUTE),
+            ],
+        });
+        let fragment_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("march (fragment)"),
+            entries: &[
+                uniform_entry(0, S::FRAGMENT),
+                texture_entry(
+                    1,
+                    wgpu::TextureSampleType::Float { filterable: true },
+                    D::D3,
+                    S::FRAGMENT,
+                ),
+                wgpu::BindGroupLayoutEntry {
+                    binding: 2,
+                    visibility: S::FRAGMENT,
+                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
+                    count: None,
+                },
+                texture_entry(3, wgpu::TextureSampleType::Uint, D::D3, S::FRAGMENT),
+            ],
+        });
+        let module = shader_module(device, "march.wgsl", MARCH_WGSL)?;
+        let compute = compute_pipeline(device, &layout, &module, "march", &[]);
+        let counting = compute_pipeline(device, &layout, &module, "march", &[("COUNT_SAMPLES", 1.0)]);
+        let fragment_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
+            label: Some("march (fragment)"),
+            bind_group_layouts: &[Some(&fragment_layout)],
+            immediate_size: 0,
+        });
+        let fragment = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+            label: Some("march (fragment)"),
+            layout: Some(&fragment_pipeline_layout),
+            vertex: wgpu::VertexState {
+                module: &module,
+                entry_point: Some("march_vs"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                buffers: &[],
+            },
+            primitive: wgpu::PrimitiveState::default(),
+            depth_stencil: None,
+            multisample: wgpu::MultisampleState::default(),
+            fragment: Some(wgpu::FragmentState {
+                module: &module,
+                entry_point: Some("march_fs"),
+                compilation_options: wgpu::PipelineCompilationOptions::default(),
+                targets: &[Some(wgpu::ColorTargetState {
+                    format: MARCH_FORMAT,
+                    blend: None,
+                    write_mask: wgpu::ColorWrites::ALL,
+                })],
+            }),
+            multiview_mask: None,
+            cache: None,
+        });
+        let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
+            label: Some("atlas"),
+            address_mode_u: wgpu::AddressMode::ClampToEdge,
+            address_mode_v: wgpu::AddressMode::ClampToEdge,
+            address_mode_w: wgpu::AddressMode::ClampToEdge,
+            mag_filter: wgpu::FilterMode::Linear,
+            min_filter: wgpu::FilterMode::Linear,
+            mipmap_filter: wgpu::MipmapFilterMode::Nearest,
+            ..Default::default()
+        });
+        Ok(Self {
+            layout,
+            compute,
+            counting,
+            fragment_layout,
+            fragment,
+            sampler,
+        })
+    }
+
+    /// The bind groups of the compute and the fragment march: uniform `march_params`, the
+    /// relit atlas, the indirection grid, the output `view` (compute only) and the sample
+    /// `counters` (compute only).
+    pub(super) fn bind_groups(
+        &self,
+        device: &wgpu::Device,
+        march_params: &wgpu::Buffer,
+        asset: &GpuAsset,
+        view: &wgpu::TextureView,
+        counters: &wgpu::Buffer,
+    ) -> (wgpu::BindGroup, wgpu::BindGroup) {
+        let march_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("march"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: march_params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&asset.atlas_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&asset.indirection_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: counters.as_entire_binding(),
+                },
+            ],
+        });
+        let march_fragment_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("march (fragment)"),
+            layout: &self.fragment_layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: march_params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: wgpu::BindingResource::TextureView(&asset.atlas_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: wgpu::BindingResource::Sampler(&self.sampler),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: wgpu::BindingResource::TextureView(&asset.indirection_view),
+                },
+            ],
+        });
+        (march_bind_group, march_fragment_bind_group)
+    }
+
+    /// Encodes the march into `target` (its uniform already written): the fragment
+    /// pipeline for [`MarchPass::Fragment`] unless counting samples, else a compute
+    /// dispatch of 8 × 8 workgroups over the target.
+    pub(super) fn encode(
+        &self,
+        encoder: &mut wgpu::CommandEncoder,
+        target: &Target,
+        pass_kind: MarchPass,
+        count_samples: bool,
+    ) {
+        if pass_kind == MarchPass::Fragment && !count_samples {
+            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
+                label: Some("march (fragment)"),
+                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
+                    view: &target.view,
+                    depth_slice: None,
+                    resolve_target: None,
+                    ops: wgpu::Operations {
+                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
+                        store: wgpu::StoreOp::Store,
+                    },
+                })],
+                depth_stencil_attachment: None,
+                timestamp_writes: None,
+                occlusion_query_set: None,
+                multiview_mask: None,
+            });
+            pass.set_pipeline(&self.fragment);
+            pass.set_bind_group(0, &target.march_fragment_bind_group, &[]);
+            pass.draw(0..3, 0..1);
+            return;
+        }
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("march"),
+            timestamp_writes: None,
+        });
+        pass.set_pipeline(if count_samples {
+            &self.counting
+        } else {
+            &self.compute
+        });
+        pass.set_bind_group(0, &target.march_bind_group, &[]);
+        pass.dispatch_workgroups(target.width.div_ceil(8), target.height.div_ceil(8), 1);
+    }
+}
+
+impl GpuRenderer {
+    /// The march uniform for a camera and settings.
+    pub(super) fn march_params(
+        &self,
+        camera: &PinholeCamera,
+        settings: &ViewSettings,
+    ) -> Result<MarchParams, ViewerError> {
+        camera.validate()?;
+        settings.march.validate()?;
+        if settings.march.pixel_grid != 1 {
+            return Err(ViewerError::BadSetting(format!(
+                "pixel_grid = {}: the GPU renderer takes one ray per pixel (antialias with jitter)",
+                settings.march.pixel_grid
+            )));
+        }
+        let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
+        let grid = &asset.grid;
+        let voxel = grid.voxel_size_m;
+        let centre = camera.centre();
+        let origin: [f32; 3] =
+            std::array::from_fn(|a| ((centre[a] - grid.bbox_min_m[a]) / voxel - 0.5) as f32);
+        let row = |i: usize| {
+            let r = camera.rotation.row(i);
+            [r.x as f32, r.y as f32, r.z as f32, 0.0]
+        };
+        let n = grid
+            .grid_bricks
+            .map(|b| (f64::from(b) * BRICK_SIZE as f64 - 0.5) as f32);
+        let texels = asset.layout.texels();
+        let (view, scale) = match settings.view {
+            MarchView::Shaded => (0, 0.0),
+            MarchView::Density { sigma_white_per_m } => (1, 1.0 / sigma_white_per_m.max(1e-12)),
+            MarchView::Alpha => (2, 0.0),
+            MarchView::Cost => (3, 0.0),
+        };
+        Ok(MarchParams {
+            world_from_camera_x: row(0),
+            world_from_camera_y: row(1),
+            world_from_camera_z: row(2),
+            origin_u: [origin[0], origin[1], origin[2], (1.0 / voxel) as f32],
+            intrinsics: [
+                camera.fx as f32,
+                camera.fy as f32,
+                camera.cx as f32,
+                camera.cy as f32,
+            ],
+            box_max_u: [
+                n[0],
+                n[1],
+                n[2],
+                (f64::from(settings.march.step_voxels) * voxel) as f32,
+            ],
+            atlas_inv_size: [
+                1.0 / texels[0] as f32,
+                1.0 / texels[1] as f32,
+                1.0 / texels[2] as f32,
+                settings.march.min_transmittance,
+            ],
+            grid_bricks: [
+                grid.grid_bricks[0] as i32,
+                grid.grid_bricks[1] as i32,
+                grid.grid_bricks[2] as i32,
+                0,
+            ],
+            image: [
+                camera.width,
+                camera.height,
+                settings.frame_index,
+                u32::from(settings.jitter),
+            ],
+            view: [view, asset.layout.x_bits, asset.layout.y_bits, 0],
+            scales: [scale, 0.0, 0.0, 0.0],
+        })
+    }
+}

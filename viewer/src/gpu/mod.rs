@@ -1,0 +1,595 @@
+//! The GPU renderer (wgpu): loads an asset into a brick atlas, relights it with a
+//! compute pass once per lighting change, ray-marches it with a compute pass per frame,
+//! and either reads the linear image back (headless) or draws it, tone-mapped, into a
+//! render pass (the app). It mirrors the CPU reference renderer `nelf_render` step for
+//! step (see `shaders/march.wgsl`), so the two agree to f16 precision.
+//!
+//! Relighting (DESIGN.md, "view"): the environment map is projected onto the asset's PCA
+//! basis on the CPU ([`nelf_render::project_light`], `3(K + 1)` numbers), then every
+//! voxel's radiance is its `K`-term dot product, written with its density into an RGBA16F
+//! atlas ([`crate::atlas`]). Shading is linear, so marching the relit atlas equals
+//! shading every sample; a frame without a lighting change costs only the march.
+//!
+//! One module per pass, as the shaders are (`shaders/*.wgsl`): `relight` (relight.wgsl),
+//! `march` (march.wgsl, compute, counting and fragment variants), `display`
+//! (display.wgsl: exposure, tone map, sRGB); `common` holds the layout and pipeline
+//! helpers they share and `readback` the headless read-back. This module owns the device,
+//! the asset upload, the public API and the frame encoding that calls the passes.
+
+mod common;
+mod display;
+mod march;
+mod readback;
+mod relight;
+
+use glam::DMat3;
+use nelf_format::conventions::{LT_DIM, LatLong, PinholeCamera};
+use nelf_format::{Asset, GridGeometry, PcaModel};
+use nelf_render::{ProjectedLight, project_light};
+use wgpu::util::DeviceExt as _;
+
+pub use self::display::{DisplayImage, DisplaySettings, ToneMap};
+use self::display::{DisplayPipelines, display_params};
+use self::march::{MARCH_FORMAT, MarchPipelines};
+pub use self::march::{MarchPass, MarchView, ViewSettings};
+use self::relight::RelightPipeline;
+use crate::atlas::{
+    AtlasLayout, Dequantization, GpuMemory, RelightView, indirection_grid, neighbour_slots,
+    pack_coefficients, pack_density,
+};
+use crate::error::ViewerError;
+use crate::shaders::{Counters, DisplayParams, MarchParams, RelightParams};
+
+/// What loading an asset produced.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AssetInfo {
+    /// Bricks (their atlas slots come first).
+    pub bricks: usize,
+    /// Halo slots: missing bricks next to present ones (zeros plus aprons).
+    pub halo_slots: usize,
+    /// PCA rank `K`.
+    pub rank: usize,
+    /// Atlas size in texels.
+    pub atlas_texels: [u32; 3],
+    /// GPU memory by part.
+    pub memory: GpuMemory,
+    /// Largest voxel density (1/m).
+    pub max_density_per_m: f32,
+}
+
+/// Compute and render pipelines, created once per device: one set per pass.
+struct Pipelines {
+    relight: RelightPipeline,
+    march: MarchPipelines,
+    display: DisplayPipelines,
+}
+
+impl Pipelines {
+    fn new(device: &wgpu::Device) -> Result<Self, ViewerError> {
+        Ok(Self {
+            relight: RelightPipeline::new(device)?,
+            march: MarchPipelines::new(device)?,
+            display: DisplayPipelines::new(device)?,
+        })
+    }
+}
+
+/// An asset resident on the GPU.
+struct GpuAsset {
+    layout: AtlasLayout,
+    grid: GridGeometry,
+    pca: PcaModel,
+    world_from_light: DMat3,
+    dequantization: Dequantization,
+    coefficient_words_per_voxel: u32,
+    coefficient_encoding: i32,
+    atlas: wgpu::Texture,
+    atlas_view: wgpu::TextureView,
+    indirection_view: wgpu::TextureView,
+    relight_params: wgpu::Buffer,
+    light: wgpu::Buffer,
+    relight_bind_group: wgpu::BindGroup,
+    voxel_count: usize,
+    info: AssetInfo,
+}
+
+/// The lighting in use.
+struct Lighting {
+    env: LatLong,
+    world_from_env: DMat3,
+    projected: ProjectedLight,
+}
+
+/// The march's output image and the bind groups that use it.
+struct Target {
+    width: u32,
+    height: u32,
+    texture: wgpu::Texture,
+    view: wgpu::TextureView,
+    march_bind_group: wgpu::BindGroup,
+    march_fragment_bind_group: wgpu::BindGroup,
+    display_bind_group: wgpu::BindGroup,
+}
+
+/// The GPU renderer. Create it headless ([`GpuRenderer::new_headless`]) or on an existing
+/// device ([`GpuRenderer::from_device`], as the app does with eframe's).
+pub struct GpuRenderer {
+    device: wgpu::Device,
+    queue: wgpu::Queue,
+    adapter_info: Option<wgpu::AdapterInfo>,
+    pipelines: Pipelines,
+    march_params: wgpu::Buffer,
+    display_params: wgpu::Buffer,
+    counters: wgpu::Buffer,
+    asset: Option<GpuAsset>,
+    lighting: Option<Lighting>,
+    rank: Option<usize>,
+    relight_view: RelightView,
+    relight_dirty: bool,
+    target: Option<Target>,
+}
+
+impl std::fmt::Debug for GpuRenderer {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GpuRenderer")
+            .field("adapter", &self.adapter_info.as_ref().map(|a| &a.name))
+            .field("asset", &self.asset.as_ref().map(|a| a.info))
+            .field("rank", &self.rank)
+            .field("relight_view", &self.relight_view)
+            .finish_non_exhaustive()
+    }
+}
+
+impl GpuRenderer {
+    /// A renderer on the default adapter without a window (on a machine without a GPU:
+    /// Mesa's lavapipe). Prefers Vulkan/Metal/DX12 and falls back to any backend.
+    pub fn new_headless() -> Result<Self, ViewerError> {
+        pollster::block_on(async {
+            let mut last_error = String::from("no backend tried");
+            for backends in [wgpu::Backends::PRIMARY, wgpu::Backends::all()] {
+                let mut descriptor = wgpu::InstanceDescriptor::new_without_display_handle_from_env();
+                if wgpu::Backends::from_env().is_none() {
+                    descriptor.backends = backends;
+                }
+                let instance = wgpu::Instance::new(descriptor);
+                let adapter = match instance
+                    .request_adapter(&wgpu::RequestAdapterOptions {
+                        power_preference: wgpu::PowerPreference::HighPerformance,
+                        ..Default::default()
+                    })
+                    .await
+                {
+                    Ok(a) => a,
+                    Err(e) => {
+                        last_error = e.to_string();
+                        continue;
+                    }
+                };
+                let limits = adapter.limits();
+                let (device, queue) = adapter
+                    .request_device(&wgpu::DeviceDescriptor {
+                        label: Some("nelf-viewer"),
+                        required_features: wgpu::Features::empty(),
+                        required_limits: wgpu::Limits::default().using_resolution(limits.clone()),
+                        ..Default::default()
+                    })
+                    .await
+                    .map_err(|e| ViewerError::Device(e.to_string()))?;
+                let mut renderer = Self::from_device(device, queue)?;
+                renderer.adapter_info = Some(adapter.get_info());
+                return Ok(renderer);
+            }
+            Err(ViewerError::NoAdapter(last_error))
+        })
+    }
+
+    /// A renderer on an existing device (the app passes eframe's). Needs only WebGPU's
+    /// default features and limits.
+    pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Result<Self, ViewerError> {
+        let pipelines = Pipelines::new(&device)?;
+        let uniform = |label: &str, size: usize| {
+            device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some(label),
+                size: size as u64,
+                usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            })
+        };
+        let march_params = uniform("march params", size_of::<MarchParams>());
+        let display_params = uniform("display params", size_of::<DisplayParams>());
+        let counters = device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("counters"),
+            size: size_of::<Counters>() as u64,
+            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            mapped_at_creation: false,
+        });
+        Ok(Self {
+            device,
+            queue,
+            adapter_info: None,
+            pipelines,
+            march_params,
+            display_params,
+            counters,
+            asset: None,
+            lighting: None,
+            rank: None,
+            relight_view: RelightView::Shaded,
+            relight_dirty: true,
+            target: None,
+        })
+    }
+
+    /// The adapter's description (headless renderers only).
+    pub fn adapter_info(&self) -> Option<&wgpu::AdapterInfo> {
+        self.adapter_info.as_ref()
+    }
+
+    /// The device.
+    pub fn device(&self) -> &wgpu::Device {
+        &self.device
+    }
+
+    /// The queue.
+    pub fn queue(&self) -> &wgpu::Queue {
+        &self.queue
+    }
+
+    /// The loaded asset's description.
+    pub fn asset_info(&self) -> Option<AssetInfo> {
+        self.asset.as_ref().map(|a| a.info)
+    }
+
+    /// Reads a `.nelf` file (fully validated by the reader) and uploads it; a missing,
+    /// damaged or hostile file is an error and leaves the previous asset in place.
+    pub fn load_asset_file(&mut self, path: &std::path::Path) -> Result<AssetInfo, ViewerError> {
+        let asset = nelf_format::read_asset(path)?;
+        self.load_asset(&asset)
+    }
+
+    /// Uploads `asset` (validated first; an invalid one is an error and leaves the
+    /// previous asset in place): coefficients, densities, brick list, indirection grid,
+    /// and an atlas the relight pass fills. Lighting, if set, is re-projected onto the
+    /// new basis.
+    pub fn load_asset(&mut self, asset: &Asset) -> Result<AssetInfo, ViewerError> {
+        asset.validate()?;
+        let limits = self.device.limits();
+        let grid_bricks = asset.grid.grid_bricks;
+        if grid_bricks.iter().any(|&n| n > limits.max_texture_dimension_3d) {
+            return Err(ViewerError::TooLarge(format!(
+                "grid of {grid_bricks:?} bricks exceeds 3D textures of {} texels",
+                limits.max_texture_dimension_3d
+            )));
+        }
+        let indirection = indirection_grid(grid_bricks, &asset.bricks)?;
+        let layout = AtlasLayout::for_bricks(indirection.slot_cells.len(), limits.max_texture_dimension_3d)?;
+        let coefficients = pack_coefficients(&asset.coefficients);
+        let density = pack_density(&asset.density);
+        let neighbours = neighbour_slots(&indirection, grid_bricks, &asset.bricks);
+        let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
+        let voxel_count = asset.voxel_count();
+        for (what, bytes) in [
+            ("coefficients", coefficients.words.len() as u64 * 4),
+            ("densities", density.len() as u64 * 4),
+            ("neighbour slots", neighbours.len() as u64 * 4),
+        ] {
+            if bytes > max_binding {
+                return Err(ViewerError::TooLarge(format!(
+                    "{what} take {bytes} bytes, the device binds at most {max_binding}"
+                )));
+            }
+        }
+        let storage = |label: &str, data: &[u8]| {
+            // Storage bindings must not be empty.
+            let padded;
+            let contents = if data.is_empty() {
+                padded = [0u8; 16];
+                &padded[..]
+            } else {
+                data
+            };
+            self.device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                label: Some(label),
+                contents,
+                usage: wgpu::BufferUsages::STORAGE,
+            })
+        };
+        let coefficient_buffer = storage("coefficients", bytemuck::cast_slice(&coefficients.words));
+        let density_buffer = storage("density", bytemuck::cast_slice(&density));
+        let neighbour_buffer = storage("neighbour slots", bytemuck::cast_slice(&neighbours));
+        let rank = asset.rank();
+        let light = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("light"),
+            size: (LT_DIM * 16) as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let relight_params = self.device.create_buffer(&wgpu::BufferDescriptor {
+            label: Some("relight params"),
+            size: size_of::<RelightParams>() as u64,
+            usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
+            mapped_at_creation: false,
+        });
+        let indirection_texture = self.device.create_texture_with_data(
+            &self.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("indirection"),
+                size: wgpu::Extent3d {
+                    width: grid_bricks[0],
+                    height: grid_bricks[1],
+                    depth_or_array_layers: grid_bricks[2],
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format: wgpu::TextureFormat::R32Uint,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&indirection.entries),
+        );
+        let texels = layout.texels();
+        let atlas = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("atlas"),
+            size: wgpu::Extent3d {
+                width: texels[0],
+                height: texels[1],
+                depth_or_array_layers: texels[2],
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D3,
+            format: wgpu::TextureFormat::Rgba16Float,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let atlas_view = atlas.create_view(&wgpu::TextureViewDescriptor::default());
+        let indirection_view = indirection_texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let relight_bind_group = self.pipelines.relight.bind_group(
+            &self.device,
+            [
+                &relight_params,
+                &light,
+                &coefficient_buffer,
+                &density_buffer,
+                &neighbour_buffer,
+            ],
+            &atlas_view,
+        );
+        let memory = GpuMemory {
+            atlas_bytes: u64::from(texels[0]) * u64::from(texels[1]) * u64::from(texels[2]) * 8,
+            coefficient_bytes: coefficient_buffer.size(),
+            density_bytes: density_buffer.size(),
+            indirection_bytes: indirection.entries.len() as u64 * 4,
+            neighbour_bytes: neighbour_buffer.size(),
+            other_bytes: light.size() + relight_params.size(),
+        };
+        let max_density_per_m = asset.density.iter().map(|d| d.to_f32()).fold(0.0f32, f32::max);
+        let info = AssetInfo {
+            bricks: asset.bricks.len(),
+            halo_slots: indirection.halo_count(asset.bricks.len()),
+            rank,
+            atlas_texels: texels,
+            memory,
+            max_density_per_m,
+        };
+        self.asset = Some(GpuAsset {
+            layout,
+            grid: asset.grid,
+            pca: asset.pca.clone(),
+            world_from_light: asset.world_from_light,
+            dequantization: Dequantization::of(&asset.coefficients),
+            coefficient_words_per_voxel: coefficients.words_per_voxel,
+            coefficient_encoding: coefficients.encoding,
+            atlas,
+            atlas_view,
+            indirection_view,
+            relight_params,
+            light,
+            relight_bind_group,
+            voxel_count,
+            info,
+        });
+        // Bind groups of the old atlas are stale.
+        self.target = None;
+        self.relight_dirty = true;
+        if let Some(lighting) = self.lighting.take() {
+            self.set_lighting(&lighting.env, lighting.world_from_env)?;
+        }
+        Ok(info)
+    }
+
+    /// Sets the environment map (any resolution, lat-long, world frame) and its rotation
+    /// `world_from_env`, projecting it onto the asset's basis
+    /// ([`nelf_render::project_light`]). Needs an asset. The relight pass runs before the
+    /// next frame.
+    pub fn set_lighting(&mut self, env: &LatLong, world_from_env: DMat3) -> Result<(), ViewerError> {
+        let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
+        let projected = project_light(&asset.pca, asset.world_from_light, env, world_from_env)?;
+        self.lighting = Some(Lighting {
+            env: env.clone(),
+            world_from_env,
+            projected,
+        });
+        self.relight_dirty = true;
+        Ok(())
+    }
+
+    /// Turns the current environment map to `world_from_env` (re-projects it; no need to
+    /// pass the map again).
+    pub fn set_light_rotation(&mut self, world_from_env: DMat3) -> Result<(), ViewerError> {
+        let lighting = self.lighting.take().ok_or(ViewerError::NoLighting)?;
+        let result = self.set_lighting(&lighting.env, world_from_env);
+        if result.is_err() {
+            self.lighting = Some(lighting);
+        }
+        result
+    }
+
+    /// Uses only the first `rank` PCA components (`None`: all).
+    pub fn set_rank(&mut self, rank: Option<usize>) {
+        if self.rank != rank {
+            self.rank = rank;
+            self.relight_dirty = true;
+        }
+    }
+
+    /// What the relight pass writes: radiance, or one component's contribution.
+    pub fn set_relight_view(&mut self, view: RelightView) {
+        if self.relight_view != view {
+            self.relight_view = view;
+            self.relight_dirty = true;
+        }
+    }
+
+    /// Makes the next frame relight even if nothing changed (benchmarks).
+    pub fn invalidate_lighting(&mut self) {
+        self.relight_dirty = true;
+    }
+
+    /// Makes the march target `width × height` (recreating it and its bind groups on change).
+    fn ensure_target(&mut self, width: u32, height: u32) -> Result<(), ViewerError> {
+        if self
+            .target
+            .as_ref()
+            .is_some_and(|t| t.width == width && t.height == height)
+        {
+            return Ok(());
+        }
+        let max = self.device.limits().max_texture_dimension_2d;
+        if width == 0 || height == 0 || width > max || height > max {
+            return Err(ViewerError::BadSetting(format!(
+                "image {width}×{height} must be 1..={max} pixels a side"
+            )));
+        }
+        let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
+        let texture = self.device.create_texture(&wgpu::TextureDescriptor {
+            label: Some("march output"),
+            size: wgpu::Extent3d {
+                width,
+                height,
+                depth_or_array_layers: 1,
+            },
+            mip_level_count: 1,
+            sample_count: 1,
+            dimension: wgpu::TextureDimension::D2,
+            format: MARCH_FORMAT,
+            usage: wgpu::TextureUsages::STORAGE_BINDING
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::COPY_SRC,
+            view_formats: &[],
+        });
+        let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let (march_bind_group, march_fragment_bind_group) =
+            self.pipelines
+                .march
+                .bind_groups(&self.device, &self.march_params, asset, &view, &self.counters);
+        let display_bind_group = self
+            .pipelines
+            .display
+            .bind_group(&self.device, &self.display_params, &view);
+        self.target = Some(Target {
+            width,
+            height,
+            texture,
+            view,
+            march_bind_group,
+            march_fragment_bind_group,
+            display_bind_group,
+        });
+        Ok(())
+    }
+
+    /// Encodes the relight pass (if needed) and the march of `camera` into `encoder`;
+    /// the result lands in the internal target that [`GpuRenderer::paint`] displays.
+    pub fn encode_frame(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &PinholeCamera,
+        settings: &ViewSettings,
+    ) -> Result<(), ViewerError> {
+        self.encode_frame_with(encoder, camera, settings, false)
+    }
+
+    fn encode_frame_with(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+        camera: &PinholeCamera,
+        settings: &ViewSettings,
+        count_samples: bool,
+    ) -> Result<(), ViewerError> {
+        let params = self.march_params(camera, settings)?;
+        if self.lighting.is_none() {
+            return Err(ViewerError::NoLighting);
+        }
+        self.encode_relight_if_needed(encoder)?;
+        self.ensure_target(camera.width, camera.height)?;
+        self.queue
+            .write_buffer(&self.march_params, 0, bytemuck::bytes_of(&params));
+        let target = self.target.as_ref().ok_or(ViewerError::NoAsset)?;
+        self.pipelines
+            .march
+            .encode(encoder, target, settings.pass, count_samples);
+        Ok(())
+    }
+
+    /// Prepares the display pass for a target of `format` (call before
+    /// [`GpuRenderer::paint`], outside the render pass).
+    pub fn prepare_display(
+        &mut self,
+        format: wgpu::TextureFormat,
+        display: &DisplaySettings,
+        view: MarchView,
+    ) {
+        let params = display_params(format, display, view);
+        self.queue
+            .write_buffer(&self.display_params, 0, bytemuck::bytes_of(&params));
+        self.pipelines.display.pipeline_for(&self.device, format);
+    }
+
+    /// Draws the last marched image, tone-mapped, over the render pass's viewport
+    /// (after [`GpuRenderer::prepare_display`] for the pass's format). Draws nothing if
+    /// no frame was marched yet.
+    pub fn paint(&self, pass: &mut wgpu::RenderPass<'_>, format: wgpu::TextureFormat) {
+        let Some(target) = &self.target else { return };
+        self.pipelines
+            .display
+            .paint(pass, &target.display_bind_group, format);
+    }
+
+    /// Runs the relight pass now and waits for it (benchmarks).
+    pub fn relight_blocking(&mut self) -> Result<(), ViewerError> {
+        self.relight_dirty = true;
+        let mut encoder = self.encoder("relight");
+        self.encode_relight_if_needed(&mut encoder)?;
+        self.submit_and_wait(encoder)
+    }
+
+    /// Relights if needed, marches `camera`'s view and waits, without reading back
+    /// (benchmarks: the GPU work of one frame).
+    pub fn frame_blocking(
+        &mut self,
+        camera: &PinholeCamera,
+        settings: &ViewSettings,
+    ) -> Result<(), ViewerError> {
+        let mut encoder = self.encoder("frame");
+        self.encode_frame(&mut encoder, camera, settings)?;
+        self.submit_and_wait(encoder)
+    }
+
+    /// Edge length of one voxel of the loaded asset, metres.
+    pub fn voxel_size_m(&self) -> Option<f64> {
+        self.asset.as_ref().map(|a| a.grid.voxel_size_m)
+    }
+
+    /// The loaded asset's grid box `(min, max)` in metres.
+    pub fn bounds_m(&self) -> Option<([f64; 3], [f64; 3])> {
+        self.asset
+            .as_ref()
+            .map(|a| (a.grid.bbox_min_m, a.grid.bbox_max_m()))
+    }
+}

@@ -1,0 +1,160 @@
+//! The relight pass (`shaders/relight.wgsl`, compute), run once per lighting change
+//! rather than per frame.
+//!
+//! The environment map, projected onto the asset's PCA basis on the CPU
+//! ([`nelf_render::project_light`]: `P_mean` and `P_k`, `3(K + 1)` numbers), is folded
+//! with the coefficient dequantisation ([`crate::atlas::fold_light`]); then every stored
+//! voxel's radiance is its `K`-term dot product
+//!
+//! ```text
+//! L(voxel) = light_mean + Σ_{k < K} q_k(voxel) · light[k]
+//! ```
+//!
+//! (`q_k` the stored codes), written with its density σ as `[r, g, b, σ]` into the
+//! RGBA16F brick atlas — the voxel's own slot and the aprons of the neighbouring slots
+//! ([`crate::atlas`]). Shading is linear, so marching the relit atlas equals shading every
+//! sample.
+
+use nelf_format::conventions::LT_DIM;
+
+use super::GpuRenderer;
+use super::common::{compute_pipeline, shader_module, storage_entry, storage_texture_entry, uniform_entry};
+use crate::atlas::{RelightView, fold_light};
+use crate::error::ViewerError;
+use crate::shaders::{RELIGHT_WGSL, RelightParams};
+
+/// The relight pass's bind group layout and pipeline, created once per device.
+pub(super) struct RelightPipeline {
+    layout: wgpu::BindGroupLayout,
+    pipeline: wgpu::ComputePipeline,
+}
+
+impl RelightPipeline {
+    pub(super) fn new(device: &wgpu::Device) -> Result<Self, ViewerError> {
+        use wgpu::ShaderStages as S;
+        use wgpu::TextureViewDimension as D;
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+            label: Some("relight"),
+            entries: &[
+                uniform_entry(0, S::COMPUTE),
+                uniform_entry(1, S::COMPUTE),
+                storage_entry(2, true, S::COMPUTE),
+                storage_entry(3, true, S::COMPUTE),
+                storage_entry(4, true, S::COMPUTE),
+                storage_texture_entry(5, wgpu::TextureFormat::Rgba16Float, D::D3),
+            ],
+        });
+        let module = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
+        let pipeline = compute_pipeline(device, &layout, &module, "relight", &[]);
+        Ok(Self { layout, pipeline })
+    }
+
+    /// The bind group of an asset: `buffers` = (relight params, light, coefficients,
+    /// densities, neighbour slots), bindings 0 to 4, and the atlas the pass writes.
+    pub(super) fn bind_group(
+        &self,
+        device: &wgpu::Device,
+        buffers: [&wgpu::Buffer; 5],
+        atlas_view: &wgpu::TextureView,
+    ) -> wgpu::BindGroup {
+        let [
+            relight_params,
+            light,
+            coefficient_buffer,
+            density_buffer,
+            neighbour_buffer,
+        ] = buffers;
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("relight"),
+            layout: &self.layout,
+            entries: &[
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: relight_params.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: light.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: coefficient_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 3,
+                    resource: density_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: neighbour_buffer.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: wgpu::BindingResource::TextureView(atlas_view),
+                },
+            ],
+        })
+    }
+}
+
+impl GpuRenderer {
+    /// Encodes the relight pass if the lighting, rank or view changed since the last one.
+    pub(super) fn encode_relight_if_needed(
+        &mut self,
+        encoder: &mut wgpu::CommandEncoder,
+    ) -> Result<(), ViewerError> {
+        if !self.relight_dirty {
+            return Ok(());
+        }
+        let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
+        let lighting = self.lighting.as_ref().ok_or(ViewerError::NoLighting)?;
+        let rank = self.rank.unwrap_or(asset.info.rank).min(asset.info.rank);
+        let folded = fold_light(
+            &lighting.projected,
+            &asset.dequantization,
+            rank,
+            self.relight_view,
+        );
+        // Zeros up to the next multiple of 4: the shader applies whole words of codes.
+        let mut components = folded.components.clone();
+        components.resize(
+            folded.components.len().next_multiple_of(4).clamp(4, LT_DIM),
+            [0.0; 4],
+        );
+        self.queue
+            .write_buffer(&asset.light, 0, bytemuck::cast_slice(&components));
+        let g = asset.grid.grid_bricks;
+        // 64 voxels per workgroup, rows of at most 32768 workgroups.
+        let groups = (asset.voxel_count as u32).div_ceil(64).max(1);
+        let groups = [groups.min(32_768), groups.div_ceil(32_768)];
+        let params = RelightParams {
+            atlas: [
+                asset.layout.x_bits,
+                asset.layout.y_bits,
+                asset.layout.slot_count,
+                folded.components.len() as u32,
+            ],
+            grid_bricks: [g[0] as i32, g[1] as i32, g[2] as i32, asset.coefficient_encoding],
+            words: [
+                asset.info.rank as u32,
+                asset.coefficient_words_per_voxel,
+                u32::from(matches!(self.relight_view, RelightView::Component(_))),
+                0,
+            ],
+            light_mean: [folded.mean_rgb[0], folded.mean_rgb[1], folded.mean_rgb[2], 0.0],
+            dispatch: [asset.voxel_count as u32, groups[0] * 64, 0, 0],
+        };
+        self.queue
+            .write_buffer(&asset.relight_params, 0, bytemuck::bytes_of(&params));
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
+            label: Some("relight"),
+            timestamp_writes: None,
+        });
+        pass.set_bind_group(0, &asset.relight_bind_group, &[]);
+        pass.set_pipeline(&self.pipelines.relight.pipeline);
+        pass.dispatch_workgroups(groups[0], groups[1], 1);
+        drop(pass);
+        self.relight_dirty = false;
+        Ok(())
+    }
+}
