@@ -19,14 +19,16 @@
 //! asset finally chosen is rendered exactly and its PSNR reported; should it miss
 //! the target, the next larger candidate is tried.
 //!
-//! **Resolutions** are tried in increasing order (default: ½, ¾ and 1 × `--resolution`,
-//! so `--resolution` is the largest grid tried); a larger grid is sampled only when
+//! **Resolutions** are tried in increasing order (default: ½ and 1 × `--resolution`,
+//! so `--resolution` is the largest grid tried; a ½-resolution sample costs about a
+//! quarter of a full one, so the choice stays within ~1.5–2× a plain bake); a larger grid is sampled only when
 //! no candidate of a smaller one meets the target, since voxels grow as the square of
 //! the resolution and with them the file. With `--max-bytes` alone the candidate of
 //! highest PSNR within the budget wins, and resolutions grow until even rank 1 is over
 //! budget. At each resolution and encoding the rank is the smallest meeting the
 //! target (or the largest within the budget): file bytes are exact (the candidate
-//! encoded in memory), PSNR as above.
+//! encoded in memory), PSNR as above. f16 coefficients are tried only where they
+//! can win (`f16_worth_trying`): they cost twice the bytes of 8-bit ones at a rank.
 
 use std::time::Instant;
 
@@ -56,7 +58,8 @@ pub struct ChoiceArgs {
     /// smallest meeting the target within the budget; alone: the best within it).
     #[arg(long, value_name = "BYTES")]
     pub max_bytes: Option<u64>,
-    /// Grid resolutions to try, ascending (default: ½, ¾ and 1 × --resolution).
+    /// Grid resolutions to try, ascending (default: ½ and 1 × --resolution; each
+    /// one more costs a field sample).
     #[arg(long, value_delimiter = ',', value_name = "R,R,…")]
     pub choice_resolutions: Vec<u32>,
 }
@@ -92,7 +95,7 @@ impl ChoiceArgs {
     pub fn resolutions(&self, config: &BakeConfig) -> Vec<u32> {
         let mut out = if self.choice_resolutions.is_empty() {
             let r = config.resolution;
-            vec![(r / 2).max(8), (3 * r / 4).max(8), r]
+            vec![(r / 2).max(8), r]
         } else {
             self.choice_resolutions.clone()
         };
@@ -251,9 +254,12 @@ fn resolution_candidates(
     let ranks = candidate_ranks(sampled.top_rank, sampled.data_rank);
     let voxel_size_m = sampled.dense.grid.geometry().voxel_size_m;
     let voxels = sampled.dense.grid.voxel_count();
-    let mut out = Vec::new();
+    let mut out: Vec<ChoiceCandidate> = Vec::new();
     let bar = progress.bar("candidates", 2, "encodings");
     for encoding in [EncodingChoice::U8, EncodingChoice::F16] {
+        if encoding == EncodingChoice::F16 && !f16_worth_trying(&out, args) {
+            continue;
+        }
         let full = sampled.asset(sampled.top_rank, encoding.encoding())?;
         let psnrs = rank_psnrs(&full, &ranks, held, step_voxels)?;
         let mut rows: Vec<ChoiceCandidate> = ranks
@@ -269,28 +275,16 @@ fn resolution_candidates(
                 bytes: None,
             })
             .collect();
-        let measure = |i: usize, rows: &mut Vec<ChoiceCandidate>| -> Result<u64> {
-            if let Some(b) = rows[i].bytes {
-                return Ok(b);
-            }
-            let b = encoded_bytes(&sampled.asset(rows[i].rank, encoding.encoding())?)?;
-            rows[i].bytes = Some(b);
-            Ok(b)
-        };
         if let Some(target) = args.target_psnr {
             if let Some(i) = rows.iter().position(|r| r.psnr_db >= target) {
-                measure(i, &mut rows)?;
-                // A second rank up, in case the estimate was optimistic.
-                if i + 1 < rows.len() {
-                    measure(i + 1, &mut rows)?;
-                }
+                measure_bytes(sampled, &mut rows[i])?;
             }
         } else if let Some(budget) = args.max_bytes {
             // Bytes grow with the rank: binary search the largest rank within budget.
             let (mut lo, mut hi) = (0usize, rows.len());
             while lo < hi {
                 let mid = usize::midpoint(lo, hi);
-                if measure(mid, &mut rows)? <= budget {
+                if measure_bytes(sampled, &mut rows[mid])? <= budget {
                     lo = mid + 1;
                 } else {
                     hi = mid;
@@ -303,6 +297,38 @@ fn resolution_candidates(
     bar.finish_and_clear();
     Ok(out)
 }
+
+/// Bytes of a candidate's asset (encoded in memory once, then remembered).
+fn measure_bytes(sampled: &SampledField, c: &mut ChoiceCandidate) -> Result<u64> {
+    if let Some(b) = c.bytes {
+        return Ok(b);
+    }
+    let b = encoded_bytes(&sampled.asset(c.rank, c.encoding.encoding())?)?;
+    c.bytes = Some(b);
+    Ok(b)
+}
+
+/// Whether f16 coefficients can win over the 8-bit ones of the same resolution
+/// (`u8` rows, already measured). They take twice the bytes at a rank and differ in
+/// PSNR only by the 8-bit rounding, so: with a target, only when no 8-bit rank meets
+/// it but the best comes within [`F16_MARGIN_DB`]; with a budget alone, only when
+/// the 8-bit asset at the top rank fits it (more PSNR might then be bought).
+fn f16_worth_trying(u8_rows: &[ChoiceCandidate], args: &ChoiceArgs) -> bool {
+    let best = u8_rows
+        .iter()
+        .map(|c| c.psnr_db)
+        .fold(f64::NEG_INFINITY, f64::max);
+    if let Some(target) = args.target_psnr {
+        return best < target && best >= target - F16_MARGIN_DB;
+    }
+    match (args.max_bytes, u8_rows.last().and_then(|c| c.bytes)) {
+        (Some(budget), Some(top_bytes)) => top_bytes <= budget,
+        _ => false,
+    }
+}
+
+/// How far below a target the best 8-bit candidate may be for f16 to be tried, dB.
+pub const F16_MARGIN_DB: f64 = 0.5;
 
 /// Whether `c` is acceptable: meets the target (if any) and the budget (if any,
 /// with bytes measured).
@@ -389,7 +415,14 @@ pub fn bake_capture_to_target(
             {
                 return Ok(None);
             }
-            for &i in local.iter().take(3) {
+            // The best first; should its exact render miss the target (the
+            // estimate was optimistic), the next rank up of the same encoding.
+            let mut queue = local;
+            for _ in 0..3 {
+                if queue.is_empty() {
+                    break;
+                }
+                let i = queue.remove(0);
                 let c = &candidates[i];
                 let config_c = BakeConfig {
                     rank: Some(c.rank),
@@ -400,6 +433,16 @@ pub fn bake_capture_to_target(
                 let verified = held_aside_psnr(&output.asset, &held, config.step_voxels)?;
                 if args.target_psnr.is_none_or(|t| verified >= t) {
                     return Ok(Some((output, i, verified)));
+                }
+                let j = i + 1;
+                if j < candidates.len()
+                    && candidates[j].resolution == resolution
+                    && candidates[j].encoding == candidates[i].encoding
+                    && args.target_psnr.is_none_or(|t| candidates[j].psnr_db >= t)
+                {
+                    measure_bytes(&sampled, &mut candidates[j])?;
+                    queue.push(j);
+                    queue.sort_by(|&a, &b| order(&candidates[a], &candidates[b], args));
                 }
             }
             Ok(None)
@@ -526,7 +569,7 @@ mod tests {
     #[test]
     fn default_resolutions_end_at_the_configured_one() {
         let config = BakeConfig::default();
-        assert_eq!(ChoiceArgs::default().resolutions(&config), vec![64, 96, 128]);
+        assert_eq!(ChoiceArgs::default().resolutions(&config), vec![64, 128]);
         let given = ChoiceArgs {
             choice_resolutions: vec![96, 48, 96],
             ..ChoiceArgs::default()

@@ -65,6 +65,11 @@ pub struct ParetoConfig {
     /// GPU frames timed per setting and size (the minimum is reported).
     #[arg(long, default_value_t = 5)]
     pub gpu_frames: usize,
+    /// Measure the CPU and GPU times of the settings already in results.json again
+    /// (their assets are kept under assets/), keeping their accuracy figures: for
+    /// timings taken on a quiet machine after a sweep that shared it.
+    #[arg(long)]
+    pub retime: bool,
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
@@ -229,6 +234,14 @@ pub fn run_pareto(config: &ParetoConfig) -> Result<ParetoResults> {
         rows: Vec::new(),
         run_secs: 0.0,
     };
+    if config.retime {
+        let bar = progress.bar("retime", rows.len() as u64, "settings");
+        for row in &mut rows {
+            retime(row, &held, out, gpu.as_mut(), config)?;
+            bar.inc(1);
+        }
+        bar.finish_and_clear();
+    }
     for resolution in config.resolutions() {
         let todo: Vec<(usize, EncodingChoice)> = settings
             .iter()
@@ -317,6 +330,52 @@ fn about_section(results: &ParetoResults, held: &HeldAside) -> crate::report::Se
     }
 }
 
+/// The CPU and GPU times of one setting, from its asset file.
+fn times(
+    asset: &nelf_format::Asset,
+    id: &str,
+    held: &HeldAside,
+    gpu: Option<&mut GpuTimer>,
+    config: &ParetoConfig,
+) -> Result<(f64, Option<f64>, Option<f64>, Option<String>)> {
+    let step = BakeConfig::default().step_voxels;
+    let cpu_ms = cpu_render_ms(asset, &held.cameras[0], &held.envs[0], step)?;
+    // A GPU that cannot hold the asset (a binding limit) leaves its times empty.
+    let (gpu_512, gpu_1080, adapter) = match gpu {
+        Some(g) => {
+            let mut time = |w: u32, h: u32| match g.frame_ms(asset, &held.envs[0], w, h, config.gpu_frames) {
+                Ok(ms) => Some(ms),
+                Err(e) => {
+                    eprintln!("{id}: no GPU frame time at {w}×{h}: {e}");
+                    None
+                }
+            };
+            let (a, b) = (time(512, 512), time(1920, 1080));
+            (a, b, Some(g.adapter().to_string()))
+        }
+        None => (None, None, None),
+    };
+    Ok((cpu_ms, gpu_512, gpu_1080, adapter))
+}
+
+/// Re-measures `row`'s times from `assets/<id>.nelf`.
+fn retime(
+    row: &mut ParetoRow,
+    held: &HeldAside,
+    out: &Path,
+    gpu: Option<&mut GpuTimer>,
+    config: &ParetoConfig,
+) -> Result<()> {
+    let path = out.join("assets").join(format!("{}.nelf", row.id));
+    let asset = nelf_format::read_asset(&path)?;
+    let (cpu, g512, g1080, adapter) = times(&asset, &row.id, held, gpu, config)?;
+    row.cpu_render_ms = cpu;
+    row.gpu_frame_ms_512 = g512;
+    row.gpu_frame_ms_1080p = g1080;
+    row.gpu_adapter = adapter;
+    Ok(())
+}
+
 #[allow(clippy::too_many_arguments)] // One setting's every input; a struct would only rename them.
 fn measure_setting(
     sampled: &nelf_bake::SampledField,
@@ -342,24 +401,9 @@ fn measure_setting(
     let own_secs = t.elapsed().as_secs_f64();
     let step = BakeConfig::default().step_voxels;
     let (scores, views) = score_held_aside(&asset, held, step)?;
-    let cpu_ms = cpu_render_ms(&asset, &held.cameras[0], &held.envs[0], step)?;
     let thumbnail = format!("thumbnails/{id}.png");
     write_thumbnail_png(&out.join(&thumbnail), &held.images[0], &views[0])?;
-    // A GPU that cannot hold the asset (a binding limit) leaves its times empty.
-    let (gpu_512, gpu_1080, adapter) = match gpu {
-        Some(g) => {
-            let mut time = |w: u32, h: u32| match g.frame_ms(&asset, &held.envs[0], w, h, config.gpu_frames) {
-                Ok(ms) => Some(ms),
-                Err(e) => {
-                    eprintln!("{id}: no GPU frame time at {w}×{h}: {e}");
-                    None
-                }
-            };
-            let (a, b) = (time(512, 512), time(1920, 1080));
-            (a, b, Some(g.adapter().to_string()))
-        }
-        None => (None, None, None),
-    };
+    let (cpu_ms, gpu_512, gpu_1080, adapter) = times(&asset, &id, held, gpu, config)?;
     Ok(ParetoRow {
         id,
         resolution,
