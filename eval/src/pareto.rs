@@ -28,6 +28,7 @@ use crate::measure::{GpuTimer, cpu_render_ms, score_held_aside, write_thumbnail_
 use crate::rows::ParetoRow;
 
 /// Options of `nelf eval pareto` (saved in `results.json`).
+#[allow(clippy::struct_excessive_bools)] // Independent command-line switches.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
 pub struct ParetoConfig {
     /// What to evaluate: a capture folder (synthetic, with its ground truth), a mesh
@@ -330,14 +331,22 @@ fn about_section(results: &ParetoResults, held: &HeldAside) -> crate::report::Se
     }
 }
 
-/// The CPU and GPU times of one setting, from its asset file.
+/// The times of one setting.
+struct Times {
+    cpu_ms: f64,
+    gpu_512: Option<f64>,
+    gpu_1080: Option<f64>,
+    adapter: Option<String>,
+}
+
+/// The CPU and GPU times of one setting.
 fn times(
     asset: &nelf_format::Asset,
     id: &str,
     held: &HeldAside,
     gpu: Option<&mut GpuTimer>,
     config: &ParetoConfig,
-) -> Result<(f64, Option<f64>, Option<f64>, Option<String>)> {
+) -> Result<Times> {
     let step = BakeConfig::default().step_voxels;
     let cpu_ms = cpu_render_ms(asset, &held.cameras[0], &held.envs[0], step)?;
     // A GPU that cannot hold the asset (a binding limit) leaves its times empty.
@@ -355,7 +364,12 @@ fn times(
         }
         None => (None, None, None),
     };
-    Ok((cpu_ms, gpu_512, gpu_1080, adapter))
+    Ok(Times {
+        cpu_ms,
+        gpu_512,
+        gpu_1080,
+        adapter,
+    })
 }
 
 /// Re-measures `row`'s times from `assets/<id>.nelf`.
@@ -368,11 +382,11 @@ fn retime(
 ) -> Result<()> {
     let path = out.join("assets").join(format!("{}.nelf", row.id));
     let asset = nelf_format::read_asset(&path)?;
-    let (cpu, g512, g1080, adapter) = times(&asset, &row.id, held, gpu, config)?;
-    row.cpu_render_ms = cpu;
-    row.gpu_frame_ms_512 = g512;
-    row.gpu_frame_ms_1080p = g1080;
-    row.gpu_adapter = adapter;
+    let t = times(&asset, &row.id, held, gpu, config)?;
+    row.cpu_render_ms = t.cpu_ms;
+    row.gpu_frame_ms_512 = t.gpu_512;
+    row.gpu_frame_ms_1080p = t.gpu_1080;
+    row.gpu_adapter = t.adapter;
     Ok(())
 }
 
@@ -403,7 +417,7 @@ fn measure_setting(
     let (scores, views) = score_held_aside(&asset, held, step)?;
     let thumbnail = format!("thumbnails/{id}.png");
     write_thumbnail_png(&out.join(&thumbnail), &held.images[0], &views[0])?;
-    let (cpu_ms, gpu_512, gpu_1080, adapter) = times(&asset, &id, held, gpu, config)?;
+    let t = times(&asset, &id, held, gpu, config)?;
     Ok(ParetoRow {
         id,
         resolution,
@@ -413,10 +427,10 @@ fn measure_setting(
         file_bytes: written.file_size,
         bake_secs: sample_secs + own_secs,
         scores,
-        cpu_render_ms: cpu_ms,
-        gpu_frame_ms_512: gpu_512,
-        gpu_frame_ms_1080p: gpu_1080,
-        gpu_adapter: adapter,
+        cpu_render_ms: t.cpu_ms,
+        gpu_frame_ms_512: t.gpu_512,
+        gpu_frame_ms_1080p: t.gpu_1080,
+        gpu_adapter: t.adapter,
         thumbnail: Some(thumbnail),
         front_bytes: false,
         front_frame: false,
