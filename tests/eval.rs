@@ -186,7 +186,11 @@ fn stability_quick_runs_every_axis_and_names_where_it_breaks() {
             .unwrap()
     };
     assert!(at("rank", "rank 1") < at("rank", "rank 16"));
-    // Undamaged masks beat masks eroded by 2 px.
+    // Two views 30° apart leave the hull unbounded along their rays; it is clipped
+    // around the head (--max-hull-radius-m), so they still bake.
+    let two = results.points.iter().find(|p| p.label == "2 views").unwrap();
+    assert!(two.failure.is_none(), "{:?}", two.failure);
+    // The frontal view at full rank beats rank 1.
     assert!(at("target_angle_deg", "0°") > at("rank", "rank 1"));
     let csv = read(&out.join("stability.csv"));
     assert_eq!(csv.lines().count(), 1 + results.points.len());

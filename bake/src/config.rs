@@ -24,6 +24,13 @@ pub const FIELD_TEXEL_SAMPLES: u32 = 4;
 /// capture's images take 128); see [`FIELD_TEXEL_SAMPLES`].
 pub const FIELD_INDIRECT_SAMPLES: u32 = 32;
 
+/// Default `--max-hull-radius-m`: a head and shoulders fit.
+pub const DEFAULT_MAX_HULL_RADIUS_M: f64 = 0.5;
+
+fn default_max_hull_radius_m() -> f64 {
+    DEFAULT_MAX_HULL_RADIUS_M
+}
+
 /// Default `--lt-share-voxels`.
 pub const DEFAULT_LT_SHARE_VOXELS: f32 = 2.0;
 
@@ -136,6 +143,12 @@ pub struct BakeConfig {
     /// Visual hull: grow every mask by this many pixels (a (2r+1)² square) before carving.
     #[arg(long, default_value_t = 2)]
     pub dilate_px: u32,
+    /// Visual hull: clip it to a cube of this half-size (metres) around the head
+    /// centre when the views leave it unbounded (two views, or views close
+    /// together), as NeLF bounds its rays by a sphere around the head.
+    #[arg(long, default_value_t = DEFAULT_MAX_HULL_RADIUS_M)]
+    #[serde(default = "default_max_hull_radius_m")]
+    pub max_hull_radius_m: f64,
     /// Drop a brick whose densest voxel is less opaque than this across one voxel
     /// (`σ_min = −ln(1 − α)/voxel_size`).
     #[arg(long, default_value_t = 0.01)]
@@ -223,6 +236,7 @@ impl Default for BakeConfig {
             resolution: 128,
             voxel_size_m: None,
             dilate_px: 2,
+            max_hull_radius_m: DEFAULT_MAX_HULL_RADIUS_M,
             min_brick_opacity: 0.01,
             max_optical_depth: 10.0,
             shell_placement: ShellPlacement::Signed,
@@ -257,6 +271,12 @@ impl BakeConfig {
         }
         if !(1..=LT_DIM).contains(&self.max_rank) {
             return bad(format!("--max-rank {} must be in 1..={LT_DIM}", self.max_rank));
+        }
+        if !(self.max_hull_radius_m.is_finite() && self.max_hull_radius_m > 0.0) {
+            return bad(format!(
+                "--max-hull-radius-m {} must be positive",
+                self.max_hull_radius_m
+            ));
         }
         if !(self.max_loss_db.is_finite() && self.max_loss_db >= 0.0) {
             return bad(format!("--max-loss-db {} must be ≥ 0", self.max_loss_db));

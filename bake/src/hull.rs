@@ -30,7 +30,10 @@
 //! **Bounds**: [`hull_bounds`] finds the hull's box coarse-to-fine: carve a cube
 //! around the head centre at 32³, grow the cube while kept voxels touch its
 //! faces, then carve the kept box again at 64³. Both passes are conservative, so
-//! the box returned contains the hull.
+//! the box returned contains the hull. Few or alike views (two views 30° apart)
+//! leave a hull that runs off along their rays; the cube stops growing at a
+//! half-size of `max_radius_m` around the head centre, and the hull is clipped there,
+//! as NeLF bounds every ray by a sphere around the head (`--max-hull-radius-m`).
 
 use glam::DVec3;
 use nelf_format::conventions::PinholeCamera;
@@ -262,7 +265,7 @@ const BOUNDS_MAX_GROWTH: u32 = 8;
 
 /// The box `(min, max)` in metres holding the visual hull, found coarse-to-fine
 /// around `centre_m` (see the module documentation).
-pub fn hull_bounds(carver: &HullCarver, centre_m: DVec3) -> Result<(DVec3, DVec3)> {
+pub fn hull_bounds(carver: &HullCarver, centre_m: DVec3, max_radius_m: f64) -> Result<(DVec3, DVec3)> {
     // Start from the largest radius the masks subtend around the centre's depth.
     let mut half = 0.0f64;
     for (cam, table) in carver.cameras.iter().zip(&carver.tables) {
@@ -278,6 +281,12 @@ pub fn hull_bounds(carver: &HullCarver, centre_m: DVec3) -> Result<(DVec3, DVec3
     if !(half.is_finite() && half > 0.0) {
         return Err(BakeError::Hull("cannot size the search box".into()));
     }
+    if !(max_radius_m.is_finite() && max_radius_m > 0.0) {
+        return Err(BakeError::Hull(format!(
+            "the hull's largest radius {max_radius_m} m must be positive"
+        )));
+    }
+    half = half.min(max_radius_m);
     for _ in 0..BOUNDS_MAX_GROWTH {
         let cell = 2.0 * half / BOUNDS_COARSE as f64;
         let coarse = carver.carve(centre_m - DVec3::splat(half), cell, [BOUNDS_COARSE; 3]);
@@ -288,8 +297,8 @@ pub fn hull_bounds(carver: &HullCarver, centre_m: DVec3) -> Result<(DVec3, DVec3
                         .into(),
                 ));
             }
-            Some((_, _, true)) => half *= 2.0,
-            Some((lo, hi, false)) => {
+            Some((_, _, true)) if half < max_radius_m => half = (2.0 * half).min(max_radius_m),
+            Some((lo, hi, _)) => {
                 let extent = hi - lo;
                 let cell = extent.max_element() / BOUNDS_FINE as f64;
                 let dims = (extent / cell)

@@ -58,7 +58,7 @@ pub fn plan_capture(
     config.validate()?;
     let t = Instant::now();
     let carver = HullCarver::new(&capture.cameras, &capture.masks, config.dilate_px)?;
-    let (lo, hi) = hull_bounds(&carver, capture.head_centre_m)?;
+    let (lo, hi) = hull_bounds(&carver, capture.head_centre_m, config.max_hull_radius_m)?;
     let (grid_lo, grid_hi) = match config.voxel_size_m {
         Some(_) => (lo, hi),
         None => occupied_box(Some(&carver), lo, hi, probe, config.min_brick_opacity, progress)?,

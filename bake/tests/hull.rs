@@ -26,7 +26,7 @@ fn sphere_hull_contains_the_sphere_and_is_tight() {
     let carver = HullCarver::new(&cameras, &masks, 1).unwrap();
 
     // The bounds search finds a box around the sphere, not much larger.
-    let (lo, hi) = hull_bounds(&carver, SPHERE_CENTRE).unwrap();
+    let (lo, hi) = hull_bounds(&carver, SPHERE_CENTRE, 10.0).unwrap();
     let r = DVec3::splat(SPHERE_RADIUS);
     assert!(
         lo.cmple(SPHERE_CENTRE - r).all() && hi.cmpge(SPHERE_CENTRE + r).all(),
