@@ -152,7 +152,7 @@ pub fn error_breakdown(
 
 /// A capture's held-aside target views, decoded: what a bake is judged by on views
 /// and lightings it never saw (`cameras.json` `targets`).
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, Default)]
 pub struct HeldAside {
     /// Target names.
     pub names: Vec<String>,
@@ -181,13 +181,7 @@ impl HeldAside {
 /// Loads the held-aside target views of the capture in `dir` described by
 /// `capture`; an error names the file that fails. Empty when there are none.
 pub fn load_held_aside(capture: &nelf_format::capture::Capture, dir: &Path) -> Result<HeldAside> {
-    let mut held = HeldAside {
-        names: Vec::new(),
-        cameras: Vec::new(),
-        images: Vec::new(),
-        masks: Vec::new(),
-        envs: Vec::new(),
-    };
+    let mut held = HeldAside::default();
     for t in &capture.targets {
         let path = t.image_path(dir);
         let (w, h, image) = read_linear_rgb(&path)?;

@@ -6,7 +6,8 @@
 
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
-use indicatif::ProgressBar;
+mod common;
+
 use nelf_bake::eval::{read_linear_rgb, score_view};
 use nelf_bake::{
     BakeConfig, CaptureLoadOptions, GroundTruth, Progress, bake_capture, load_capture, sidecar_path,
@@ -14,7 +15,6 @@ use nelf_bake::{
 };
 use nelf_format::read_asset;
 use nelf_scene::envmap::load_envmap;
-use nelf_scene::synth::{SynthConfig, write_synthetic_capture};
 
 /// PSNR (dB, data range = the target's largest value) the baked asset reaches at
 /// the 64² target view (novel view, novel lighting) with a 48-voxel grid, scored as
@@ -23,25 +23,11 @@ use nelf_scene::synth::{SynthConfig, write_synthetic_capture};
 /// the grid sized by the occupied box); the floor leaves a 2 dB margin.
 const TARGET_PSNR_FLOOR_DB: f64 = 31.7;
 
-fn tiny_capture(dir: &std::path::Path) {
-    let config = SynthConfig {
-        width: 64,
-        height: 64,
-        head_cells: 40,
-        targets: 1,
-        bounces: 0,
-        texel_samples: 1,
-        indirect_samples: 0,
-        ..SynthConfig::default()
-    };
-    write_synthetic_capture(&config, dir, &ProgressBar::hidden()).unwrap();
-}
-
 #[test]
 fn tiny_capture_bakes_deterministically_and_renders_its_target() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("capture");
-    tiny_capture(&cap);
+    common::tiny_capture(&cap, 1);
     let capture = load_capture(&cap, &CaptureLoadOptions::default()).unwrap();
     let truth = GroundTruth::from_synth_capture(&cap).unwrap();
     let config = BakeConfig {

@@ -5,33 +5,19 @@
 
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
-use indicatif::ProgressBar;
+mod common;
+
 use nelf_bake::choose::held_aside_psnr;
 use nelf_bake::eval::load_held_aside;
 use nelf_bake::{
     BakeConfig, CaptureLoadOptions, ChoiceArgs, GroundTruth, Progress, bake_capture_to_target, load_capture,
 };
-use nelf_scene::synth::{SynthConfig, write_synthetic_capture};
-
-fn tiny_capture(dir: &std::path::Path) {
-    let config = SynthConfig {
-        width: 64,
-        height: 64,
-        head_cells: 40,
-        targets: 2,
-        bounces: 0,
-        texel_samples: 1,
-        indirect_samples: 0,
-        ..SynthConfig::default()
-    };
-    write_synthetic_capture(&config, dir, &ProgressBar::hidden()).unwrap();
-}
 
 #[test]
 fn target_psnr_chooses_the_smallest_asset_that_meets_it() {
     let tmp = tempfile::tempdir().unwrap();
     let cap = tmp.path().join("capture");
-    tiny_capture(&cap);
+    common::tiny_capture(&cap, 2);
     let capture = load_capture(&cap, &CaptureLoadOptions::default()).unwrap();
     let truth = GroundTruth::from_synth_capture(&cap).unwrap();
     let held = load_held_aside(capture.description().unwrap(), &cap).unwrap();

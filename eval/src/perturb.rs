@@ -29,10 +29,8 @@ use std::path::{Path, PathBuf};
 use glam::{DMat3, DVec3};
 use image::{ColorType, DynamicImage, ImageBuffer, ImageFormat, Primitive};
 use nelf_format::capture::{CAPTURE_FILE_NAME, Capture, CaptureError};
-use nelf_format::conventions::{
-    LatLong, PinholeCamera, col_phi_bounds, direction, row_theta_bounds, texel_center_direction,
-    texel_of_direction, texel_solid_angle,
-};
+use nelf_format::conventions::{LatLong, PinholeCamera};
+use nelf_scene::envgen::{Emitter, EmitterShape, add_emitter};
 use nelf_scene::synth::{SynthConfig, Viewpoint, camera_for};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -429,84 +427,17 @@ fn write_image_atomically(
 // ---------------------------------------------------------------------------
 // Lighting.
 
-/// Sub-texel points per side when a texel is partly covered by the sun.
-const SUN_SUBSAMPLES: usize = 8;
-
-/// Coverage of each texel by the disc of angular radius `alpha` (radians) around
-/// the unit direction `centre`: `(texel index, covered fraction)` for every texel
-/// with a non-zero fraction. A texel whose every point lies within `alpha` has
-/// fraction 1, one wholly outside is skipped, one crossed by the edge is split into
-/// `8 × 8` points of equal solid angle (uniform in `cos θ` and `φ`) and the fraction
-/// inside counted. A disc that no point falls in (smaller than a sub-texel) covers
-/// the texel holding its centre, fraction 1.
-fn disc_coverage(centre: DVec3, alpha: f64, width: usize, height: usize) -> Vec<(usize, f64)> {
-    let cos_alpha = alpha.cos();
-    let dphi = 2.0 * PI / width as f64;
-    let mut out = Vec::new();
-    for row in 0..height {
-        let (t0, t1) = row_theta_bounds(row, height);
-        let sin_max = if t0 <= PI / 2.0 && t1 >= PI / 2.0 {
-            1.0
-        } else {
-            t0.sin().max(t1.sin())
-        };
-        // Every point of the texel is within this angle of its centre: half the
-        // θ extent, then along the parallel (an arc no shorter than the great circle).
-        let reach = 0.5 * ((t1 - t0) + dphi * sin_max) + 1e-12;
-        for col in 0..width {
-            let d = texel_center_direction(row, col, height, width);
-            let angle = d.dot(centre).clamp(-1.0, 1.0).acos();
-            if angle > alpha + reach {
-                continue;
-            }
-            if angle + reach <= alpha {
-                out.push((row * width + col, 1.0));
-                continue;
-            }
-            let (u0, u1) = (t0.cos(), t1.cos());
-            let (phi0, _) = col_phi_bounds(col, width);
-            let mut hits = 0usize;
-            for a in 0..SUN_SUBSAMPLES {
-                let u = u0 + (u1 - u0) * (a as f64 + 0.5) / SUN_SUBSAMPLES as f64;
-                let theta = u.clamp(-1.0, 1.0).acos();
-                for b in 0..SUN_SUBSAMPLES {
-                    let phi = phi0 + dphi * (b as f64 + 0.5) / SUN_SUBSAMPLES as f64;
-                    if direction(theta, phi).dot(centre) >= cos_alpha {
-                        hits += 1;
-                    }
-                }
-            }
-            if hits > 0 {
-                out.push((
-                    row * width + col,
-                    hits as f64 / (SUN_SUBSAMPLES * SUN_SUBSAMPLES) as f64,
-                ));
-            }
-        }
-    }
-    if out.is_empty() {
-        let (row, col) = texel_of_direction(centre, height, width);
-        out.push((row * width + col, 1.0));
-    }
-    out
-}
-
 /// A `width × height` lat-long map (world frame, project layout) of a uniform sky of
 /// radiance `sky` plus a white disc sun of angular radius `sun_radius_deg` around
 /// `sun_direction` whose power `P = ∫_disc L dΩ = sun_radiance_total` (per channel,
 /// radiance × solid angle, e.g. W/m² for W/m²/sr) does not depend on the radius:
 /// shrinking the sun only sharpens the lighting.
 ///
-/// With `f_k` texel `k`'s covered fraction (exact for texels wholly inside, `8 × 8`
-/// sub-texel points for texels crossed by the edge) and `Ω_k` its exact solid angle,
-///
-/// ```text
-/// L_k = sky + P · f_k / Σ_j Ω_j f_j
-/// ```
-///
-/// so `Σ_k Ω_k (L_k − sky) = P` exactly (up to the `f32` texels), the sun's
-/// radiance is `≈ P / 2π(1 − cos α)` inside it, and a sun smaller than a texel (or
-/// of radius ≤ 0: a point) lands whole in the texel holding its centre. A zero or
+/// The sun is a disc emitter of radiance `P / 2π(1 − cos α)` added by
+/// `nelf_scene::envgen::add_emitter` (covered fractions from sub-texel points,
+/// renormalised to the disc's exact solid angle), so `Σ_k Ω_k (L_k − sky) = P` (up
+/// to the `f32` texels), and a sun smaller than a texel (or of radius ≤ 0: a point)
+/// lands whole in the texel holding its centre. A zero or
 /// non-finite direction is taken as the zenith (+y); the radius is clamped to 180°;
 /// the size to at least 1 × 1.
 pub fn sun_envmap(
@@ -519,26 +450,30 @@ pub fn sun_envmap(
 ) -> LatLong {
     let (width, height) = (width.max(1), height.max(1));
     let centre = sun_direction.try_normalize().unwrap_or(DVec3::Y);
+    // A point sun is a disc far below a texel: the emitter lands whole in one texel.
     let alpha = if sun_radius_deg.is_finite() {
-        sun_radius_deg.to_radians().clamp(0.0, PI)
+        sun_radius_deg.to_radians().clamp(MIN_SUN_RADIUS_RAD, PI)
     } else {
-        0.0
+        MIN_SUN_RADIUS_RAD
     };
-    let coverage = disc_coverage(centre, alpha, width, height);
-    let covered: f64 = coverage
-        .iter()
-        .map(|&(k, f)| texel_solid_angle(k / width, height, width) * f)
-        .sum();
+    let radiance = (sun_radiance_total / (2.0 * PI * (1.0 - alpha.cos()))) as f32;
     let mut map = LatLong::constant(width, height, sky);
-    let texels = map.texels_mut();
-    for (k, f) in coverage {
-        let sun = (sun_radiance_total * f / covered) as f32;
-        for value in &mut texels[k] {
-            *value += sun;
-        }
-    }
+    add_emitter(
+        &mut map,
+        &Emitter {
+            shape: EmitterShape::Disc {
+                centre,
+                half_angle_rad: alpha,
+            },
+            radiance: [radiance; 3],
+        },
+    );
     map
 }
+
+/// Smallest sun radius, radians (a "point" sun), where `1 − cos α` is still exact
+/// enough in `f64`.
+const MIN_SUN_RADIUS_RAD: f64 = 1e-4;
 
 // ---------------------------------------------------------------------------
 // Viewpoints.
@@ -584,6 +519,7 @@ mod tests {
     use super::*;
     use image::{Luma, Rgb};
     use nelf_format::capture::{CaptureView, TargetView};
+    use nelf_format::conventions::{texel_center_direction, texel_of_direction, texel_solid_angle};
 
     type TestResult = Result<(), Box<dyn std::error::Error>>;
 
@@ -950,25 +886,6 @@ mod tests {
             peaks.windows(2).all(|p| p[1] > p[0]),
             "sharper as it shrinks: {peaks:?}"
         );
-    }
-
-    #[test]
-    fn disc_coverage_matches_the_disc_solid_angle() {
-        // Before the renormalisation, the counted coverage is the disc's own solid angle.
-        let centre = DVec3::new(-0.4, 0.2, 0.9).normalize();
-        let (w, h) = (256, 128);
-        for (radius, tolerance) in [(20.0f64, 0.002), (5.0, 0.005), (1.0, 0.03)] {
-            let alpha = radius.to_radians();
-            let exact = 2.0 * PI * (1.0 - alpha.cos());
-            let covered: f64 = disc_coverage(centre, alpha, w, h)
-                .iter()
-                .map(|&(k, f)| texel_solid_angle(k / w, h, w) * f)
-                .sum();
-            assert!(
-                (covered / exact - 1.0).abs() < tolerance,
-                "{radius}°: {covered} vs {exact}"
-            );
-        }
     }
 
     #[test]

@@ -1664,7 +1664,7 @@ mod tests {
         assert_eq!(
             headings,
             [
-                "Quality against size: head.obj",
+                "Quality against size",
                 "Quality against frame time",
                 "ꟻLIP against size",
                 "Every setting",

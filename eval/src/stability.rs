@@ -206,13 +206,7 @@ fn held_aside_at(
         0.9,
         angles_deg,
     );
-    let mut held = HeldAside {
-        names: Vec::new(),
-        cameras: Vec::new(),
-        images: Vec::new(),
-        masks: Vec::new(),
-        envs: Vec::new(),
-    };
+    let mut held = HeldAside::default();
     for (i, (camera, angle)) in cameras.iter().zip(angles_deg).enumerate() {
         let env = envs[i % envs.len()].clone();
         let light = project_envmap(&env, DMat3::IDENTITY).map_err(|e| EvalError::Input(e.to_string()))?;

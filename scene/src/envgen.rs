@@ -196,6 +196,15 @@ pub fn procedural_env(seed: u64, params: &EnvGenParams) -> ProceduralEnv {
     }
 }
 
+/// Adds `emitter` to `map` (world frame): its radiance × the covered fraction of
+/// every texel it touches (16 × 16 sub-texel points); a disc carries exactly its
+/// radiance × its solid angle `2π(1 − cos α)`, however small (one smaller than a
+/// sub-texel lands whole in the texel holding its centre).
+pub fn add_emitter(map: &mut LatLong, emitter: &Emitter) {
+    let (width, height) = (map.width(), map.height());
+    splat_emitter(map.texels_mut(), width, height, emitter);
+}
+
 /// Adds an emitter's radiance × covered fraction to every texel it touches.
 fn splat_emitter(texels: &mut [[f32; 3]], width: usize, height: usize, emitter: &Emitter) {
     const SUB: usize = 16;

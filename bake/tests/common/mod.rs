@@ -1,5 +1,5 @@
 //! Shared fixtures of the baker's tests: cameras around a sphere and its exact
-//! (supersampled) masks.
+//! (supersampled) masks, and a tiny path-traced capture of a procedural head.
 
 #![allow(dead_code)]
 
@@ -75,4 +75,25 @@ pub fn in_analytic_hull(cameras: &[PinholeCamera], p: DVec3) -> bool {
         let cos_max = (1.0 - (SPHERE_RADIUS / to_centre.length()).powi(2)).sqrt();
         cam.camera_from_world(p).z > 0.0 && cos >= cos_max
     })
+}
+
+/// Writes a tiny synthetic capture into `dir`: a path-traced procedural head, five
+/// 64² views, `targets` held-aside targets under other lightings (direct light
+/// only, one sample per texel: seconds).
+pub fn tiny_capture(dir: &std::path::Path, targets: usize) {
+    let config = nelf_scene::synth::SynthConfig {
+        width: 64,
+        height: 64,
+        head_cells: 40,
+        targets,
+        bounces: 0,
+        texel_samples: 1,
+        indirect_samples: 0,
+        ..nelf_scene::synth::SynthConfig::default()
+    };
+    if let Err(e) =
+        nelf_scene::synth::write_synthetic_capture(&config, dir, &indicatif::ProgressBar::hidden())
+    {
+        panic!("cannot write the tiny capture: {e}");
+    }
 }
