@@ -52,18 +52,21 @@ pub fn pareto_front(points: &[(f64, f64)]) -> Vec<bool> {
     on_front
 }
 
+/// PSNR differences below this are not told apart on a front, dB.
+pub const PSNR_RESOLUTION_DB: f64 = 0.01;
+
 /// Sets [`ParetoRow::front_bytes`] (cost: `file_bytes`, quality: `scores.psnr_db`)
 /// and [`ParetoRow::front_frame`] (cost: `gpu_frame_ms_512`, quality:
 /// `scores.psnr_db`; rows without a GPU frame time are not on that front) of every
-/// row, with [`pareto_front`]'s rules.
+/// row, with [`pareto_front`]'s rules. PSNR is compared at
+/// [`PSNR_RESOLUTION_DB`], the precision reported: an f16 asset 0.001 dB above its
+/// 8-bit twin at twice the bytes is not a better trade.
 pub fn mark_fronts(rows: &mut [ParetoRow]) {
-    let by_bytes: Vec<(f64, f64)> = rows
-        .iter()
-        .map(|r| (r.file_bytes as f64, r.scores.psnr_db))
-        .collect();
+    let quality = |r: &ParetoRow| (r.scores.psnr_db / PSNR_RESOLUTION_DB).round() * PSNR_RESOLUTION_DB;
+    let by_bytes: Vec<(f64, f64)> = rows.iter().map(|r| (r.file_bytes as f64, quality(r))).collect();
     let by_frame: Vec<(f64, f64)> = rows
         .iter()
-        .map(|r| (r.gpu_frame_ms_512.unwrap_or(f64::NAN), r.scores.psnr_db))
+        .map(|r| (r.gpu_frame_ms_512.unwrap_or(f64::NAN), quality(r)))
         .collect();
     let front_bytes = pareto_front(&by_bytes);
     let front_frame = pareto_front(&by_frame);
@@ -147,6 +150,23 @@ mod tests {
             let points: Vec<(f64, f64)> = (0..n).map(|_| (next(), next())).collect();
             assert_eq!(pareto_front(&points), brute_force(&points), "{points:?}");
         }
+    }
+
+    #[test]
+    fn fronts_do_not_tell_apart_psnr_below_the_reported_precision() {
+        // An f16 twin 0.002 dB above its 8-bit asset at twice the bytes is dominated.
+        let mut rows = vec![
+            row("u8", 1_000, 30.001, Some(5.0)),
+            row("f16", 2_000, 30.003, Some(5.0)),
+        ];
+        mark_fronts(&mut rows);
+        assert!(rows[0].front_bytes && !rows[1].front_bytes);
+        // Equal rounded PSNR and equal frame time: both stay (exact ties).
+        assert!(rows[0].front_frame && rows[1].front_frame);
+        // A real gain is a real trade.
+        let mut rows = vec![row("u8", 1_000, 30.0, None), row("f16", 2_000, 30.1, None)];
+        mark_fronts(&mut rows);
+        assert!(rows[0].front_bytes && rows[1].front_bytes);
     }
 
     fn row(id: &str, bytes: u64, psnr: f64, frame: Option<f64>) -> ParetoRow {
