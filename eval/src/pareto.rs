@@ -127,7 +127,7 @@ pub struct ParetoResults {
     pub views: Vec<String>,
     /// One row per setting.
     pub rows: Vec<ParetoRow>,
-    /// Seconds of the whole run (this invocation).
+    /// Seconds spent on this sweep, summed over every invocation that resumed it.
     pub run_secs: f64,
 }
 
@@ -142,8 +142,9 @@ fn create_dir(path: &Path) -> Result<()> {
     })
 }
 
-/// Loads earlier rows of the same sweep from `results.json`, if any.
-fn earlier_rows(path: &Path, config: &ParetoConfig) -> Vec<ParetoRow> {
+/// Loads earlier rows of the same sweep from `results.json`, if any, with the
+/// seconds already spent on them.
+fn earlier_rows(path: &Path, config: &ParetoConfig) -> (Vec<ParetoRow>, f64) {
     std::fs::read_to_string(path)
         .ok()
         .and_then(|t| serde_json::from_str::<ParetoResults>(&t).ok())
@@ -154,7 +155,7 @@ fn earlier_rows(path: &Path, config: &ParetoConfig) -> Vec<ParetoRow> {
                 && r.config.mesh_rotate_y_deg == config.mesh_rotate_y_deg
                 && r.config.image_size == config.image_size
         })
-        .map(|r| r.rows)
+        .map(|r| (r.rows, r.run_secs))
         .unwrap_or_default()
 }
 
@@ -198,7 +199,7 @@ pub fn run_pareto(config: &ParetoConfig) -> Result<ParetoResults> {
         )));
     }
     let results_path = out.join("results.json");
-    let mut rows = earlier_rows(&results_path, config);
+    let (mut rows, earlier_secs) = earlier_rows(&results_path, config);
     let mut gpu = if config.no_gpu {
         None
     } else {
@@ -289,7 +290,7 @@ pub fn run_pareto(config: &ParetoConfig) -> Result<ParetoResults> {
         )?;
         rows.extend(new_rows);
         results.rows.clone_from(&rows);
-        results.run_secs = start.elapsed().as_secs_f64();
+        results.run_secs = earlier_secs + start.elapsed().as_secs_f64();
         save(out, &results)?;
     }
     bar.finish_and_clear();
@@ -300,7 +301,7 @@ pub fn run_pareto(config: &ParetoConfig) -> Result<ParetoResults> {
         .collect();
     crate::front::mark_fronts(&mut ordered);
     results.rows = ordered;
-    results.run_secs = start.elapsed().as_secs_f64();
+    results.run_secs = earlier_secs + start.elapsed().as_secs_f64();
     save(out, &results)?;
     crate::report::write_csv(&out.join("results.csv"), &results.rows)?;
     let mut sections = crate::report::pareto_sections(&results.rows, &results.input, out);

@@ -117,7 +117,7 @@ pub struct StabilityResults {
     pub points: Vec<StabilityPoint>,
     /// Per axis, the first value whose PSNR falls below the threshold (`None`: never).
     pub breaks: Vec<(String, Option<String>)>,
-    /// Seconds of this invocation.
+    /// Seconds spent on this run, summed over every invocation that resumed it.
     pub run_secs: f64,
 }
 
@@ -604,7 +604,7 @@ pub fn run_stability(config: &StabilityConfig) -> Result<StabilityResults> {
         quiet: config.quiet,
     };
     let results_path = out.join("stability.json");
-    let earlier: Vec<StabilityPoint> = std::fs::read_to_string(&results_path)
+    let earlier: (Vec<StabilityPoint>, f64) = std::fs::read_to_string(&results_path)
         .ok()
         .and_then(|t| serde_json::from_str::<StabilityResults>(&t).ok())
         .filter(|r| {
@@ -615,8 +615,9 @@ pub fn run_stability(config: &StabilityConfig) -> Result<StabilityResults> {
                 && r.config.mesh_height_m == config.mesh_height_m
                 && r.config.mesh_rotate_y_deg == config.mesh_rotate_y_deg
         })
-        .map(|r| r.points)
+        .map(|r| (r.points, r.run_secs))
         .unwrap_or_default();
+    let (earlier, earlier_secs) = earlier;
     let mut results = StabilityResults {
         config: config.clone(),
         input: input.name(),
@@ -632,7 +633,7 @@ pub fn run_stability(config: &StabilityConfig) -> Result<StabilityResults> {
         ctx.axis_points(axis, &done, |p| {
             fresh.push(p.clone());
             results.points.push(p);
-            results.run_secs = start.elapsed().as_secs_f64();
+            results.run_secs = earlier_secs + start.elapsed().as_secs_f64();
             crate::report::write_json(&results_path, &results)?;
             Ok(())
         })?;
@@ -655,7 +656,7 @@ pub fn run_stability(config: &StabilityConfig) -> Result<StabilityResults> {
     }
     results.points = ordered;
     results.breaks = breaks(&results.points, config.threshold_db);
-    results.run_secs = start.elapsed().as_secs_f64();
+    results.run_secs = earlier_secs + start.elapsed().as_secs_f64();
     crate::report::write_json(&results_path, &results)?;
     crate::report::write_stability_csv(&out.join("stability.csv"), &results.points)?;
     let sections = crate::report::stability_sections(&results.points, config.threshold_db, out);
