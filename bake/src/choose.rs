@@ -34,7 +34,7 @@ use std::time::Instant;
 
 use nelf_format::{Asset, WriteOptions, encode_asset};
 use nelf_render::{BrickGrid, MarchSettings, project_light_texels, render_asset, render_features};
-use nelf_scene::metrics::psnr;
+use nelf_scene::metrics::{mse, psnr};
 use serde::{Deserialize, Serialize};
 
 use crate::capture_in::LoadedCapture;
@@ -175,41 +175,29 @@ pub fn rank_psnrs(full: &Asset, ranks: &[usize], held: &HeldAside, step_voxels: 
         .zip(&held.names)
     {
         let range = f64::from(data_range(truth));
-        let mse_of = |db: f64| range * range / 10f64.powf(db / 10.0);
         let exact_top = render_asset(full, camera, env, glam::DMat3::IDENTITY, None, &antialiased)?;
-        let mse_top_aa = mse_of(psnr(&exact_top.rgb, truth, range)?);
+        let mse_top_aa = mse(&exact_top.rgb, truth)?;
         let rendered = render_features(&grid, &density, &features, dim, camera, &one_ray)?;
         let light = project_light_texels(&full.pca, &light_texels(env, full.world_from_light)?)?;
-        // Running image, rank by rank.
+        // The one-ray image, component by component; its MSE is kept at every
+        // candidate rank (ranks above the top count as the top).
         let mut image: Vec<[f32; 3]> = rendered
             .chunks_exact(dim)
             .map(|f| light.mean_rgb.map(|m| f[0] * m))
             .collect();
-        let mut done = 0;
-        let mut mse_k = Vec::with_capacity(ranks.len());
-        for &k in ranks {
-            for j in done..k.min(top) {
-                let p = light.component_rgb[j];
-                for (px, f) in image.iter_mut().zip(rendered.chunks_exact(dim)) {
-                    for c in 0..3 {
-                        px[c] += f[j + 1] * p[c];
-                    }
-                }
-            }
-            done = done.max(k.min(top));
-            mse_k.push(mse_of(psnr(&image, truth, range)?));
-        }
-        // The one-ray image at the top rank is the last running image when the last
-        // rank is the top; otherwise finish it.
-        for j in done..top {
-            let p = light.component_rgb[j];
+        let mut mse_at = vec![0.0f64; top + 1];
+        for (j, p) in light.component_rgb.iter().enumerate() {
             for (px, f) in image.iter_mut().zip(rendered.chunks_exact(dim)) {
                 for c in 0..3 {
                     px[c] += f[j + 1] * p[c];
                 }
             }
+            if ranks.contains(&(j + 1)) || j + 1 == top {
+                mse_at[j + 1] = mse(&image, truth)?;
+            }
         }
-        let mse_top_one = mse_of(psnr(&image, truth, range)?);
+        let mse_k: Vec<f64> = ranks.iter().map(|&k| mse_at[k.min(top)]).collect();
+        let mse_top_one = mse_at[top];
         for (s, m) in sums.iter_mut().zip(&mse_k) {
             let corrected = (mse_top_aa + m - mse_top_one)
                 .max(1e-3 * mse_top_aa)

@@ -352,7 +352,16 @@ impl Context<'_> {
                 let dir = self.synth(&base, "base")?;
                 let capture = load_capture(&dir, &CaptureLoadOptions::default())?;
                 let truth = GroundTruth::from_synth_capture(&dir)?;
-                let asset = self.bake(&dir)?;
+                // Baked on first use: a resumed axis with every point measured bakes nothing.
+                let mut baked: Option<Asset> = None;
+                let mut asset = || -> Result<Asset> {
+                    if let Some(a) = &baked {
+                        return Ok(a.clone());
+                    }
+                    let a = self.bake(&dir)?;
+                    baked = Some(a.clone());
+                    Ok(a)
+                };
                 match axis {
                     "target_angle_deg" => {
                         for deg in self
@@ -362,7 +371,7 @@ impl Context<'_> {
                             let label = format!("{deg}°");
                             if !have(&label) {
                                 let held = held_aside_at(&truth, &self.setup, &[deg], &self.held.envs)?;
-                                emit(self.point(axis, deg, label, &asset, &held)?)?;
+                                emit(self.point(axis, deg, label, &asset()?, &held)?)?;
                             }
                         }
                     }
@@ -373,15 +382,28 @@ impl Context<'_> {
                                 let sun =
                                     sun_envmap(deg, DVec3::new(0.6, 0.5, 0.62), 10.0, [0.05; 3], 256, 128);
                                 let held = held_aside_at(&truth, &self.setup, &[-20.0, 15.0], &[sun])?;
-                                emit(self.point(axis, deg, label, &asset, &held)?)?;
+                                emit(self.point(axis, deg, label, &asset()?, &held)?)?;
                             }
                         }
                     }
                     "hdri" => {
-                        let mut files: Vec<PathBuf> = std::fs::read_dir(&self.config.hdri_dir)
-                            .map(|rd| rd.filter_map(|e| e.ok().map(|e| e.path())).collect())
-                            .unwrap_or_default();
+                        let hdri_dir = &self.config.hdri_dir;
+                        let mut files: Vec<PathBuf> = std::fs::read_dir(hdri_dir)
+                            .map_err(|e| EvalError::Io {
+                                path: hdri_dir.clone(),
+                                message: format!(
+                                    "cannot read the HDRI folder of the hdri axis ({e}); give --hdri-dir or leave the axis out with --axes"
+                                ),
+                            })?
+                            .filter_map(|e| e.ok().map(|e| e.path()))
+                            .collect();
                         files.retain(|p| p.extension().is_some_and(|e| e == "exr" || e == "hdr"));
+                        if files.is_empty() {
+                            return Err(EvalError::Input(format!(
+                                "{}: no .exr or .hdr environment maps for the hdri axis",
+                                hdri_dir.display()
+                            )));
+                        }
                         files.sort();
                         if quick {
                             files.truncate(2);
@@ -397,7 +419,7 @@ impl Context<'_> {
                                         message: e.to_string(),
                                     })?;
                                 let held = held_aside_at(&truth, &self.setup, &[-20.0, 15.0], &[env])?;
-                                emit(self.point(axis, i as f64, label, &asset, &held)?)?;
+                                emit(self.point(axis, i as f64, label, &asset()?, &held)?)?;
                             }
                         }
                     }
