@@ -254,6 +254,7 @@ impl SampledField {
             density: self.stored_density.clone(),
             pca: self.pca.model(self.top_rank).truncated(rank),
             coefficients: Coefficients::quantize_with_min_step(&truncated, rank, encoding, self.min_step)?,
+            view: None,
             metadata: serde_json::json!({}),
         };
         Ok(asset)

@@ -13,7 +13,7 @@
 use glam::{DMat3, DVec3};
 use half::f16;
 
-use crate::conventions::{LT_DIM, is_rotation};
+use crate::conventions::{LT_DIM, VIEW_HARMONICS, is_rotation, view_harmonics};
 use crate::error::{FormatError, Result};
 use crate::spec::{BRICK_SIZE, BRICK_VOXELS, MAX_GRID_BRICKS};
 
@@ -532,6 +532,106 @@ pub fn has_negative_density(density: &[f16]) -> bool {
     density.iter().any(|d| d.to_f32() < 0.0)
 }
 
+/// The view-dependent part of the light transport (format 1.2, optional sections
+/// `VDEP` and `VCOF`, SPEC.md §6). With it, the transport a voxel sends toward a viewer
+/// in world direction `ω` (unit, from the voxel toward the eye) is
+///
+/// `T(x, ω) = m + Σ_k c_k(x) B_k + Σ_j Y_j(ω) Σ_i d_ji(x) V_i`,
+///
+/// the first two terms being the asset's PCA part (the view-independent mean over the
+/// directions it was seen from), `Y_j(ω) = Σ_l lobes[j·8 + l] · y_l(ω)` a lobe built from
+/// the real spherical harmonics of degrees 1–2 ([`crate::conventions::view_harmonics`]),
+/// `V_i` the view basis (no mean) and `d_ji(x)` per-voxel coefficients, stored at index
+/// `j·K_v + i` among the voxel's `J·K_v`. A reader that ignores it renders the PCA part,
+/// which is the view-averaged asset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ViewDependence {
+    /// `J × 8` lobe weights over the degree-1–2 harmonics, lobe-major.
+    pub lobes: Vec<f32>,
+    /// `K_v` view basis vectors of [`LT_DIM`] numbers, vector `i` at `i·384 .. (i+1)·384`.
+    pub basis: Vec<f32>,
+    /// Per-voxel coefficients, `J·K_v` per voxel (the [`Coefficients`] rank), lobe-major.
+    pub coefficients: Coefficients,
+}
+
+impl ViewDependence {
+    /// Number of lobes `J`.
+    pub fn lobe_count(&self) -> usize {
+        self.lobes.len() / VIEW_HARMONICS
+    }
+
+    /// View basis rank `K_v`.
+    pub fn rank(&self) -> usize {
+        self.basis.len() / LT_DIM
+    }
+
+    /// Basis vector `i`.
+    pub fn component(&self, i: usize) -> &[f32] {
+        &self.basis[i * LT_DIM..(i + 1) * LT_DIM]
+    }
+
+    /// The `J` lobe values `Y_j(ω)` at world direction `omega` (normalised here).
+    pub fn lobe_values(&self, omega: [f32; 3]) -> Vec<f32> {
+        let y = view_harmonics(omega);
+        self.lobes
+            .chunks_exact(VIEW_HARMONICS)
+            .map(|w| w.iter().zip(&y).map(|(a, b)| a * b).sum())
+            .collect()
+    }
+
+    /// Adds the view-dependent transport of a voxel with dequantized coefficients
+    /// `coefficients` (`J·K_v`) seen from `omega` to `out` (384 numbers):
+    /// `out += Σ_j Y_j(ω) Σ_i d_ji V_i`, in `f32`, `j` then `i` ascending.
+    pub fn add_to(&self, coefficients: &[f32], omega: [f32; 3], out: &mut [f32]) {
+        let rank = self.rank();
+        for (j, y) in self.lobe_values(omega).into_iter().enumerate() {
+            for i in 0..rank {
+                let w = y * coefficients[j * rank + i];
+                for (o, b) in out[..LT_DIM].iter_mut().zip(self.component(i)) {
+                    *o += w * b;
+                }
+            }
+        }
+    }
+
+    /// Checks shapes (1..=8 lobes, rank ≥ 1, `J·K_v ≤ 384` coefficients per voxel,
+    /// `voxels × J·K_v` values), finiteness and the coefficient parameters.
+    pub fn validate(&self, voxels: usize) -> Result<()> {
+        let lobes = self.lobe_count();
+        if self.lobes.len() % VIEW_HARMONICS != 0 || !(1..=VIEW_HARMONICS).contains(&lobes) {
+            return Err(FormatError::InvalidAsset(format!(
+                "view dependence has {} lobe weights: must be 8 per lobe, 1 to 8 lobes",
+                self.lobes.len()
+            )));
+        }
+        if self.basis.len() % LT_DIM != 0 || self.basis.is_empty() {
+            return Err(FormatError::InvalidAsset(format!(
+                "view basis has {} values, not a positive multiple of {LT_DIM}",
+                self.basis.len()
+            )));
+        }
+        let per_voxel = lobes * self.rank();
+        if per_voxel > LT_DIM || self.coefficients.rank() != per_voxel {
+            return Err(FormatError::InvalidAsset(format!(
+                "view coefficients have {} values per voxel; {lobes} lobes × rank {} = {per_voxel} (at most {LT_DIM})",
+                self.coefficients.rank(),
+                self.rank()
+            )));
+        }
+        if let Some(i) = self.lobes.iter().position(|v| !v.is_finite()) {
+            return Err(FormatError::NonFinite {
+                what: format!("section VDEP lobe {} weight {}", i / VIEW_HARMONICS, i % VIEW_HARMONICS),
+            });
+        }
+        if let Some(i) = self.basis.iter().position(|v| !v.is_finite()) {
+            return Err(FormatError::NonFinite {
+                what: format!("section VDEP basis vector {} element {}", i / LT_DIM, i % LT_DIM),
+            });
+        }
+        self.coefficients.validate(voxels)
+    }
+}
+
 /// A whole `.nelf` asset in memory.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Asset {
@@ -547,6 +647,8 @@ pub struct Asset {
     pub pca: PcaModel,
     /// Quantized coefficients, `bricks.len() × 512 × K`.
     pub coefficients: Coefficients,
+    /// The view-dependent part (format 1.2), `None` for a view-independent asset.
+    pub view: Option<ViewDependence>,
     /// Metadata, a JSON object (provenance, bake settings, measured error).
     pub metadata: serde_json::Value,
 }
@@ -649,6 +751,9 @@ impl Asset {
             )));
         }
         self.coefficients.validate(voxels)?;
+        if let Some(view) = &self.view {
+            view.validate(voxels)?;
+        }
         if !self.metadata.is_object() {
             return Err(FormatError::MetadataNotObject {
                 found: json_type_name(&self.metadata),

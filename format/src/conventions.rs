@@ -364,6 +364,40 @@ fn project_splat(env: &LatLong, env_from_light: DMat3) -> Vec<[f32; 3]> {
         .collect()
 }
 
+/// Number of outgoing-direction functions a view-dependent asset's lobes are built from:
+/// the real spherical harmonics of degrees 1 and 2 ([`view_harmonics`]).
+pub const VIEW_HARMONICS: usize = 8;
+
+/// The real spherical harmonics of degrees 1 and 2 at the unit outgoing direction `ω`
+/// (world frame, from the point toward the viewer), orthonormal over the sphere
+/// (`∫ y_a y_b dω = δ_ab`; the constant `y_0` is left out: the view-independent part
+/// of `T` is the PCA part). With `ω = (x, y, z)`:
+///
+/// `y = (a·y, a·z, a·x, b·xy, b·yz, c·(3z² − 1), b·xz, b/2·(x² − y²))`,
+/// `a = √(3/4π)`, `b = √(15/4π)`, `c = √(5/16π)` (the usual order `m = −l … l` with the
+/// physics convention's z axis; SPEC.md §6 `VDEP`). `ω` need not be unit: it is
+/// normalised first (a zero vector gives zeros).
+pub fn view_harmonics(omega: [f32; 3]) -> [f32; VIEW_HARMONICS] {
+    const A: f32 = 0.488_602_5; // √(3/4π)
+    const B: f32 = 1.092_548_4; // √(15/4π)
+    const C: f32 = 0.315_391_57; // √(5/16π)
+    let len = (omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]).sqrt();
+    if !(len > 0.0 && len.is_finite()) {
+        return [0.0; VIEW_HARMONICS];
+    }
+    let [x, y, z] = omega.map(|v| v / len);
+    [
+        A * y,
+        A * z,
+        A * x,
+        B * x * y,
+        B * y * z,
+        C * (3.0 * z * z - 1.0),
+        B * x * z,
+        0.5 * B * (x * x - y * y),
+    ]
+}
+
 /// Outgoing radiance `radiance_c = Σ_k T[c·128 + k] · L_k[c]` of one light-transport
 /// vector under an 8 × 16 map in the same light frame.
 pub fn shade(lt: &[f32], light: &LatLong) -> [f32; 3] {

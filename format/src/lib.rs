@@ -16,7 +16,7 @@ pub mod synthetic;
 pub mod write;
 
 pub use asset::{
-    Asset, BrickData, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, encode_density,
+    Asset, BrickData, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, ViewDependence, encode_density,
     has_negative_density,
 };
 pub use error::FormatError;

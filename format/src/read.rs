@@ -334,6 +334,7 @@ impl<R: Read + Seek> AssetReader<R> {
             density,
             pca: self.pca,
             coefficients,
+            view: None,
             metadata: self.metadata,
         };
         asset.validate()?;

@@ -223,6 +223,7 @@ impl SyntheticField {
             density: encode_density(&self.density())?,
             pca,
             coefficients,
+            view: None,
             metadata: serde_json::json!({
                 "provenance": {
                     "generator": "nelf_format::synthetic",

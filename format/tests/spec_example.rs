@@ -124,6 +124,7 @@ fn example_asset() -> Asset {
             offset: OFFSET.to_vec(),
             codes,
         },
+        view: None,
         metadata: serde_json::json!({"example": "SPEC.md section 17"}),
     }
 }

@@ -56,6 +56,7 @@ use rayon::prelude::*;
 use crate::error::RenderError;
 use crate::grid::{BrickGrid, Lookup};
 use crate::light::{project_light, voxel_radiance};
+use crate::view::{project_view_light, radiance_seen_from, voxel_lobe_radiance};
 
 /// Largest [`MarchSettings::pixel_grid`] (256 rays per pixel).
 pub const MAX_PIXEL_GRID: u32 = 16;
@@ -560,7 +561,8 @@ pub fn asset_density(asset: &Asset) -> Vec<f32> {
 
 /// Everything for one asset, camera and lighting: checks the asset, projects `env`
 /// (turned by `world_from_env`) onto its basis, computes per-voxel radiance with the
-/// first `rank` components (default all) and ray-marches.
+/// first `rank` components (default all), adds a view-dependent asset's lobes toward the
+/// camera centre ([`crate::view`]) and ray-marches.
 pub fn render_asset(
     asset: &Asset,
     camera: &PinholeCamera,
@@ -572,6 +574,11 @@ pub fn render_asset(
     asset.validate()?;
     let grid = BrickGrid::from_asset(asset)?;
     let light = project_light(&asset.pca, asset.world_from_light, env, world_from_env)?;
-    let radiance = voxel_radiance(asset, &light, rank);
+    let mut radiance = voxel_radiance(asset, &light, rank);
+    if let Some(view) = &asset.view {
+        let view_light = project_view_light(view, asset.world_from_light, env, world_from_env)?;
+        let lobes = voxel_lobe_radiance(view, &view_light, radiance.len());
+        radiance = radiance_seen_from(asset, &radiance, &lobes, camera.centre());
+    }
     render_volume(&grid, &asset_density(asset), &radiance, camera, settings)
 }

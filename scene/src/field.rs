@@ -165,6 +165,35 @@ pub trait FieldSource: Sync {
         lt: &mut [f32],
     ) -> Result<(), FieldError>;
 
+    /// Light transport toward several outgoing directions at once (view-dependent
+    /// bakes): `lt[(i·D + d)·384 ..][..384]` is point `i`'s `T` for the fixed unit world
+    /// direction `directions[d]` (from the point toward the viewer), `D =
+    /// directions.len()`; `density[i]` as [`Self::evaluate`]. The default calls
+    /// [`Self::evaluate`] once per direction with [`ViewPolicy::Direction`]; sources
+    /// that share work across directions (the ground-truth tracer traces each point's
+    /// visibility once) override it, with the same results up to their own noise rules.
+    fn evaluate_directions(
+        &self,
+        points: &[Vec3],
+        directions: &[Vec3],
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        let count = directions.len();
+        if count == 0 || lt.len() != points.len() * count * LT_DIM || density.len() != points.len() {
+            return Err(length_error(points.len(), density.len(), lt.len() / count.max(1)));
+        }
+        let mut one = vec![0.0f32; points.len() * LT_DIM];
+        for (d, dir) in directions.iter().enumerate() {
+            self.evaluate(points, &ViewPolicy::Direction(*dir), density, &mut one)?;
+            for (i, t) in one.chunks_exact(LT_DIM).enumerate() {
+                let at = (i * count + d) * LT_DIM;
+                lt[at..at + LT_DIM].copy_from_slice(t);
+            }
+        }
+        Ok(())
+    }
+
     /// Axis-aligned box `(min, max)` outside which the density is zero.
     fn bounds(&self) -> (Vec3, Vec3);
 
