@@ -23,11 +23,13 @@ use std::f64::consts::PI;
 
 use glam::DVec3;
 
-use crate::asset::{Asset, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, encode_density};
-use crate::conventions::{
-    ENV_H, ENV_W, LT_DIM, lt_index, rotation_y, texel_center_direction, texel_solid_angle,
+use crate::asset::{
+    Asset, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, ViewDependence, encode_density,
 };
-use crate::error::Result;
+use crate::conventions::{
+    ENV_H, ENV_W, LT_DIM, VIEW_HARMONICS, lt_index, rotation_y, texel_center_direction, texel_solid_angle,
+};
+use crate::error::{FormatError, Result};
 use crate::spec::{BRICK_SIZE, BRICK_VOXELS};
 
 /// Radius of the synthetic head, metres.
@@ -246,6 +248,80 @@ pub fn synthetic_asset(
     SyntheticField::new(voxels_target, seed).asset(rank, encoding)
 }
 
+/// A deterministic view-dependent part for `asset` (format 1.2, [`ViewDependence`]), for
+/// tests of everything that reads one: `lobes` lobes (`J`, 1..=8), a view basis of rank
+/// `rank` (`K_v`, `J·K_v ≤ 384`) and `asset.voxel_count()` voxels of coefficients quantized
+/// with `encoding`, all a function of the arguments (and the asset's voxel positions).
+///
+/// Not a physical model, but shaped like one: lobe `j` is mostly harmonic `j mod 8`
+/// (plus a seeded ±0.25 mix of the others); basis vector `i` is a glossy highlight
+/// around a seeded light direction, `Ω_k · max(0, ω_k·a_i)⁴`, tinted per channel, with 5 %
+/// seeded noise, then orthonormalised; the coefficients `d_ji` are smooth in space
+/// (about 0.02 / (i + 1), a few percent of `T`), with 10 % per-voxel noise. Set it with
+/// `asset.view = Some(synthetic_view(&asset, …)?)`.
+pub fn synthetic_view(
+    asset: &Asset,
+    lobes: usize,
+    rank: usize,
+    encoding: CoefficientEncoding,
+    seed: u64,
+) -> Result<ViewDependence> {
+    if !(1..=VIEW_HARMONICS).contains(&lobes) || rank == 0 || lobes * rank > LT_DIM {
+        return Err(FormatError::InvalidAsset(format!(
+            "a view part needs 1 to {VIEW_HARMONICS} lobes and rank ≥ 1 with lobes × rank ≤ {LT_DIM}, \
+             not {lobes} × {rank}"
+        )));
+    }
+    let hash = |a: u64, b: u64, c: u64| {
+        unit(splitmix(
+            seed ^ splitmix(a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ splitmix(b ^ (c << 32))),
+        ))
+    };
+    let lobe_weights: Vec<f32> = (0..lobes * VIEW_HARMONICS)
+        .map(|n| {
+            let (j, l) = (n / VIEW_HARMONICS, n % VIEW_HARMONICS);
+            let main = if l == j % VIEW_HARMONICS { 1.0 } else { 0.0 };
+            (main + 0.25 * hash(1, j as u64, l as u64)) as f32
+        })
+        .collect();
+    let world_from_light = asset.world_from_light;
+    let mut basis = vec![0.0f64; rank * LT_DIM];
+    for (i, vector) in basis.chunks_exact_mut(LT_DIM).enumerate() {
+        let iu = i as u64;
+        let axis = DVec3::new(hash(2, iu, 0), hash(2, iu, 1), hash(2, iu, 2)).normalize_or(DVec3::Y);
+        for row in 0..ENV_H {
+            for col in 0..ENV_W {
+                let k = row * ENV_W + col;
+                let omega = texel_solid_angle(row, ENV_H, ENV_W);
+                let d = world_from_light * texel_center_direction(row, col, ENV_H, ENV_W);
+                let gloss = d.dot(axis).max(0.0).powi(4);
+                for c in 0..3 {
+                    let tint = 1.0 + 0.2 * c as f64;
+                    let noise = 0.05 * hash(3, iu, (c * 128 + k) as u64);
+                    vector[lt_index(c, row, col)] = omega * (tint * gloss + noise);
+                }
+            }
+        }
+    }
+    orthonormalize(&mut basis, LT_DIM);
+    let per_voxel = lobes * rank;
+    let values: Vec<f32> = (0..asset.voxel_count() * per_voxel)
+        .map(|n| {
+            let (v, m) = (n / per_voxel, n % per_voxel);
+            let (j, i) = ((m / rank) as f64, (m % rank) as f64);
+            let p = asset.voxel_position_m(v);
+            let smooth = 0.5 + 0.5 * (17.0 * p.x + 1.3 * j + 0.7 * i).sin() * (13.0 * p.y - 0.9 * j).cos();
+            let noise = 0.1 * hash(4, v as u64, m as u64);
+            (0.02 / (1.0 + i) * (smooth + noise)) as f32
+        })
+        .collect();
+    Ok(ViewDependence {
+        lobes: lobe_weights,
+        basis: basis.iter().map(|&b| b as f32).collect(),
+        coefficients: Coefficients::quantize(&values, per_voxel, encoding)?,
+    })
+}
+
 /// A grid of `n³` bricks around the head with a 20 % margin.
 fn grid_for(n: u32) -> GridGeometry {
     let half = 1.2 * HEAD_RADIUS_M;
@@ -452,6 +528,41 @@ mod tests {
         f.lt(top, &mut t);
         let rgb = shade(&t, &LatLong::constant(ENV_W, ENV_H, [1.0; 3]));
         assert!(rgb.iter().all(|&v| v > 0.2 && v < 1.0), "{rgb:?}");
+    }
+
+    #[test]
+    fn synthetic_view_is_deterministic_valid_and_small() {
+        let field = SyntheticField::new(1500, 3);
+        let asset = field.asset(4, CoefficientEncoding::U8Affine).unwrap();
+        for (lobes, rank, encoding) in [
+            (1, 1, CoefficientEncoding::U8Affine),
+            (3, 2, CoefficientEncoding::F16),
+            (8, 48, CoefficientEncoding::U8Affine),
+        ] {
+            let view = synthetic_view(&asset, lobes, rank, encoding, 9).unwrap();
+            assert!(view == synthetic_view(&asset, lobes, rank, encoding, 9).unwrap());
+            assert!(view != synthetic_view(&asset, lobes, rank, encoding, 10).unwrap());
+            assert_eq!((view.lobe_count(), view.rank()), (lobes, rank));
+            assert_eq!(view.coefficients.encoding(), encoding);
+            view.validate(asset.voxel_count()).unwrap();
+            // A few percent of T: the view part of a voxel is well below its PCA part.
+            let v = asset.voxel_count() / 2;
+            let mut d = vec![0.0f32; lobes * rank];
+            view.coefficients.voxel_f32(v, &mut d);
+            let mut extra = [0.0f32; LT_DIM];
+            view.add_to(&d, [0.3, 0.5, 0.8], &mut extra);
+            let norm = |t: &[f32]| t.iter().map(|x| x * x).sum::<f32>().sqrt();
+            let t = asset.reconstruct_lt(v);
+            assert!(
+                norm(&extra) > 0.0 && norm(&extra) < 0.5 * norm(&t),
+                "{} vs {}",
+                norm(&extra),
+                norm(&t)
+            );
+        }
+        assert!(synthetic_view(&asset, 0, 1, CoefficientEncoding::F16, 1).is_err());
+        assert!(synthetic_view(&asset, 9, 1, CoefficientEncoding::F16, 1).is_err());
+        assert!(synthetic_view(&asset, 2, 193, CoefficientEncoding::F16, 1).is_err());
     }
 
     #[test]
