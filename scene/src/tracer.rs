@@ -248,6 +248,11 @@ impl Lobe<'_> {
     }
 }
 
+/// [`LtTracer::accumulate_joint`] met an indirect path traced for some of its
+/// vectors and skipped for others.
+#[derive(Debug, Clone, Copy)]
+struct StreamsParted;
+
 /// Most outgoing directions averaged in one call (reflections kept on the stack).
 pub const MAX_AVERAGED_DIRECTIONS: usize = 64;
 
@@ -432,6 +437,105 @@ impl LtTracer {
         );
     }
 
+    /// The light-transport vectors `T` at `sp` for each unit outgoing direction in
+    /// `omegas`, written (not added) to `out[d·384 .. (d+1)·384]` (`out.len()` must be
+    /// `omegas.len() × 384`), in one pass.
+    ///
+    /// Only the BRDF depends on `ω_o`: the direct samples, visibility rays and
+    /// indirect paths are drawn and traced once and each direction's lobe is
+    /// evaluated on them, with the same random draws in the same order as
+    /// [`Self::light_transport`] makes. So `out[d]` equals `light_transport(sp,
+    /// omegas[d], rng)` from the same generator state (bit for bit: the same
+    /// operations in the same order). Directions with the same lobe (every direction
+    /// without a specular lobe, every direction below the shading horizon) are
+    /// computed once and copied.
+    ///
+    /// The one case where the single-direction estimates' random streams part is an
+    /// indirect path that is traced for some directions and skipped for others (its
+    /// weight is zero for some directions only: a black diffuse part, a zero-valued
+    /// lobe); it is detected and the distinct lobes are then traced one by one, each
+    /// from the generator's starting state. `rng` ends as after one of the
+    /// single-direction estimates.
+    pub fn light_transport_directions(
+        &self,
+        sp: &SurfacePoint,
+        omegas: &[Vec3],
+        rng: &mut TraceRng,
+        out: &mut [f32],
+    ) {
+        assert_eq!(
+            out.len(),
+            omegas.len() * LT_DIM,
+            "light transport toward {} directions needs {} floats",
+            omegas.len(),
+            omegas.len() * LT_DIM
+        );
+        out.fill(0.0);
+        if omegas.is_empty() {
+            return;
+        }
+        let mut reflections = vec![Vec3::ZERO; omegas.len()];
+        // The distinct lobes, told apart by their mirror direction (or its absence),
+        // and each direction's index among them.
+        let mut distinct: Vec<(Option<[u32; 3]>, Lobe<'_>)> = Vec::new();
+        let mut lobe_of = Vec::with_capacity(omegas.len());
+        for (w, scratch) in omegas.iter().zip(reflections.chunks_exact_mut(1)) {
+            let lobe = self.lobe(sp, std::slice::from_ref(w), scratch);
+            let key = lobe.reflections.first().map(|r| r.to_array().map(f32::to_bits));
+            let index = distinct.iter().position(|(k, _)| *k == key).unwrap_or_else(|| {
+                distinct.push((key, lobe));
+                distinct.len() - 1
+            });
+            lobe_of.push(index);
+        }
+        let lobes: Vec<Lobe<'_>> = distinct.into_iter().map(|(_, lobe)| lobe).collect();
+        let mut vectors = vec![0.0f32; lobes.len() * LT_DIM];
+        let settings = &self.settings;
+        let one_by_one = |rng: &mut TraceRng, vectors: &mut [f32]| {
+            let start = rng.clone();
+            for (lobe, vector) in lobes.iter().zip(vectors.chunks_exact_mut(LT_DIM)) {
+                *rng = start.clone();
+                let Ok(vector) = <&mut [f32; LT_DIM]>::try_from(vector) else {
+                    continue;
+                };
+                self.accumulate(
+                    sp,
+                    lobe,
+                    settings.texel_samples,
+                    settings.indirect_samples,
+                    settings.bounces,
+                    [1.0; 3],
+                    rng,
+                    vector,
+                );
+            }
+        };
+        if lobes.len() == 1 {
+            one_by_one(rng, &mut vectors);
+        } else {
+            let start = rng.clone();
+            let weights = vec![[1.0f32; 3]; lobes.len()];
+            let joint = self.accumulate_joint(
+                sp,
+                &lobes,
+                settings.texel_samples,
+                settings.indirect_samples,
+                settings.bounces,
+                &weights,
+                rng,
+                &mut vectors,
+            );
+            if joint.is_err() {
+                *rng = start;
+                vectors.fill(0.0);
+                one_by_one(rng, &mut vectors);
+            }
+        }
+        for (o, &i) in out.chunks_exact_mut(LT_DIM).zip(&lobe_of) {
+            o.copy_from_slice(&vectors[i * LT_DIM..(i + 1) * LT_DIM]);
+        }
+    }
+
     /// The BRDF at `sp` averaged over `omegas`; `reflections` is scratch space.
     fn lobe<'a>(&self, sp: &SurfacePoint, omegas: &[Vec3], reflections: &'a mut [Vec3]) -> Lobe<'a> {
         let n = sp.shading_normal;
@@ -553,6 +657,129 @@ impl LtTracer {
                 );
             }
         }
+    }
+
+    /// [`Self::accumulate`] for several vectors at once that differ only in their
+    /// BRDF: `out[u·384 ..] += weights[u] ⊙ T_u(sp)`, where `T_u` uses `lobes[u]`, or
+    /// `lobes[0]` for every `u` when there is one lobe (a later vertex, whose lobe
+    /// does not depend on the first `ω_o`). Draws exactly what `accumulate` draws for
+    /// each `u`, and computes each `out[u]` with the same operations in the same
+    /// order; fails, with `out` partly written, where `accumulate` would trace an
+    /// indirect path for some `u` and skip it for others (their streams part).
+    #[allow(clippy::too_many_arguments)]
+    fn accumulate_joint(
+        &self,
+        sp: &SurfacePoint,
+        lobes: &[Lobe<'_>],
+        texel_samples: u32,
+        indirect_samples: u32,
+        bounces_left: u32,
+        weights: &[[f32; 3]],
+        rng: &mut TraceRng,
+        out: &mut [f32],
+    ) -> Result<(), StreamsParted> {
+        debug_assert!(lobes.len() == 1 || lobes.len() == weights.len());
+        debug_assert_eq!(out.len(), weights.len() * LT_DIM);
+        let shared = lobes.len() == 1;
+        let lobe_index = |u: usize| if shared { 0 } else { u };
+        let origin = sp.position + self.epsilon * sp.geometric_normal;
+        let (n_s, n_g) = (sp.shading_normal, sp.geometric_normal);
+        let (rows, cols) = strata(texel_samples);
+        let inv_count = 1.0 / texel_samples as f32;
+        let mut spec_sums = vec![0.0f32; lobes.len()];
+        for (k, patch) in self.texels.iter().enumerate() {
+            if n_s.dot(patch.centre) < -patch.sin_radius {
+                continue;
+            }
+            let mut diffuse_sum = 0.0f32;
+            spec_sums.fill(0.0);
+            for a in 0..rows {
+                for b in 0..cols {
+                    let (xi_u, xi_phi): (f64, f64) = (rng.random(), rng.random());
+                    let u = patch.cos_top
+                        + (patch.cos_bottom - patch.cos_top) * (f64::from(a) + xi_u) / f64::from(rows);
+                    let phi =
+                        patch.phi0 + (patch.phi1 - patch.phi0) * (f64::from(b) + xi_phi) / f64::from(cols);
+                    let omega = self.world_from_light * direction(u.clamp(-1.0, 1.0).acos(), phi).as_vec3();
+                    let cos_s = n_s.dot(omega);
+                    if cos_s <= 0.0 || n_g.dot(omega) <= 0.0 {
+                        continue;
+                    }
+                    if self.bvh.any_hit(origin, omega, 0.0, f32::INFINITY) {
+                        continue;
+                    }
+                    diffuse_sum += cos_s;
+                    for (sum, lobe) in spec_sums.iter_mut().zip(lobes) {
+                        *sum += lobe.specular(omega) * cos_s;
+                    }
+                }
+            }
+            if diffuse_sum == 0.0 {
+                continue;
+            }
+            let scale = patch.solid_angle * inv_count;
+            for (u, (weight, vector)) in weights.iter().zip(out.chunks_exact_mut(LT_DIM)).enumerate() {
+                let (lobe, spec_sum) = (&lobes[lobe_index(u)], spec_sums[lobe_index(u)]);
+                for c in 0..3 {
+                    vector[c * ENV_TEXELS + k] +=
+                        weight[c] * scale * (lobe.diffuse[c] * diffuse_sum + spec_sum);
+                }
+            }
+        }
+        if bounces_left == 0 || indirect_samples == 0 {
+            return Ok(());
+        }
+        let (rows, cols) = strata(indirect_samples);
+        let frame = Frame::new(n_s);
+        let inv_count = 1.0 / indirect_samples as f32;
+        let mut f_pis = vec![0.0f32; lobes.len()];
+        let mut next_weights = vec![[0.0f32; 3]; weights.len()];
+        for a in 0..rows {
+            for b in 0..cols {
+                let xi1 = (a as f32 + rng.random::<f32>()) / rows as f32;
+                let xi2 = (b as f32 + rng.random::<f32>()) / cols as f32;
+                let omega = frame.to_world(cosine_hemisphere(xi1, xi2));
+                if n_g.dot(omega) <= 0.0 {
+                    continue;
+                }
+                let Some(hit) = self.bvh.closest_hit(origin, omega, 0.0, f32::INFINITY) else {
+                    continue;
+                };
+                for (f_pi, lobe) in f_pis.iter_mut().zip(lobes) {
+                    *f_pi = std::f32::consts::PI * lobe.specular(omega);
+                }
+                let mut traced = 0;
+                for (u, (next, weight)) in next_weights.iter_mut().zip(weights).enumerate() {
+                    let (lobe, f_pi) = (&lobes[lobe_index(u)], f_pis[lobe_index(u)]);
+                    *next = std::array::from_fn(|c| {
+                        weight[c] * inv_count * (std::f32::consts::PI * lobe.diffuse[c] + f_pi)
+                    });
+                    if !next.iter().all(|&w| w <= 0.0) {
+                        traced += 1;
+                    }
+                }
+                if traced == 0 {
+                    continue;
+                }
+                if traced < weights.len() {
+                    return Err(StreamsParted);
+                }
+                let next = self.surface_at_hit(&hit, omega);
+                let mut reflections = [Vec3::ZERO; 1];
+                let next_lobe = self.lobe(&next, &[-omega], &mut reflections);
+                self.accumulate_joint(
+                    &next,
+                    std::slice::from_ref(&next_lobe),
+                    self.settings.bounce_texel_samples,
+                    1,
+                    bounces_left - 1,
+                    &next_weights,
+                    rng,
+                    out,
+                )?;
+            }
+        }
+        Ok(())
     }
 
     /// One path-traced radiance estimate at `sp` seen from `omega_o` under `light`
@@ -700,6 +927,60 @@ mod tests {
             assert!((f.bitangent.length() - 1.0).abs() < 1e-6);
             assert!(f.to_world(Vec3::Z).abs_diff_eq(n, 1e-6));
         }
+    }
+
+    /// The joint estimate runs through where every direction traces the same paths
+    /// and reports the parting streams of a black, purely glossy scene (where
+    /// `light_transport_directions` falls back to one lobe at a time).
+    #[test]
+    fn joint_estimate_reports_parting_streams() {
+        let scene = |albedo: [f32; 3], weight: f32| {
+            let mesh = crate::shapes::merge(&[
+                crate::shapes::uv_sphere(Vec3::ZERO, 0.5, 12, 24, albedo),
+                crate::shapes::quad(
+                    Vec3::new(-1.5, -0.5, 1.5),
+                    Vec3::new(3.0, 0.0, 0.0),
+                    Vec3::new(0.0, 0.0, -3.0),
+                    2,
+                    albedo,
+                ),
+            ]);
+            let settings = TraceSettings {
+                texel_samples: 1,
+                indirect_samples: 64,
+                specular: Some(Specular {
+                    weight,
+                    exponent: 30.0,
+                }),
+                ..TraceSettings::default()
+            };
+            LtTracer::new(&mesh, settings).unwrap()
+        };
+        let joint = |tracer: &LtTracer| {
+            let hit = tracer.intersect(Vec3::new(0.7, 2.0, 0.1), Vec3::NEG_Y).unwrap();
+            let sp = tracer.surface_at_hit(&hit, Vec3::NEG_Y);
+            let omegas = [Vec3::Y, Vec3::new(0.6, 0.8, 0.0), Vec3::new(-0.6, 0.0, 0.8)];
+            let mut reflections = [Vec3::ZERO; 3];
+            let lobes: Vec<Lobe<'_>> = omegas
+                .iter()
+                .zip(reflections.chunks_exact_mut(1))
+                .map(|(w, r)| tracer.lobe(&sp, std::slice::from_ref(w), r))
+                .collect();
+            let mut out = vec![0.0f32; 3 * LT_DIM];
+            let s = tracer.settings;
+            tracer.accumulate_joint(
+                &sp,
+                &lobes,
+                s.texel_samples,
+                s.indirect_samples,
+                s.bounces,
+                &[[1.0; 3]; 3],
+                &mut tracer.rng(0),
+                &mut out,
+            )
+        };
+        assert!(joint(&scene([0.5; 3], 0.3)).is_ok());
+        assert!(joint(&scene([0.0; 3], 1.0)).is_err());
     }
 
     #[test]

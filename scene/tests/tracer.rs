@@ -5,7 +5,8 @@
 
 use glam::{DMat3, DVec3, Vec3};
 use nelf_format::conventions::{
-    ENV_H, ENV_TEXELS, ENV_W, LatLong, PinholeCamera, lt_index, rotation_y, shade, texel_center_direction,
+    ENV_H, ENV_TEXELS, ENV_W, LT_DIM, LatLong, PinholeCamera, lt_index, rotation_y, shade,
+    texel_center_direction,
 };
 use nelf_scene::mesh::Mesh;
 use nelf_scene::render::{
@@ -465,4 +466,160 @@ fn back_faces_are_two_sided_and_settings_validate() {
     }
     let open_box = boxed(Vec3::ZERO, Vec3::ONE, 1, true, true, ALBEDO);
     assert!(LtTracer::new(&open_box, TraceSettings::default()).is_ok());
+}
+
+/// Surface points of `sphere_on_plane` seen along a few rays: the sphere's top and
+/// sides, near its contact with the floor, the floor in its shadow and in the open.
+fn sample_surface_points(tracer: &LtTracer) -> Vec<nelf_scene::tracer::SurfacePoint> {
+    [
+        (Vec3::new(0.0, 2.0, 0.1), Vec3::NEG_Y),
+        (Vec3::new(2.0, 0.2, 0.3), Vec3::NEG_X),
+        (Vec3::new(0.3, -0.2, 2.0), Vec3::NEG_Z),
+        (Vec3::new(0.55, 1.0, 0.0), Vec3::NEG_Y),
+        (Vec3::new(-1.2, 1.0, 0.9), Vec3::NEG_Y),
+    ]
+    .into_iter()
+    .map(|(origin, dir)| {
+        let hit = tracer.intersect(origin, dir).unwrap();
+        tracer.surface_at_hit(&hit, dir)
+    })
+    .collect()
+}
+
+/// Outgoing directions for the multi-direction estimator: a spread over the sphere
+/// (about half below any surface point's horizon), a repeat, and a tilt.
+fn outgoing_directions() -> Vec<Vec3> {
+    let golden = std::f32::consts::PI * (3.0 - 5.0f32.sqrt());
+    let mut dirs: Vec<Vec3> = (0..14)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f32 + 0.5) / 14.0;
+            let r = (1.0 - y * y).sqrt();
+            let phi = golden * i as f32;
+            Vec3::new(r * phi.cos(), y, r * phi.sin())
+        })
+        .collect();
+    dirs.push(dirs[3]);
+    dirs.push(Vec3::new(0.2, 0.9, 0.4).normalize());
+    dirs
+}
+
+/// `light_transport_directions` against one `light_transport` call per direction
+/// from the same generator state: equal bit for bit (`==` on every float).
+fn assert_directions_match_single(tracer: &LtTracer, dirs: &[Vec3]) -> Vec<Vec<f32>> {
+    let mut all = Vec::new();
+    for (stream, sp) in sample_surface_points(tracer).iter().enumerate() {
+        let mut joint = vec![f32::NAN; dirs.len() * LT_DIM];
+        let mut rng = tracer.rng(stream as u64);
+        tracer.light_transport_directions(sp, dirs, &mut rng, &mut joint);
+        for (d, dir) in dirs.iter().enumerate() {
+            let single = tracer.light_transport(sp, *dir, &mut tracer.rng(stream as u64));
+            assert!(
+                joint[d * LT_DIM..(d + 1) * LT_DIM] == single[..],
+                "point {stream}, direction {d}: the joint estimate differs"
+            );
+        }
+        assert!(joint.iter().any(|&v| v > 0.0), "point {stream} is lit");
+        all.push(joint);
+    }
+    all
+}
+
+#[test]
+fn light_transport_directions_equal_single_direction_estimates() {
+    let settings = TraceSettings {
+        texel_samples: 4,
+        indirect_samples: 16,
+        specular: Some(Specular {
+            weight: 0.3,
+            exponent: 8.0,
+        }),
+        ..TraceSettings::default()
+    };
+    let tracer = LtTracer::new(&sphere_on_plane(), settings).unwrap();
+    let dirs = outgoing_directions();
+    for (i, joint) in assert_directions_match_single(&tracer, &dirs).iter().enumerate() {
+        let vector = |d: usize| &joint[d * LT_DIM..(d + 1) * LT_DIM];
+        // The lobe makes directions above the horizon differ; the repeat is a copy.
+        let distinct = (0..dirs.len())
+            .filter(|&d| (0..d).all(|e| vector(e) != vector(d)))
+            .count();
+        assert!(distinct >= 4, "point {i}: {distinct} distinct vectors");
+        assert_eq!(vector(3), vector(14));
+    }
+    // Directions below the shading horizon all give the diffuse part alone.
+    let sp = sample_surface_points(&tracer)[0];
+    let below: Vec<Vec3> = dirs
+        .iter()
+        .copied()
+        .filter(|d| d.dot(sp.shading_normal) <= 0.0)
+        .collect();
+    assert!(below.len() >= 4);
+    let mut joint = vec![0.0f32; below.len() * LT_DIM];
+    tracer.light_transport_directions(&sp, &below, &mut tracer.rng(9), &mut joint);
+    for v in joint.chunks_exact(LT_DIM) {
+        assert_eq!(v, &joint[..LT_DIM]);
+    }
+    // No directions: nothing written, nothing to do.
+    tracer.light_transport_directions(&sp, &[], &mut tracer.rng(9), &mut []);
+}
+
+#[test]
+fn light_transport_directions_without_a_lobe_are_one_vector() {
+    let settings = TraceSettings {
+        texel_samples: 4,
+        indirect_samples: 16,
+        ..TraceSettings::default()
+    };
+    let tracer = LtTracer::new(&sphere_on_plane(), settings).unwrap();
+    let dirs = outgoing_directions();
+    for joint in assert_directions_match_single(&tracer, &dirs) {
+        for v in joint.chunks_exact(LT_DIM) {
+            assert_eq!(v, &joint[..LT_DIM]);
+        }
+    }
+    // A zero-weight lobe is no lobe.
+    let tracer = LtTracer::new(
+        &sphere_on_plane(),
+        TraceSettings {
+            specular: Some(Specular {
+                weight: 0.0,
+                exponent: 8.0,
+            }),
+            ..settings
+        },
+    )
+    .unwrap();
+    for joint in assert_directions_match_single(&tracer, &dirs) {
+        for v in joint.chunks_exact(LT_DIM) {
+            assert_eq!(v, &joint[..LT_DIM]);
+        }
+    }
+}
+
+/// A black, purely glossy scene: an indirect path's weight is the lobe alone, zero
+/// for some outgoing directions and not others, so the single-direction estimates'
+/// random streams part; the joint estimator notices and still matches them.
+#[test]
+fn light_transport_directions_match_where_streams_part() {
+    let mesh = merge(&[
+        uv_sphere(Vec3::ZERO, 0.5, 24, 48, [0.0; 3]),
+        quad(
+            Vec3::new(-1.5, -0.5, 1.5),
+            Vec3::new(3.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -3.0),
+            4,
+            [0.0, 0.4, 0.0],
+        ),
+    ]);
+    let settings = TraceSettings {
+        texel_samples: 4,
+        indirect_samples: 16,
+        specular: Some(Specular {
+            weight: 1.0,
+            exponent: 30.0,
+        }),
+        ..TraceSettings::default()
+    };
+    let tracer = LtTracer::new(&mesh, settings).unwrap();
+    assert_directions_match_single(&tracer, &outgoing_directions());
 }
