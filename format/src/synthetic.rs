@@ -249,16 +249,17 @@ pub fn synthetic_asset(
 }
 
 /// A deterministic view-dependent part for `asset` (format 1.2, [`ViewDependence`]), for
-/// tests of everything that reads one: `lobes` lobes (`J`, 1..=8), a view basis of rank
-/// `rank` (`K_v`, `J·K_v ≤ 384`) and `asset.voxel_count()` voxels of coefficients quantized
-/// with `encoding`, all a function of the arguments (and the asset's voxel positions).
+/// tests of everything that reads one: `lobes` lobes (`J`, 1..=[`VIEW_HARMONICS`]), a
+/// view basis of rank `rank` (`K_v`, `J·K_v ≤ 384`) and `asset.voxel_count()` voxels of
+/// coefficients quantized with `encoding`, all a function of the arguments (and the
+/// asset's voxel positions).
 ///
-/// Not a physical model, but shaped like one: lobe `j` is mostly harmonic `j mod 8`
-/// (plus a seeded ±0.25 mix of the others); basis vector `i` is a glossy highlight
-/// around a seeded light direction, `Ω_k · max(0, ω_k·a_i)⁴`, tinted per channel, with 5 %
-/// seeded noise, then orthonormalised; the coefficients `d_ji` are smooth in space
-/// (about 0.02 / (i + 1), a few percent of `T`), with 10 % per-voxel noise. Set it with
-/// `asset.view = Some(synthetic_view(&asset, …)?)`.
+/// Not a physical model, but shaped like one: lobe `j` is mostly harmonic `j` (modulo
+/// [`VIEW_HARMONICS`]) plus a seeded ±0.25 mix of the others; basis vector `i` is a
+/// glossy highlight around a seeded light direction, `Ω_k · max(0, ω_k·a_i)⁴`, tinted
+/// per channel, with 5 % seeded noise, then orthonormalised; the coefficients `d_ji` are
+/// smooth in space (about 0.02 / (i + 1), a few percent of `T`), with 10 % per-voxel
+/// noise. Set it with `asset.view = Some(synthetic_view(&asset, …)?)`.
 pub fn synthetic_view(
     asset: &Asset,
     lobes: usize,
@@ -561,7 +562,7 @@ mod tests {
             );
         }
         assert!(synthetic_view(&asset, 0, 1, CoefficientEncoding::F16, 1).is_err());
-        assert!(synthetic_view(&asset, 9, 1, CoefficientEncoding::F16, 1).is_err());
+        assert!(synthetic_view(&asset, VIEW_HARMONICS + 1, 1, CoefficientEncoding::F16, 1).is_err());
         assert!(synthetic_view(&asset, 2, 193, CoefficientEncoding::F16, 1).is_err());
     }
 
