@@ -179,10 +179,8 @@ pub trait FieldSource: Sync {
         density: &mut [f32],
         lt: &mut [f32],
     ) -> Result<(), FieldError> {
+        check_directions_batch(points, directions, density, lt)?;
         let count = directions.len();
-        if count == 0 || lt.len() != points.len() * count * LT_DIM || density.len() != points.len() {
-            return Err(length_error(points.len(), density.len(), lt.len() / count.max(1)));
-        }
         let mut one = vec![0.0f32; points.len() * LT_DIM];
         for (d, dir) in directions.iter().enumerate() {
             self.evaluate(points, &ViewPolicy::Direction(*dir), density, &mut one)?;
@@ -230,6 +228,37 @@ fn length_error(points: usize, density: usize, lt: usize) -> FieldError {
 pub fn check_density_batch(points: &[Vec3], density: &[f32]) -> Result<(), FieldError> {
     if density.len() != points.len() {
         return Err(length_error(points.len(), density.len(), points.len() * LT_DIM));
+    }
+    if let Some(index) = points.iter().position(|p| !p.is_finite()) {
+        return Err(FieldError::NotFinite { index });
+    }
+    Ok(())
+}
+
+/// Checks a batch for [`FieldSource::evaluate_directions`]: at least one direction,
+/// each finite and non-zero (as [`ViewPolicy::Direction`] requires), buffer sizes
+/// (`points.len()` densities, `points.len() × directions.len() × 384` floats) and
+/// point finiteness.
+pub fn check_directions_batch(
+    points: &[Vec3],
+    directions: &[Vec3],
+    density: &[f32],
+    lt: &[f32],
+) -> Result<(), FieldError> {
+    if directions.is_empty() {
+        return Err(FieldError::View("no outgoing directions".into()));
+    }
+    let lt_needed = points.len() * directions.len() * LT_DIM;
+    if density.len() != points.len() || lt.len() != lt_needed {
+        return Err(FieldError::LengthMismatch {
+            points: points.len(),
+            density: density.len(),
+            lt: lt.len(),
+            lt_needed,
+        });
+    }
+    for d in directions {
+        ViewPolicy::Direction(*d).validate()?;
     }
     if let Some(index) = points.iter().position(|p| !p.is_finite()) {
         return Err(FieldError::NotFinite { index });
@@ -403,12 +432,37 @@ impl MeshField {
     ) {
         let mut omegas = [Vec3::ZERO; MAX_AVERAGED_DIRECTIONS];
         let count = view.directions_at(x, sp.shading_normal, &mut omegas);
-        let bits = |v: f32| u64::from(v.to_bits());
-        let stream = mix64(bits(cp.point.x) | bits(cp.point.y) << 32)
-            ^ mix64(bits(cp.point.z) | u64::from(cp.triangle) << 32);
-        let mut rng = self.tracer.rng(stream);
+        let mut rng = self.tracer.rng(Self::stream(cp));
         self.tracer
             .light_transport_averaged(sp, &omegas[..count], &mut rng, out);
+    }
+
+    /// Writes to `out` (`directions.len() × 384` floats) the light transport of the
+    /// surface point `sp` (closest point `cp`, normals chosen by the caller) toward
+    /// each fixed world direction, normalised as [`ViewPolicy::Direction`] is: in one
+    /// pass ([`LtTracer::light_transport_directions`]), and `out[d]` equal to what
+    /// [`Self::light_transport_at`] adds with `ViewPolicy::Direction(directions[d])`.
+    pub fn light_transport_directions_at(
+        &self,
+        sp: &SurfacePoint,
+        cp: &ClosestPoint,
+        directions: &[Vec3],
+        out: &mut [f32],
+    ) {
+        let omegas: Vec<Vec3> = directions
+            .iter()
+            .map(|d| d.normalize_or(sp.shading_normal))
+            .collect();
+        let mut rng = self.tracer.rng(Self::stream(cp));
+        self.tracer.light_transport_directions(sp, &omegas, &mut rng, out);
+    }
+
+    /// The random stream of the light transport at closest point `cp`: from its
+    /// coordinates' bits and triangle.
+    fn stream(cp: &ClosestPoint) -> u64 {
+        let bits = |v: f32| u64::from(v.to_bits());
+        mix64(bits(cp.point.x) | bits(cp.point.y) << 32)
+            ^ mix64(bits(cp.point.z) | u64::from(cp.triangle) << 32)
     }
 
     /// [`FieldSource::evaluate`] with an optional progress bar (length set to the
@@ -463,6 +517,33 @@ pub fn evaluate_in_parallel(
     Ok(())
 }
 
+/// [`evaluate_in_parallel`] for [`FieldSource::evaluate_directions`]: checks the
+/// batch ([`check_directions_batch`]), then on all cores, in fixed chunks of 64
+/// points, calls `point(x, out)` with each point's `directions.len() × 384` floats
+/// (to be written, not added: they hold the previous contents), which returns the
+/// density.
+pub fn evaluate_directions_in_parallel(
+    points: &[Vec3],
+    directions: &[Vec3],
+    density: &mut [f32],
+    lt: &mut [f32],
+    point: impl Fn(Vec3, &mut [f32]) -> f32 + Sync,
+) -> Result<(), FieldError> {
+    const CHUNK: usize = 64;
+    check_directions_batch(points, directions, density, lt)?;
+    let per_point = directions.len() * LT_DIM;
+    points
+        .par_chunks(CHUNK)
+        .zip(density.par_chunks_mut(CHUNK))
+        .zip(lt.par_chunks_mut(CHUNK * per_point))
+        .for_each(|((p, d), t)| {
+            for ((x, sigma), out) in p.iter().zip(d.iter_mut()).zip(t.chunks_mut(per_point)) {
+                *sigma = point(*x, out);
+            }
+        });
+    Ok(())
+}
+
 impl FieldSource for MeshField {
     fn evaluate(
         &self,
@@ -483,6 +564,25 @@ impl FieldSource for MeshField {
 
     fn world_from_light(&self) -> DMat3 {
         self.tracer.settings().world_from_light
+    }
+
+    /// One pass per point for all directions
+    /// ([`MeshField::light_transport_directions_at`]): the same results as the
+    /// default's per-direction [`Self::evaluate`] calls, bit for bit.
+    fn evaluate_directions(
+        &self,
+        points: &[Vec3],
+        directions: &[Vec3],
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        evaluate_directions_in_parallel(points, directions, density, lt, |x, out| {
+            match self.surface_point_seen_from(x) {
+                Some((sp, cp)) => self.light_transport_directions_at(&sp, &cp, directions, out),
+                None => out.fill(0.0),
+            }
+            self.density(x)
+        })
     }
 
     fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {

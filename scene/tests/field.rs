@@ -313,3 +313,206 @@ fn rejects_bad_batches_and_views() {
     }
     assert!(MeshField::new(&sphere(), fast_settings(), DensityProfile::with_shell_width(0.0)).is_err());
 }
+
+/// Query points around the sphere: inside, in the shell, outside, far outside.
+fn points_around_sphere(n: usize) -> Vec<Vec3> {
+    directions(n)
+        .into_iter()
+        .enumerate()
+        .map(|(i, d)| d * (RADIUS + [-0.1, -0.004, 0.0, 0.003, 0.05, 2.0][i % 6]))
+        .collect()
+}
+
+/// Per-direction `evaluate` with `ViewPolicy::Direction`, laid out as
+/// `evaluate_directions` lays it out.
+fn per_direction(field: &impl FieldSource, points: &[Vec3], dirs: &[Vec3]) -> (Vec<f32>, Vec<f32>) {
+    let mut density = vec![0.0f32; points.len()];
+    let mut lt = vec![0.0f32; points.len() * dirs.len() * LT_DIM];
+    let mut one = vec![0.0f32; points.len() * LT_DIM];
+    for (d, dir) in dirs.iter().enumerate() {
+        field
+            .evaluate(points, &ViewPolicy::Direction(*dir), &mut density, &mut one)
+            .unwrap();
+        for (i, t) in one.chunks_exact(LT_DIM).enumerate() {
+            let at = (i * dirs.len() + d) * LT_DIM;
+            lt[at..at + LT_DIM].copy_from_slice(t);
+        }
+    }
+    (density, lt)
+}
+
+/// `evaluate_directions` (one trace per point for every direction) equals one
+/// `evaluate` per direction bit for bit (compared with `==`, no tolerance), with
+/// a glossy lobe; without one every direction gets the same vector.
+#[test]
+fn evaluate_directions_equals_per_direction_evaluate() {
+    let glossy = TraceSettings {
+        specular: Some(Specular::MILD_SHEEN),
+        ..fast_settings()
+    };
+    // A sphere over a floor, so that the indirect paths hit something.
+    let mesh = merge(&[
+        sphere(),
+        quad(
+            Vec3::new(-2.0, -RADIUS - 0.02, 2.0),
+            Vec3::new(4.0, 0.0, 0.0),
+            Vec3::new(0.0, 0.0, -4.0),
+            4,
+            [0.6; 3],
+        ),
+    ]);
+    let field = MeshField::new(&mesh, glossy, DensityProfile::with_shell_width(0.01)).unwrap();
+    let points = points_around_sphere(36);
+    // Not all unit: they are normalised as `ViewPolicy::Direction` normalises them.
+    let mut dirs: Vec<Vec3> = directions(12);
+    dirs.push(Vec3::new(0.0, 0.0, 3.0));
+    let (want_density, want_lt) = per_direction(&field, &points, &dirs);
+    let mut density = vec![f32::NAN; points.len()];
+    let mut lt = vec![f32::NAN; points.len() * dirs.len() * LT_DIM];
+    field
+        .evaluate_directions(&points, &dirs, &mut density, &mut lt)
+        .unwrap();
+    assert_eq!(density, want_density);
+    assert!(
+        lt == want_lt,
+        "evaluate_directions differs from per-direction evaluate"
+    );
+    // The lobe is there: at a lit surface point the directions differ.
+    let at = |i: usize, d: usize| &lt[(i * dirs.len() + d) * LT_DIM..][..LT_DIM];
+    assert!((0..dirs.len()).any(|d| at(2, d) != at(2, 0)));
+    // Independent of the batch and the thread count.
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let tail = &points[7..];
+    let (mut d1, mut l1) = (
+        vec![0.0f32; tail.len()],
+        vec![0.0f32; tail.len() * dirs.len() * LT_DIM],
+    );
+    one_thread.install(|| field.evaluate_directions(tail, &dirs, &mut d1, &mut l1).unwrap());
+    assert_eq!(d1, density[7..]);
+    assert!(l1 == lt[7 * dirs.len() * LT_DIM..]);
+
+    // Without a lobe, T does not depend on the direction.
+    let field = MeshField::new(&mesh, fast_settings(), DensityProfile::with_shell_width(0.01)).unwrap();
+    let (_, want_lt) = per_direction(&field, &points, &dirs);
+    field
+        .evaluate_directions(&points, &dirs, &mut density, &mut lt)
+        .unwrap();
+    assert!(lt == want_lt);
+    for per_point in lt.chunks_exact(dirs.len() * LT_DIM) {
+        for v in per_point.chunks_exact(LT_DIM) {
+            assert_eq!(v, &per_point[..LT_DIM]);
+        }
+    }
+    assert!(lt.iter().any(|&v| v > 0.0));
+}
+
+#[test]
+fn evaluate_directions_rejects_bad_batches() {
+    let field = MeshField::new(&sphere(), fast_settings(), DensityProfile::default()).unwrap();
+    let points = [Vec3::ZERO, Vec3::ONE];
+    let dirs = [Vec3::Z, Vec3::X];
+    let mut d = [0.0f32; 2];
+    let mut lt = vec![0.0f32; 2 * 2 * LT_DIM];
+    let mut short = vec![0.0f32; 2 * LT_DIM];
+    assert!(matches!(
+        field.evaluate_directions(&points, &dirs, &mut d, &mut short),
+        Err(FieldError::LengthMismatch { lt_needed, .. }) if lt_needed == 4 * LT_DIM
+    ));
+    assert!(matches!(
+        field.evaluate_directions(&[Vec3::ZERO, Vec3::NAN], &dirs, &mut d, &mut lt),
+        Err(FieldError::NotFinite { index: 1 })
+    ));
+    for bad in [vec![], vec![Vec3::Z, Vec3::ZERO], vec![Vec3::NAN, Vec3::X]] {
+        let mut lt = vec![0.0f32; 2 * bad.len() * LT_DIM];
+        assert!(matches!(
+            field.evaluate_directions(&points, &bad, &mut d, &mut lt),
+            Err(FieldError::View(_))
+        ));
+    }
+}
+
+/// Times `evaluate_directions` with 16 directions against 1 (and against the
+/// trait's per-direction default) on points around a procedural head with a mild
+/// sheen, in CPU time of one thread (the machine is shared, wall time is noisy). A
+/// measurement, not a test: `cargo test --release -p nelf-scene --test field --
+/// --ignored --nocapture evaluate_directions_timing`.
+#[test]
+#[ignore = "timing by hand"]
+fn evaluate_directions_timing() {
+    use nelf_scene::head::{HeadParams, procedural_head};
+
+    /// The trait's default, per-direction `evaluate`, for comparison.
+    struct PerDirection<'a>(&'a MeshField);
+    impl FieldSource for PerDirection<'_> {
+        fn evaluate(
+            &self,
+            p: &[Vec3],
+            v: &ViewPolicy,
+            d: &mut [f32],
+            l: &mut [f32],
+        ) -> Result<(), FieldError> {
+            self.0.evaluate(p, v, d, l)
+        }
+        fn bounds(&self) -> (Vec3, Vec3) {
+            self.0.bounds()
+        }
+    }
+
+    /// CPU time of the calling thread, seconds (Linux).
+    fn thread_cpu_s() -> f64 {
+        let text = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap();
+        let ns: u64 = text.split_whitespace().next().unwrap().parse().unwrap();
+        ns as f64 * 1e-9
+    }
+
+    let mesh = procedural_head(3, &HeadParams::default());
+    let settings = TraceSettings {
+        specular: Some(Specular::MILD_SHEEN),
+        ..TraceSettings::default()
+    };
+    let field = MeshField::new(&mesh, settings, DensityProfile::with_shell_width(0.002)).unwrap();
+    // Points 0–1 mm off the surface along the vertex normals of every n-th vertex.
+    let normals = {
+        let mut n = vec![Vec3::ZERO; mesh.positions.len()];
+        for t in &mesh.triangles {
+            let [a, b, c] = t.map(|i| mesh.positions[i as usize]);
+            for &i in t {
+                n[i as usize] += (b - a).cross(c - a);
+            }
+        }
+        n
+    };
+    let count = 2000;
+    let step = (mesh.positions.len() / count).max(1);
+    let points: Vec<Vec3> = (0..count)
+        .map(|i| {
+            let v = (i * step) % mesh.positions.len();
+            mesh.positions[v] + normals[v].normalize_or_zero() * 0.001 * (i % 3) as f32 / 2.0
+        })
+        .collect();
+    let dirs = directions(16);
+    let one_thread = rayon::ThreadPoolBuilder::new().num_threads(1).build().unwrap();
+    let time = |source: &dyn FieldSource, points: &[Vec3], d: usize| {
+        let mut density = vec![0.0f32; points.len()];
+        let mut lt = vec![0.0f32; points.len() * d * LT_DIM];
+        one_thread.install(|| {
+            let start = thread_cpu_s();
+            source
+                .evaluate_directions(points, &dirs[..d], &mut density, &mut lt)
+                .unwrap();
+            (thread_cpu_s() - start) / points.len() as f64 * 1e3
+        })
+    };
+    for round in 0..2 {
+        let one = time(&field, &points, 1);
+        let sixteen = time(&field, &points, 16);
+        let default = time(&PerDirection(&field), &points[..count / 4], 16);
+        println!(
+            "round {round}, {count} points ({} for the default), one thread's CPU time per point: \
+             D = 1 {one:.3} ms, D = 16 {sixteen:.3} ms ({:.2}×), per-direction default D = 16 {default:.3} ms ({:.2}×)",
+            count / 4,
+            sixteen / one,
+            default / one
+        );
+    }
+}
