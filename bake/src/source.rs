@@ -41,7 +41,7 @@ use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
 use nelf_scene::bvh::{ClosestPoint, closest_point_on_triangle};
 use nelf_scene::field::{
     DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy, check_batch, check_density_batch,
-    evaluate_in_parallel,
+    check_directions_batch, evaluate_directions_in_parallel, evaluate_in_parallel,
 };
 use nelf_scene::mesh::Mesh;
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
@@ -228,7 +228,8 @@ impl ShellProfile {
 /// **Sides.** A point behind an open sheet, a point outside a closed surface whose
 /// closest triangle is wound inward (flipped), and a point in the inner half of a
 /// hollow shell are shaded with the normal turned toward them; a point within a hair
-/// of an open sheet takes the side the view policy's directions face.
+/// of an open sheet takes the side the view policy's directions face (with
+/// [`FieldSource::evaluate_directions`], the side each direction faces).
 #[derive(Debug, Clone)]
 pub struct ShellMeshField {
     inner: MeshField,
@@ -383,7 +384,7 @@ impl ShellMeshField {
         };
         let back = if located.tie {
             // On the sheet itself: the side the view policy's directions face.
-            let normal = self.inner.tracer().mesh().face_normal(cp.triangle as usize);
+            let normal = self.face_normal(&cp);
             let mut omegas = [Vec3::ZERO; MAX_AVERAGED_DIRECTIONS];
             let n = view.directions_at(x, normal, &mut omegas);
             omegas[..n].iter().sum::<Vec3>().dot(normal) < 0.0
@@ -391,6 +392,57 @@ impl ShellMeshField {
             located.back
         };
         (located.density, Some((cp, back)))
+    }
+
+    /// The true normal of the closest point's triangle.
+    fn face_normal(&self, cp: &ClosestPoint) -> Vec3 {
+        self.inner.tracer().mesh().face_normal(cp.triangle as usize)
+    }
+
+    /// The side a located point sees toward each fixed direction: [`Located::back`],
+    /// except on an open sheet (a tie), where each direction decides as
+    /// [`Self::side_at`] decides for `ViewPolicy::Direction(direction)`.
+    fn sides_toward(&self, located: &Located, cp: &ClosestPoint, directions: &[Vec3]) -> Vec<bool> {
+        if located.tie {
+            let normal = self.face_normal(cp);
+            directions
+                .iter()
+                .map(|d| d.normalize_or(normal).dot(normal) < 0.0)
+                .collect()
+        } else {
+            vec![located.back; directions.len()]
+        }
+    }
+
+    /// Writes to `out` (`directions.len() × 384` floats) the light transport of
+    /// surface point `cp` toward each direction `d`, on the side `back[d]` says: one
+    /// trace per side ([`MeshField::light_transport_directions_at`]).
+    fn light_transport_directions(
+        &self,
+        cp: &ClosestPoint,
+        back: &[bool],
+        directions: &[Vec3],
+        out: &mut [f32],
+    ) {
+        let surface = |back: bool| {
+            let sp = self.inner.surface_at(cp);
+            if back { sp.turned() } else { sp }
+        };
+        if back.iter().all(|&b| b == back[0]) {
+            self.inner
+                .light_transport_directions_at(&surface(back[0]), cp, directions, out);
+            return;
+        }
+        for side in [false, true] {
+            let chosen: Vec<usize> = (0..directions.len()).filter(|&d| back[d] == side).collect();
+            let toward: Vec<Vec3> = chosen.iter().map(|&d| directions[d]).collect();
+            let mut vectors = vec![0.0f32; chosen.len() * LT_DIM];
+            self.inner
+                .light_transport_directions_at(&surface(side), cp, &toward, &mut vectors);
+            for (&d, v) in chosen.iter().zip(vectors.chunks_exact(LT_DIM)) {
+                out[d * LT_DIM..(d + 1) * LT_DIM].copy_from_slice(v);
+            }
+        }
     }
 
     /// Adds to `out` the light transport of surface point `cp` seen from `x` on the
@@ -476,24 +528,120 @@ impl ShellMeshField {
                     out.fill(0.0);
                     return;
                 };
-                let source = &shared[i * LT_DIM..(i + 1) * LT_DIM];
-                for (c, (o, s)) in out
-                    .chunks_mut(ENV_TEXELS)
-                    .zip(source.chunks(ENV_TEXELS))
-                    .enumerate()
-                {
-                    let traced = traced_albedo[i][c];
-                    let ratio = if traced > ALBEDO_RATIO_FLOOR {
-                        albedo[c] / traced
-                    } else {
-                        1.0
-                    };
-                    for (o, s) in o.iter_mut().zip(s) {
-                        *o = s * ratio;
+                rescale_shared(
+                    &shared[i * LT_DIM..(i + 1) * LT_DIM],
+                    traced_albedo[i],
+                    albedo,
+                    out,
+                );
+            });
+        Ok(())
+    }
+
+    /// [`FieldSource::evaluate_directions`] with shared light transport: as
+    /// [`Self::evaluate_shared`], with every point's key per direction (the side of
+    /// a point on an open sheet depends on the direction) and one trace per distinct
+    /// key for all the directions. The shared vectors take as much memory as the
+    /// output for that many points.
+    fn evaluate_shared_directions(
+        &self,
+        cell_m: f32,
+        points: &[Vec3],
+        directions: &[Vec3],
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        use rayon::prelude::*;
+        check_directions_batch(points, directions, density, lt)?;
+        let count = directions.len();
+        let mesh = self.inner.tracer().mesh();
+        // Each point's key per direction and its own closest point's albedo.
+        let located: Vec<Option<(Vec<ShareKey>, [f32; 3])>> = points
+            .par_iter()
+            .zip(density.par_iter_mut())
+            .map(|(x, d)| {
+                let located = self.locate(*x, f32::INFINITY);
+                *d = located.density;
+                located.closest.map(|cp| {
+                    let cell = (cp.point / cell_m).floor().as_ivec3().to_array();
+                    let keys = self
+                        .sides_toward(&located, &cp, directions)
+                        .into_iter()
+                        .map(|back| ShareKey {
+                            triangle: cp.triangle,
+                            back,
+                            cell,
+                        })
+                        .collect();
+                    (keys, mesh.albedo_at(cp.triangle as usize, cp.b1, cp.b2))
+                })
+            })
+            .collect();
+        let mut distinct: Vec<ShareKey> = located
+            .iter()
+            .flatten()
+            .flat_map(|(keys, _)| keys.iter().copied())
+            .collect();
+        distinct.par_sort_unstable();
+        distinct.dedup();
+        // One trace per key toward every direction, with the albedo it was traced with.
+        let mut shared = vec![0.0f32; distinct.len() * count * LT_DIM];
+        let traced_albedo: Vec<[f32; 3]> = shared
+            .par_chunks_mut(count * LT_DIM)
+            .zip(distinct.par_iter())
+            .map(|(out, key)| {
+                let centre = (glam::IVec3::from_array(key.cell).as_vec3() + 0.5) * cell_m;
+                let (point, b1, b2) = closest_point_on_triangle(mesh.corners(key.triangle as usize), centre);
+                let cp = ClosestPoint {
+                    point,
+                    triangle: key.triangle,
+                    b1,
+                    b2,
+                    distance: 0.0,
+                };
+                self.light_transport_directions(&cp, &vec![key.back; count], directions, out);
+                mesh.albedo_at(key.triangle as usize, b1, b2)
+            })
+            .collect();
+        lt.par_chunks_mut(count * LT_DIM)
+            .zip(located.par_iter())
+            .for_each(|(out, entry)| {
+                let Some((keys, albedo)) = entry else {
+                    out.fill(0.0);
+                    return;
+                };
+                for (d, (out, key)) in out.chunks_exact_mut(LT_DIM).zip(keys).enumerate() {
+                    match distinct.binary_search(key) {
+                        Ok(i) => {
+                            let at = (i * count + d) * LT_DIM;
+                            rescale_shared(&shared[at..at + LT_DIM], traced_albedo[i], *albedo, out);
+                        }
+                        Err(_) => out.fill(0.0),
                     }
                 }
             });
         Ok(())
+    }
+}
+
+/// Writes to `out` a shared vector `source`, traced with albedo `traced`, rescaled
+/// per colour channel to a point's own `albedo` (diffuse light transport is
+/// proportional to it; the specular part, a few per cent, is shared as is). Below
+/// [`ALBEDO_RATIO_FLOOR`] a channel is copied unscaled.
+fn rescale_shared(source: &[f32], traced: [f32; 3], albedo: [f32; 3], out: &mut [f32]) {
+    for (c, (o, s)) in out
+        .chunks_mut(ENV_TEXELS)
+        .zip(source.chunks(ENV_TEXELS))
+        .enumerate()
+    {
+        let ratio = if traced[c] > ALBEDO_RATIO_FLOOR {
+            albedo[c] / traced[c]
+        } else {
+            1.0
+        };
+        for (o, s) in o.iter_mut().zip(s) {
+            *o = s * ratio;
+        }
     }
 }
 
@@ -510,6 +658,32 @@ impl FieldSource for ShellMeshField {
         }
         evaluate_in_parallel(points, view, density, lt, None, |x, out| {
             self.evaluate_point(x, view, out)
+        })
+    }
+
+    /// One trace per point (or shared key) and side for all directions, equal to
+    /// per-direction [`Self::evaluate`] calls bit for bit; a point on an open sheet
+    /// takes, per direction, the side that direction faces.
+    fn evaluate_directions(
+        &self,
+        points: &[Vec3],
+        directions: &[Vec3],
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        if let Some(cell_m) = self.share_cell_m {
+            return self.evaluate_shared_directions(cell_m, points, directions, density, lt);
+        }
+        evaluate_directions_in_parallel(points, directions, density, lt, |x, out| {
+            let located = self.locate(x, f32::INFINITY);
+            match located.closest {
+                Some(cp) => {
+                    let back = self.sides_toward(&located, &cp, directions);
+                    self.light_transport_directions(&cp, &back, directions, out);
+                }
+                None => out.fill(0.0),
+            }
+            located.density
         })
     }
 
@@ -762,5 +936,107 @@ mod tests {
             "{} traces for {answered} points",
             keys.len()
         );
+    }
+
+    /// `evaluate_directions` equals one `evaluate` per direction (`==` on every
+    /// float) with a glossy lobe, tracing every point or sharing per cell, on both
+    /// sides of an open sheet and on the sheet itself (where the side follows each
+    /// direction), and near a closed sphere; the shared one is independent of the batch.
+    #[test]
+    fn evaluate_directions_equals_per_direction_evaluate() {
+        use nelf_scene::defects::{striped_texture, textured_quad};
+        use nelf_scene::tracer::Specular;
+        let texture = striped_texture(16, 16, 4, [[0.8, 0.2, 0.1], [0.1, 0.6, 0.9], [0.5, 0.5, 0.5]]);
+        let sheet = textured_quad(
+            Vec3::new(-0.05, -0.05, 0.0),
+            Vec3::new(0.1, 0.0, 0.0),
+            Vec3::new(0.0, 0.1, 0.0),
+            3,
+            texture,
+        );
+        let ball = uv_sphere(Vec3::new(0.0, 0.0, 0.04), 0.02, 8, 16, [0.6, 0.5, 0.4]);
+        let mesh = nelf_scene::defects::merge_textured(&[sheet, ball]);
+        let voxel = 2e-3f32;
+        let trace = TraceSettings {
+            texel_samples: 1,
+            indirect_samples: 4,
+            bounces: 1,
+            specular: Some(Specular {
+                weight: 0.3,
+                exponent: 8.0,
+            }),
+            ..TraceSettings::default()
+        };
+        let field = || MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
+        let profile = ShellProfile::Signed {
+            lead_m: 0.25 * voxel,
+            voxel_m: voxel,
+        };
+        let own = ShellMeshField::new(field(), profile, 2.0 * voxel, None).unwrap();
+        let shared = ShellMeshField::new(field(), profile, 2.0 * voxel, None)
+            .unwrap()
+            .with_shared_transport(Some(2.0 * voxel));
+        // Points on both sides of the sheet, on it (ties), and around the ball.
+        let mut points: Vec<Vec3> = (0..8)
+            .flat_map(|i| {
+                (0..8).flat_map(move |j| [-0.0015f32, 0.0, 0.00005, 0.0015].map(move |z| (i, j, z)))
+            })
+            .map(|(i, j, z)| Vec3::new(-0.035 + 0.01 * i as f32, -0.035 + 0.01 * j as f32, z))
+            .collect();
+        points.extend((0..24).map(|i| {
+            let a = i as f32 * 0.7;
+            Vec3::new(0.0, 0.0, 0.04) + Vec3::new(a.cos(), (0.3 * a).sin(), a.sin()).normalize() * 0.0205
+        }));
+        let directions = [
+            Vec3::Z,
+            -Vec3::Z,
+            Vec3::new(0.3, 0.2, 0.9).normalize(),
+            Vec3::new(-0.5, 0.1, -0.6).normalize(),
+            Vec3::new(0.8, -0.6, 0.05).normalize(),
+            Vec3::new(-0.1, 0.7, 0.3),
+        ];
+        let per_direction = |f: &ShellMeshField, pts: &[Vec3]| {
+            let mut density = vec![0.0f32; pts.len()];
+            let mut lt = vec![0.0f32; pts.len() * directions.len() * LT_DIM];
+            let mut one = vec![0.0f32; pts.len() * LT_DIM];
+            for (d, dir) in directions.iter().enumerate() {
+                f.evaluate(pts, &ViewPolicy::Direction(*dir), &mut density, &mut one)
+                    .unwrap();
+                for (i, t) in one.chunks_exact(LT_DIM).enumerate() {
+                    let at = (i * directions.len() + d) * LT_DIM;
+                    lt[at..at + LT_DIM].copy_from_slice(t);
+                }
+            }
+            (density, lt)
+        };
+        let joint = |f: &ShellMeshField, pts: &[Vec3]| {
+            let mut density = vec![f32::NAN; pts.len()];
+            let mut lt = vec![f32::NAN; pts.len() * directions.len() * LT_DIM];
+            f.evaluate_directions(pts, &directions, &mut density, &mut lt)
+                .unwrap();
+            (density, lt)
+        };
+        for (name, f) in [("own", &own), ("shared", &shared)] {
+            let (want_d, want_lt) = per_direction(f, &points);
+            let (d, lt) = joint(f, &points);
+            assert_eq!(d, want_d, "{name}");
+            assert!(lt == want_lt, "{name}: evaluate_directions differs");
+            assert!(lt.iter().any(|&v| v > 0.0));
+        }
+        // Points on the sheet see its front toward some directions, its back toward others.
+        let ties = points
+            .iter()
+            .filter(|x| {
+                let located = own.locate(**x, f32::INFINITY);
+                let sides = own.sides_toward(&located, &located.closest.unwrap(), &directions);
+                located.tie && sides.contains(&true) && sides.contains(&false)
+            })
+            .count();
+        assert!(ties >= 32, "{ties} points on the sheet");
+        // Sharing: any batch gives the same bits.
+        let (d_all, lt_all) = joint(&shared, &points);
+        let (d_tail, lt_tail) = joint(&shared, &points[100..]);
+        assert_eq!(d_tail, d_all[100..]);
+        assert!(lt_tail == lt_all[100 * directions.len() * LT_DIM..]);
     }
 }
