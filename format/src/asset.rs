@@ -448,7 +448,65 @@ impl Coefficients {
         }
     }
 
-    fn validate(&self, voxels: usize) -> Result<()> {
+    /// Appends voxels from their stored bytes (`u8` codes or little-endian `f16`s, as
+    /// [`Self::value_bytes`] writes them), keeping rank and parameters.
+    pub(crate) fn extend_from_stored(&mut self, stored: &[u8]) {
+        match self {
+            Self::U8Affine { codes, .. } => codes.extend_from_slice(stored),
+            Self::F16 { values, .. } => values.extend(
+                stored
+                    .chunks_exact(2)
+                    .map(|b| f16::from_bits(u16::from_le_bytes([b[0], b[1]]))),
+            ),
+        }
+    }
+
+    /// Checks stored values: every `f16` finite (any 8-bit code is valid). `first_voxel`
+    /// numbers the voxels and `section` names the section in the message.
+    pub(crate) fn check_stored(&self, stored: &[u8], first_voxel: usize, section: &str) -> Result<()> {
+        let rank = self.rank().max(1);
+        if let Self::F16 { .. } = self {
+            for (i, b) in stored.chunks_exact(2).enumerate() {
+                if !f16::from_bits(u16::from_le_bytes([b[0], b[1]])).is_finite() {
+                    return Err(FormatError::NonFinite {
+                        what: format!(
+                            "section {section} voxel {} component {}",
+                            first_voxel + i / rank,
+                            i % rank
+                        ),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Dequantizes stored values (see [`Self::check_stored`], which this applies first)
+    /// with this encoding and its 8-bit parameters: `offset_k + scale_k · code` in `f32`.
+    pub(crate) fn dequantize_stored(
+        &self,
+        stored: &[u8],
+        first_voxel: usize,
+        section: &str,
+    ) -> Result<Vec<f32>> {
+        self.check_stored(stored, first_voxel, section)?;
+        let rank = self.rank().max(1);
+        Ok(match self {
+            Self::U8Affine { scale, offset, .. } => stored
+                .iter()
+                .enumerate()
+                .map(|(i, &code)| offset[i % rank] + scale[i % rank] * f32::from(code))
+                .collect(),
+            Self::F16 { .. } => stored
+                .chunks_exact(2)
+                .map(|b| f16::from_bits(u16::from_le_bytes([b[0], b[1]])).to_f32())
+                .collect(),
+        })
+    }
+
+    /// Checks rank, length, 8-bit parameters (named as section `params`) and finite `f16`
+    /// values (named as section `values`).
+    fn validate(&self, voxels: usize, params: &str, values: &str) -> Result<()> {
         let rank = self.rank();
         if rank == 0 || rank > LT_DIM {
             return Err(FormatError::BadRank {
@@ -471,11 +529,11 @@ impl Coefficients {
                         offset.len()
                     )));
                 }
-                validate_quant_params(scale, offset)
+                validate_quant_params(scale, offset, params)
             }
-            Self::F16 { values, .. } => match values.iter().position(|v| !v.is_finite()) {
+            Self::F16 { values: stored, .. } => match stored.iter().position(|v| !v.is_finite()) {
                 Some(i) => Err(FormatError::NonFinite {
-                    what: format!("section COEF voxel {} component {}", i / rank, i % rank),
+                    what: format!("section {values} voxel {} component {}", i / rank, i % rank),
                 }),
                 None => Ok(()),
             },
@@ -484,17 +542,17 @@ impl Coefficients {
 }
 
 /// Checks 8-bit dequantisation parameters: finite offsets, finite non-negative scales,
-/// and a finite largest value `offset + 255·scale`.
-pub(crate) fn validate_quant_params(scale: &[f32], offset: &[f32]) -> Result<()> {
+/// and a finite largest value `offset + 255·scale`; `section` (`QPRM`, `VDEP`) names them.
+pub(crate) fn validate_quant_params(scale: &[f32], offset: &[f32], section: &str) -> Result<()> {
     for (k, (&s, &o)) in scale.iter().zip(offset).enumerate() {
         if !(s.is_finite() && o.is_finite() && (o + 255.0 * s).is_finite()) {
             return Err(FormatError::NonFinite {
-                what: format!("section QPRM component {k} (scale {s}, offset {o})"),
+                what: format!("section {section} component {k} (scale {s}, offset {o})"),
             });
         }
         if s < 0.0 {
             return Err(FormatError::InvalidValue {
-                what: format!("section QPRM component {k}"),
+                what: format!("section {section} component {k}"),
                 reason: format!("negative scale {s}"),
             });
         }
@@ -539,14 +597,14 @@ pub fn has_negative_density(density: &[f16]) -> bool {
 /// `T(x, ω) = m + Σ_k c_k(x) B_k + Σ_j Y_j(ω) Σ_i d_ji(x) V_i`,
 ///
 /// the first two terms being the asset's PCA part (the view-independent mean over the
-/// directions it was seen from), `Y_j(ω) = Σ_l lobes[j·8 + l] · y_l(ω)` a lobe built from
-/// the real spherical harmonics of degrees 1–2 ([`crate::conventions::view_harmonics`]),
+/// directions it was seen from), `Y_j(ω) = Σ_l lobes[j·9 + l] · y_l(ω)` a lobe built from
+/// the real spherical harmonics of degrees 0–2 ([`crate::conventions::view_harmonics`]),
 /// `V_i` the view basis (no mean) and `d_ji(x)` per-voxel coefficients, stored at index
 /// `j·K_v + i` among the voxel's `J·K_v`. A reader that ignores it renders the PCA part,
 /// which is the view-averaged asset.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ViewDependence {
-    /// `J × 8` lobe weights over the degree-1–2 harmonics, lobe-major.
+    /// `J × 9` lobe weights over the degree-0–2 harmonics, lobe-major.
     pub lobes: Vec<f32>,
     /// `K_v` view basis vectors of [`LT_DIM`] numbers, vector `i` at `i·384 .. (i+1)·384`.
     pub basis: Vec<f32>,
@@ -594,13 +652,13 @@ impl ViewDependence {
         }
     }
 
-    /// Checks shapes (1..=8 lobes, rank ≥ 1, `J·K_v ≤ 384` coefficients per voxel,
+    /// Checks shapes (1..=9 lobes, rank ≥ 1, `J·K_v ≤ 384` coefficients per voxel,
     /// `voxels × J·K_v` values), finiteness and the coefficient parameters.
     pub fn validate(&self, voxels: usize) -> Result<()> {
         let lobes = self.lobe_count();
         if self.lobes.len() % VIEW_HARMONICS != 0 || !(1..=VIEW_HARMONICS).contains(&lobes) {
             return Err(FormatError::InvalidAsset(format!(
-                "view dependence has {} lobe weights: must be 8 per lobe, 1 to 8 lobes",
+                "view dependence has {} lobe weights: must be {VIEW_HARMONICS} per lobe, 1 to {VIEW_HARMONICS} lobes",
                 self.lobes.len()
             )));
         }
@@ -620,7 +678,11 @@ impl ViewDependence {
         }
         if let Some(i) = self.lobes.iter().position(|v| !v.is_finite()) {
             return Err(FormatError::NonFinite {
-                what: format!("section VDEP lobe {} weight {}", i / VIEW_HARMONICS, i % VIEW_HARMONICS),
+                what: format!(
+                    "section VDEP lobe {} weight {}",
+                    i / VIEW_HARMONICS,
+                    i % VIEW_HARMONICS
+                ),
             });
         }
         if let Some(i) = self.basis.iter().position(|v| !v.is_finite()) {
@@ -628,7 +690,7 @@ impl ViewDependence {
                 what: format!("section VDEP basis vector {} element {}", i / LT_DIM, i % LT_DIM),
             });
         }
-        self.coefficients.validate(voxels)
+        self.coefficients.validate(voxels, "VDEP", "VCOF")
     }
 }
 
@@ -662,6 +724,9 @@ pub struct BrickData {
     pub density: Vec<f32>,
     /// Dequantized coefficients, `512 × K`, voxel-major.
     pub coefficients: Vec<f32>,
+    /// Dequantized view-dependent coefficients (format 1.2), `512 × J·K_v`, voxel-major
+    /// (`d_ji` of a voxel at `j·K_v + i`); empty when the file has no view-dependent part.
+    pub view_coefficients: Vec<f32>,
 }
 
 impl Asset {
@@ -708,6 +773,20 @@ impl Asset {
         out
     }
 
+    /// Light-transport vector of voxel `voxel` seen from world direction `omega` (from the
+    /// voxel toward the eye; normalised here): [`Self::reconstruct_lt`], plus
+    /// `Σ_j Y_j(ω) Σ_i d_ji V_i` ([`ViewDependence::add_to`]) when the asset has a
+    /// view-dependent part.
+    pub fn reconstruct_lt_toward(&self, voxel: usize, omega: [f32; 3]) -> [f32; LT_DIM] {
+        let mut out = self.reconstruct_lt(voxel);
+        if let Some(view) = &self.view {
+            let mut d = vec![0.0f32; view.coefficients.rank()];
+            view.coefficients.voxel_f32(voxel, &mut d);
+            view.add_to(&d, omega, &mut out);
+        }
+        out
+    }
+
     /// Index of the brick at `coord`, by binary search on the (z, y, x) order.
     pub fn find_brick(&self, coord: [u16; 3]) -> Option<usize> {
         self.bricks
@@ -750,7 +829,7 @@ impl Asset {
                 self.pca.rank()
             )));
         }
-        self.coefficients.validate(voxels)?;
+        self.coefficients.validate(voxels, "QPRM", "COEF")?;
         if let Some(view) = &self.view {
             view.validate(voxels)?;
         }

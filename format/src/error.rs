@@ -234,6 +234,10 @@ pub enum FormatError {
     /// An in-memory asset is inconsistent (lengths, ranks) and cannot be written.
     #[error("invalid asset: {0}")]
     InvalidAsset(String),
+    /// The view-dependent part (format 1.2) is malformed: `VDEP`'s sizes out of range or
+    /// disagreeing with its length, or one of `VDEP` and `VCOF` without the other.
+    #[error("invalid view-dependent part: {0}")]
+    InvalidView(String),
     /// A byte outside the header, table and sections is not zero.
     #[error("non-zero padding byte at offset {offset} (bytes between sections must be zero)")]
     NonZeroPadding {

@@ -9,7 +9,7 @@ use serde::Serialize;
 
 use crate::error::Result;
 use crate::read::AssetReader;
-use crate::spec::{BRICK_SIZE, SectionEntry};
+use crate::spec::{BRICK_SIZE, KIND_VIEW, KIND_VIEW_COEFFICIENTS, SectionEntry, is_known_kind};
 
 /// One section as `nelf inspect` reports it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -41,7 +41,7 @@ impl SectionSummary {
         Self {
             kind: s.name(),
             required: s.required,
-            known: is_known_kind(s),
+            known: is_known_kind(s.kind),
             codec: s.codec.name(),
             shuffle: s.shuffle,
             offset: s.offset,
@@ -53,27 +53,30 @@ impl SectionSummary {
     }
 }
 
-fn is_known_kind(s: &SectionEntry) -> bool {
-    use crate::spec::{
-        KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS,
-    };
-    [
-        KIND_BRICKS,
-        KIND_DENSITY,
-        KIND_PCA,
-        KIND_QUANT_PARAMS,
-        KIND_COEFFICIENTS,
-        KIND_METADATA,
-    ]
-    .contains(&s.kind)
-}
-
 fn ratio(raw: u64, stored: u64) -> f64 {
     if stored == 0 {
         1.0
     } else {
         raw as f64 / stored as f64
     }
+}
+
+/// The view-dependent part (format 1.2, sections `VDEP` and `VCOF`) as `nelf inspect`
+/// reports it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ViewSummary {
+    /// Lobes `J`.
+    pub lobes: usize,
+    /// View basis rank `K_v`.
+    pub rank: usize,
+    /// Coefficients per voxel, `J·K_v`.
+    pub coefficients_per_voxel: usize,
+    /// Encoding name of the per-voxel coefficients.
+    pub encoding: String,
+    /// Stored bytes of `VDEP` and `VCOF` together.
+    pub stored_bytes: u64,
+    /// Decoded bytes of `VDEP` and `VCOF` together.
+    pub raw_bytes: u64,
 }
 
 /// Everything `nelf inspect` prints.
@@ -113,6 +116,8 @@ pub struct Inspection {
     pub pca_rank: u32,
     /// Coefficient encoding name.
     pub coefficient_encoding: String,
+    /// The view-dependent part, if the file has one.
+    pub view: Option<ViewSummary>,
     /// Sections in table order.
     pub sections: Vec<SectionSummary>,
     /// Decoded bytes over all sections.
@@ -139,6 +144,20 @@ pub fn inspect(path: &Path) -> Result<Inspection> {
     let stored: u64 = sections.iter().map(|s| s.stored_bytes).sum();
     let rows = h.world_from_light.transpose().to_cols_array_2d();
     let voxel_count = h.voxel_count();
+    let view = reader.view_params().map(|v| {
+        let parts = reader
+            .sections()
+            .iter()
+            .filter(|s| s.kind == KIND_VIEW || s.kind == KIND_VIEW_COEFFICIENTS);
+        ViewSummary {
+            lobes: v.lobe_count(),
+            rank: v.rank(),
+            coefficients_per_voxel: v.coefficients.rank(),
+            encoding: v.coefficients.encoding().name().to_string(),
+            stored_bytes: parts.clone().map(|s| s.stored_length).sum(),
+            raw_bytes: parts.map(|s| s.raw_length).sum(),
+        }
+    });
     Ok(Inspection {
         file: path.display().to_string(),
         file_size: h.file_size,
@@ -157,6 +176,7 @@ pub fn inspect(path: &Path) -> Result<Inspection> {
         env_size: [h.env_height, h.env_width],
         pca_rank: h.pca_rank,
         coefficient_encoding: h.coefficient_encoding.name().to_string(),
+        view,
         sections,
         raw_payload_bytes: raw,
         stored_payload_bytes: stored,
@@ -222,6 +242,18 @@ impl Inspection {
         );
         let _ = writeln!(s, "PCA rank:          {}", self.pca_rank);
         let _ = writeln!(s, "coefficients:      {}", self.coefficient_encoding);
+        match &self.view {
+            Some(v) => {
+                let _ = writeln!(
+                    s,
+                    "view dependence:   {} lobes × rank {} = {} coefficients per voxel, {}, {} bytes stored, {} decoded",
+                    v.lobes, v.rank, v.coefficients_per_voxel, v.encoding, v.stored_bytes, v.raw_bytes
+                );
+            }
+            None => {
+                let _ = writeln!(s, "view dependence:   none");
+            }
+        }
         for (i, r) in self.world_from_light.iter().enumerate() {
             let label = if i == 0 { "world_from_light:" } else { "" };
             let _ = writeln!(s, "{label:<19}[{:>9.6} {:>9.6} {:>9.6}]", r[0], r[1], r[2]);

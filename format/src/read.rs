@@ -9,9 +9,10 @@
 //! Allocation bounds: the header and table are fixed-size; a section or chunk is read
 //! only after its bounds are checked against the file size, and decompressed only
 //! after its checksum matches, into a buffer of its declared decoded length, which
-//! must equal what the header's counts require, be at most 4 MiB per chunk (1 MiB
-//! for metadata), and be at most 32768 × its stored length (zstd's largest expansion).
-//! Brick coordinates are stored raw, so every count is bounded by the file size.
+//! must equal what the header's counts require (for `VCOF`, the counts of `VDEP`), be at
+//! most 4 MiB per chunk (1 MiB for metadata, 593 168 bytes for `VDEP`), and be at most
+//! 32768 × its stored length (zstd's largest expansion). Brick coordinates are stored
+//! raw, so every count is bounded by the file size.
 //! Whole-asset decoding grows its arrays chunk by chunk, so a damaged or lying file
 //! costs at most one chunk beyond what its intact chunks decode to.
 
@@ -22,16 +23,17 @@ use std::path::{Path, PathBuf};
 use half::f16;
 
 use crate::asset::{
-    Asset, BrickData, CoefficientEncoding, Coefficients, PcaModel, json_type_name, validate_bricks,
-    validate_density, validate_quant_params,
+    Asset, BrickData, CoefficientEncoding, Coefficients, PcaModel, ViewDependence, json_type_name,
+    validate_bricks, validate_density, validate_quant_params,
 };
-use crate::conventions::LT_DIM;
+use crate::conventions::{LT_DIM, VIEW_HARMONICS};
 use crate::error::{FormatError, Result};
 use crate::spec::{
     BRICK_VOXELS, CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header, KIND_BRICKS,
-    KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, MAX_CHUNK_RAW_BYTES,
-    MAX_METADATA_BYTES, MAX_ZSTD_EXPANSION, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind,
-    checksum, header_checksum, kind_name, u64_at, unshuffle,
+    KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_VIEW,
+    KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, MAX_VIEW_PARAMS_BYTES,
+    MAX_ZSTD_EXPANSION, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind, VIEW_HEADER_SIZE,
+    ViewHeader, checksum, header_checksum, is_known_kind, kind_name, u64_at, unshuffle,
 };
 
 /// Reads and fully validates the `.nelf` file at `path`.
@@ -52,6 +54,22 @@ struct Chunk {
     checksum: u64,
 }
 
+/// What a chunked section holds (the index of its [`ChunkedSection`] in
+/// `AssetReader::chunked`, which is the order a full read visits them).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Chunked {
+    /// `DENS`: `f16` densities.
+    Density = 0,
+    /// `COEF`: the PCA coefficients.
+    Coefficients = 1,
+    /// `VCOF`: the view-dependent coefficients (format 1.2, optional).
+    View = 2,
+}
+
+impl Chunked {
+    const ALL: [Self; 3] = [Self::Density, Self::Coefficients, Self::View];
+}
+
 /// A chunked section's entry and its parsed chunk table.
 #[derive(Debug, Clone)]
 struct ChunkedSection {
@@ -62,16 +80,18 @@ struct ChunkedSection {
     bytes_per_brick: u64,
 }
 
-/// The most recently decoded chunk, so that reading bricks in order decodes each chunk once.
+/// The most recently decoded chunk of every chunked section, so that reading bricks in
+/// order decodes each chunk once.
 #[derive(Debug, Clone)]
 struct CachedChunk {
     index: usize,
-    density: Vec<u8>,
-    coefficients: Vec<u8>,
+    /// Decoded bytes, one per entry of `AssetReader::chunked`.
+    raw: Vec<Vec<u8>>,
 }
 
 /// Random access to a `.nelf` file: validated header, section table, bricks, PCA
-/// model and metadata in memory; density and coefficients decoded one chunk at a time.
+/// model, view-dependent parameters and metadata in memory; density and coefficients
+/// decoded one chunk at a time.
 #[derive(Debug)]
 pub struct AssetReader<R> {
     source: R,
@@ -80,10 +100,13 @@ pub struct AssetReader<R> {
     sections: Vec<SectionEntry>,
     bricks: Vec<[u16; 3]>,
     pca: PcaModel,
-    quant_params: Option<(Vec<f32>, Vec<f32>)>,
+    /// The coefficients' rank, encoding and 8-bit parameters, without voxels.
+    coefficients: Coefficients,
+    /// The view-dependent part (`VDEP`) without voxels, if the file has one.
+    view: Option<ViewDependence>,
     metadata: serde_json::Value,
-    density: ChunkedSection,
-    coefficients: ChunkedSection,
+    /// `DENS`, `COEF`, then `VCOF` when there is a view-dependent part (see [`Chunked`]).
+    chunked: Vec<ChunkedSection>,
     cache: Option<CachedChunk>,
 }
 
@@ -175,13 +198,17 @@ impl<R: Read + Seek> AssetReader<R> {
         };
         pca.validate()?;
 
-        let quant_params = match (header.coefficient_encoding, find(KIND_QUANT_PARAMS)) {
+        let rank = header.pca_rank as usize;
+        let coefficients = match (header.coefficient_encoding, find(KIND_QUANT_PARAMS)) {
             (CoefficientEncoding::U8Affine, Some(entry)) => {
-                let floats = f32s(&reader.whole_section(&entry)?);
-                let scale: Vec<f32> = floats.iter().step_by(2).copied().collect();
-                let offset: Vec<f32> = floats.iter().skip(1).step_by(2).copied().collect();
-                validate_quant_params(&scale, &offset)?;
-                Some((scale, offset))
+                let (scale, offset) = pairs(&f32s(&reader.whole_section(&entry)?));
+                validate_quant_params(&scale, &offset, "QPRM")?;
+                Coefficients::U8Affine {
+                    rank,
+                    scale,
+                    offset,
+                    codes: Vec::new(),
+                }
             }
             (CoefficientEncoding::U8Affine, None) => return Err(missing(KIND_QUANT_PARAMS)),
             (CoefficientEncoding::F16, Some(_)) => {
@@ -190,7 +217,21 @@ impl<R: Read + Seek> AssetReader<R> {
                     reason: "f16 coefficients need no QPRM section, but one is present".into(),
                 });
             }
-            (CoefficientEncoding::F16, None) => None,
+            (CoefficientEncoding::F16, None) => Coefficients::F16 {
+                rank,
+                values: Vec::new(),
+            },
+        };
+
+        // The view-dependent part: VDEP gives the size of VCOF's bricks, so VCOF's entry
+        // is checked only now (validate_table made sure both or neither are present).
+        let view = match (find(KIND_VIEW), find(KIND_VIEW_COEFFICIENTS)) {
+            (Some(params), Some(values)) => {
+                let (view_header, view) = view_params(&reader.whole_section(&params)?)?;
+                validate_chunked_entry(&header, &values, view_header.bytes_per_brick())?;
+                Some(view)
+            }
+            _ => None,
         };
 
         let metadata = match find(KIND_METADATA) {
@@ -207,11 +248,19 @@ impl<R: Read + Seek> AssetReader<R> {
             None => serde_json::Value::Object(serde_json::Map::new()),
         };
 
-        let density_entry = find(KIND_DENSITY).ok_or_else(|| missing(KIND_DENSITY))?;
-        let density = reader.chunk_table(&header, density_entry, 2 * BRICK_VOXELS as u64)?;
-        let coefficient_entry = find(KIND_COEFFICIENTS).ok_or_else(|| missing(KIND_COEFFICIENTS))?;
-        let coefficients =
-            reader.chunk_table(&header, coefficient_entry, header.coefficient_bytes_per_brick())?;
+        let mut chunked = Vec::with_capacity(Chunked::ALL.len());
+        for which in Chunked::ALL {
+            let (kind, bytes_per_brick) = match which {
+                Chunked::Density => (KIND_DENSITY, DENSITY_BYTES_PER_BRICK),
+                Chunked::Coefficients => (KIND_COEFFICIENTS, header.coefficient_bytes_per_brick()),
+                Chunked::View => match &view {
+                    Some(v) => (KIND_VIEW_COEFFICIENTS, view_bytes_per_brick(v)),
+                    None => break,
+                },
+            };
+            let entry = find(kind).ok_or_else(|| missing(kind))?;
+            chunked.push(reader.chunk_table(&header, entry, bytes_per_brick)?);
+        }
 
         Ok(Self {
             source,
@@ -220,10 +269,10 @@ impl<R: Read + Seek> AssetReader<R> {
             sections,
             bricks,
             pca,
-            quant_params,
-            metadata,
-            density,
             coefficients,
+            view,
+            metadata,
+            chunked,
             cache: None,
         })
     }
@@ -253,9 +302,19 @@ impl<R: Read + Seek> AssetReader<R> {
         &self.metadata
     }
 
-    /// Reads brick `index`: its coordinates, densities (1/m) and dequantized
-    /// coefficients. Decodes (and checksums) only the chunk holding it; the last
-    /// chunk decoded is kept, so reading bricks in order decodes each chunk once.
+    /// The view-dependent part's parameters (format 1.2, section `VDEP`): its lobes, view
+    /// basis and coefficient encoding, or `None` for a file without one. Its
+    /// `coefficients` hold no voxel, only the rank `J·K_v`, the encoding and (8-bit) the
+    /// dequantisation parameters; [`Self::read_brick`] gives each brick's coefficients
+    /// dequantized, and [`ViewDependence::add_to`] adds a voxel's view-dependent transport.
+    pub fn view_params(&self) -> Option<&ViewDependence> {
+        self.view.as_ref()
+    }
+
+    /// Reads brick `index`: its coordinates, densities (1/m), dequantized coefficients
+    /// and view-dependent coefficients. Decodes (and checksums) only the chunk holding
+    /// it in each chunked section; the last chunk decoded is kept, so reading bricks in
+    /// order decodes each chunk once.
     pub fn read_brick(&mut self, index: usize) -> Result<BrickData> {
         if index >= self.bricks.len() {
             return Err(FormatError::BrickOutOfRange {
@@ -269,64 +328,61 @@ impl<R: Read + Seek> AssetReader<R> {
             Some(c) if c.index == chunk => c,
             _ => CachedChunk {
                 index: chunk,
-                density: self.decode_chunk(false, chunk)?,
-                coefficients: self.decode_chunk(true, chunk)?,
+                raw: (0..self.chunked.len())
+                    .map(|which| self.decode_chunk(which, chunk))
+                    .collect::<Result<_>>()?,
             },
         };
         let cached = self.cache.insert(cached);
         let within = index - chunk * chunk_bricks;
-        let d_bytes = 2 * BRICK_VOXELS;
-        let density: Vec<f16> = f16s(&cached.density[within * d_bytes..(within + 1) * d_bytes]);
-        validate_density(&density, index * BRICK_VOXELS, self.header.signed_density())?;
-        let c_bytes = self.coefficients.bytes_per_brick as usize;
-        let raw = &cached.coefficients[within * c_bytes..(within + 1) * c_bytes];
-        let coefficients = dequantize(
-            raw,
-            &self.header,
-            self.quant_params.as_ref(),
-            index * BRICK_VOXELS,
-        )?;
+        let brick = |which: Chunked| {
+            let n = self.chunked[which as usize].bytes_per_brick as usize;
+            &cached.raw[which as usize][within * n..(within + 1) * n]
+        };
+        let first_voxel = index * BRICK_VOXELS;
+        let density: Vec<f16> = f16s(brick(Chunked::Density));
+        validate_density(&density, first_voxel, self.header.signed_density())?;
+        let coefficients =
+            self.coefficients
+                .dequantize_stored(brick(Chunked::Coefficients), first_voxel, "COEF")?;
+        let view_coefficients = match &self.view {
+            Some(view) => view
+                .coefficients
+                .dequantize_stored(brick(Chunked::View), first_voxel, "VCOF")?,
+            None => Vec::new(),
+        };
         Ok(BrickData {
             coord: self.bricks[index],
             density: density.iter().map(|d| d.to_f32()).collect(),
             coefficients,
+            view_coefficients,
         })
     }
 
     /// Checks every byte: all section checksums (unknown optional sections too), every
     /// chunk's checksum and decoding, and every value's range. Memory: one chunk.
     pub fn verify(&mut self) -> Result<()> {
-        self.visit_chunks(false, &mut |_, _| Ok(()))?;
-        self.visit_chunks(true, &mut |_, _| Ok(()))?;
+        for which in 0..self.chunked.len() {
+            self.visit_chunks(which, &mut |_| ())?;
+        }
         self.verify_other_sections()
     }
 
     /// Decodes the whole asset, checking every checksum and value.
     pub fn read_all(mut self) -> Result<Asset> {
         let mut density: Vec<f16> = Vec::new();
-        self.visit_chunks(false, &mut |_, raw| {
-            density.extend(f16s(raw));
-            Ok(())
+        self.visit_chunks(Chunked::Density as usize, &mut |raw| density.extend(f16s(raw)))?;
+        let mut coefficients = self.coefficients.clone();
+        self.visit_chunks(Chunked::Coefficients as usize, &mut |raw| {
+            coefficients.extend_from_stored(raw);
         })?;
-        let mut codes: Vec<u8> = Vec::new();
-        self.visit_chunks(true, &mut |_, raw| {
-            codes.extend_from_slice(raw);
-            Ok(())
-        })?;
+        let mut view = self.view.clone();
+        if let Some(view) = &mut view {
+            self.visit_chunks(Chunked::View as usize, &mut |raw| {
+                view.coefficients.extend_from_stored(raw);
+            })?;
+        }
         self.verify_other_sections()?;
-        let rank = self.header.pca_rank as usize;
-        let coefficients = match self.quant_params.take() {
-            Some((scale, offset)) => Coefficients::U8Affine {
-                rank,
-                scale,
-                offset,
-                codes,
-            },
-            None => Coefficients::F16 {
-                rank,
-                values: f16s(&codes),
-            },
-        };
         let asset = Asset {
             grid: self.header.grid,
             world_from_light: self.header.world_from_light,
@@ -334,7 +390,7 @@ impl<R: Read + Seek> AssetReader<R> {
             density,
             pca: self.pca,
             coefficients,
-            view: None,
+            view,
             metadata: self.metadata,
         };
         asset.validate()?;
@@ -347,7 +403,7 @@ impl<R: Read + Seek> AssetReader<R> {
         let others: Vec<SectionEntry> = self
             .sections
             .iter()
-            .filter(|s| s.kind != KIND_DENSITY && s.kind != KIND_COEFFICIENTS)
+            .filter(|s| !self.chunked.iter().any(|c| c.entry.kind == s.kind))
             .copied()
             .collect();
         let mut reader = PartialReader {
@@ -377,36 +433,32 @@ impl<R: Read + Seek> AssetReader<R> {
         Ok(())
     }
 
-    /// Decodes every chunk of the density (`false`) or coefficient (`true`) section in
+    /// Decodes every chunk of chunked section `which` (an index into `self.chunked`) in
     /// order, validates its values, hands the decoded bytes to `f`, and checks the
     /// section checksum over the chunk table and all chunks.
-    fn visit_chunks(
-        &mut self,
-        coefficients: bool,
-        f: &mut dyn FnMut(usize, &[u8]) -> Result<()>,
-    ) -> Result<()> {
-        let section = if coefficients {
-            &self.coefficients
-        } else {
-            &self.density
-        };
+    fn visit_chunks(&mut self, which: usize, f: &mut dyn FnMut(&[u8])) -> Result<()> {
+        let section = &self.chunked[which];
         let entry = section.entry;
         let mut hasher = xxhash_rust::xxh3::Xxh3Default::new();
         hasher.update(&section.table_bytes);
         let chunk_count = section.chunks.len();
         for i in 0..chunk_count {
-            let (stored, raw) = self.read_and_decode_chunk(coefficients, i)?;
+            let (stored, raw) = self.read_and_decode_chunk(which, i)?;
             hasher.update(&stored);
             drop(stored);
             let first_voxel = i * self.header.chunk_bricks as usize * BRICK_VOXELS;
-            if coefficients {
-                if self.header.coefficient_encoding == CoefficientEncoding::F16 {
-                    check_finite_f16(&f16s(&raw), self.header.pca_rank as usize, first_voxel)?;
+            match Chunked::ALL[which] {
+                Chunked::Density => {
+                    validate_density(&f16s(&raw), first_voxel, self.header.signed_density())?;
                 }
-            } else {
-                validate_density(&f16s(&raw), first_voxel, self.header.signed_density())?;
+                Chunked::Coefficients => self.coefficients.check_stored(&raw, first_voxel, "COEF")?,
+                Chunked::View => {
+                    if let Some(view) = &self.view {
+                        view.coefficients.check_stored(&raw, first_voxel, "VCOF")?;
+                    }
+                }
             }
-            f(i, &raw)?;
+            f(&raw);
         }
         let computed = hasher.digest();
         if checksums_differ(entry.checksum, computed) {
@@ -419,17 +471,14 @@ impl<R: Read + Seek> AssetReader<R> {
         Ok(())
     }
 
-    fn decode_chunk(&mut self, coefficients: bool, index: usize) -> Result<Vec<u8>> {
-        Ok(self.read_and_decode_chunk(coefficients, index)?.1)
+    fn decode_chunk(&mut self, which: usize, index: usize) -> Result<Vec<u8>> {
+        Ok(self.read_and_decode_chunk(which, index)?.1)
     }
 
-    /// Reads chunk `index`'s stored bytes, checks its checksum, and decodes it.
-    fn read_and_decode_chunk(&mut self, coefficients: bool, index: usize) -> Result<(Vec<u8>, Vec<u8>)> {
-        let section = if coefficients {
-            &self.coefficients
-        } else {
-            &self.density
-        };
+    /// Reads chunk `index` of chunked section `which`: its stored bytes, checked against
+    /// its checksum, and their decoding.
+    fn read_and_decode_chunk(&mut self, which: usize, index: usize) -> Result<(Vec<u8>, Vec<u8>)> {
+        let section = &self.chunked[which];
         let chunk = section.chunks[index];
         let entry = section.entry;
         let raw_length = self.header.bricks_in_chunk(index as u64) * section.bytes_per_brick;
@@ -648,30 +697,46 @@ fn decompress(stored: &[u8], raw_length: u64, what: &str) -> Result<Vec<u8>> {
     Ok(out)
 }
 
-/// Expected decoded length of a known section, or `None` for metadata (variable).
-fn expected_raw_length(header: &Header, kind: SectionKind) -> Option<u64> {
-    let bricks = u64::from(header.brick_count);
-    let rank = u64::from(header.pca_rank);
-    match kind {
-        KIND_BRICKS => Some(6 * bricks),
-        KIND_DENSITY => Some(2 * BRICK_VOXELS as u64 * bricks),
-        KIND_PCA => Some(4 * LT_DIM as u64 * (rank + 1)),
-        KIND_QUANT_PARAMS => Some(8 * rank),
-        KIND_COEFFICIENTS => Some(header.coefficient_bytes_per_brick() * bricks),
-        _ => None,
-    }
+/// Decoded bytes of one brick of `DENS` (512 `f16`s).
+const DENSITY_BYTES_PER_BRICK: u64 = 2 * BRICK_VOXELS as u64;
+
+/// Decoded bytes of one brick of `VCOF` for `view` (`512 · J·K_v · w`).
+fn view_bytes_per_brick(view: &ViewDependence) -> u64 {
+    (BRICK_VOXELS * view.coefficients.rank() * view.coefficients.encoding().bytes_per_value()) as u64
 }
 
-fn is_known(kind: SectionKind) -> bool {
-    [
-        KIND_BRICKS,
-        KIND_DENSITY,
-        KIND_PCA,
-        KIND_QUANT_PARAMS,
-        KIND_COEFFICIENTS,
-        KIND_METADATA,
-    ]
-    .contains(&kind)
+/// Decodes `VDEP` (format 1.2): its [`ViewHeader`], then the lobes, the view basis and,
+/// for 8-bit coefficients, the dequantisation parameters, all checked; the returned part
+/// holds no voxel.
+fn view_params(bytes: &[u8]) -> Result<(ViewHeader, ViewDependence)> {
+    let header = ViewHeader::from_section(bytes)?;
+    let floats = f32s(&bytes[VIEW_HEADER_SIZE..]);
+    let (lobes, rest) = floats.split_at(header.lobes as usize * VIEW_HARMONICS);
+    let (basis, params) = rest.split_at(header.rank as usize * LT_DIM);
+    let rank = header.coefficients_per_voxel() as usize;
+    let coefficients = match header.encoding {
+        CoefficientEncoding::U8Affine => {
+            let (scale, offset) = pairs(params);
+            Coefficients::U8Affine {
+                rank,
+                scale,
+                offset,
+                codes: Vec::new(),
+            }
+        }
+        CoefficientEncoding::F16 => Coefficients::F16 {
+            rank,
+            values: Vec::new(),
+        },
+    };
+    let view = ViewDependence {
+        lobes: lobes.to_vec(),
+        basis: basis.to_vec(),
+        coefficients,
+    };
+    // Lobes, then basis, finite; then the 8-bit parameters (as QPRM's).
+    view.validate(0)?;
+    Ok((header, view))
 }
 
 /// Checks the section table: bounds, alignment, overlaps, duplicates, unknown
@@ -711,7 +776,7 @@ fn validate_table(header: &Header, sections: &[SectionEntry]) -> Result<()> {
         }
     }
     for s in sections {
-        if !is_known(s.kind) {
+        if !is_known_kind(s.kind) {
             if s.required {
                 return Err(FormatError::UnknownRequiredSection { section: s.name() });
             }
@@ -719,94 +784,134 @@ fn validate_table(header: &Header, sections: &[SectionEntry]) -> Result<()> {
         }
         validate_known_entry(header, s)?;
     }
+    let has = |kind: SectionKind| sections.iter().any(|s| s.kind == kind);
     for kind in [KIND_BRICKS, KIND_DENSITY, KIND_PCA, KIND_COEFFICIENTS] {
-        if !sections.iter().any(|s| s.kind == kind) {
+        if !has(kind) {
             return Err(FormatError::MissingSection {
                 section: kind_name(kind),
             });
         }
     }
+    // The view-dependent part is optional, but whole: its parameters and coefficients.
+    for (present, absent) in [
+        (KIND_VIEW, KIND_VIEW_COEFFICIENTS),
+        (KIND_VIEW_COEFFICIENTS, KIND_VIEW),
+    ] {
+        if has(present) && !has(absent) {
+            return Err(FormatError::InvalidView(format!(
+                "section {} is present without section {}",
+                kind_name(present),
+                kind_name(absent)
+            )));
+        }
+    }
     Ok(())
 }
 
+/// Checks a known section's entry against the header: its codec, its declared decoded
+/// length, and the rules of its codec. `VCOF`'s length, shuffle and chunk size depend on
+/// `VDEP`, so they are checked once that is read ([`validate_chunked_entry`]).
 fn validate_known_entry(header: &Header, s: &SectionEntry) -> Result<()> {
-    let name = s.name();
-    let bad = |reason: String| FormatError::BadCodec {
-        section: name.clone(),
-        reason,
-    };
-    let chunked = s.kind == KIND_DENSITY || s.kind == KIND_COEFFICIENTS;
+    let chunked = [KIND_DENSITY, KIND_COEFFICIENTS, KIND_VIEW_COEFFICIENTS].contains(&s.kind);
     match (s.codec, chunked) {
         (SectionCodec::Raw, false) | (SectionCodec::ChunkedZstd, true) => {}
         (SectionCodec::Zstd, false) if s.kind != KIND_BRICKS => {}
         (codec, _) => {
-            return Err(bad(format!(
-                "codec {} is not allowed for this section",
-                codec.name()
-            )));
-        }
-    }
-    match expected_raw_length(header, s.kind) {
-        Some(expected) if expected != s.raw_length => {
-            return Err(FormatError::SectionLength {
-                section: name,
-                expected,
-                found: s.raw_length,
+            return Err(FormatError::BadCodec {
+                section: s.name(),
+                reason: format!("codec {} is not allowed for this section", codec.name()),
             });
         }
-        Some(_) => {}
-        None => {
+    }
+    let bricks = u64::from(header.brick_count);
+    let rank = u64::from(header.pca_rank);
+    let expected = match s.kind {
+        KIND_DENSITY => return validate_chunked_entry(header, s, DENSITY_BYTES_PER_BRICK),
+        KIND_COEFFICIENTS => return validate_chunked_entry(header, s, header.coefficient_bytes_per_brick()),
+        KIND_VIEW_COEFFICIENTS => return Ok(()),
+        KIND_BRICKS => 6 * bricks,
+        KIND_PCA => 4 * LT_DIM as u64 * (rank + 1),
+        KIND_QUANT_PARAMS => 8 * rank,
+        KIND_VIEW => {
+            if s.raw_length > MAX_VIEW_PARAMS_BYTES {
+                return Err(FormatError::InvalidView(format!(
+                    "section VDEP declares {} decoded bytes, more than the largest possible {MAX_VIEW_PARAMS_BYTES}",
+                    s.raw_length
+                )));
+            }
+            s.raw_length
+        }
+        _ => {
             if s.raw_length > MAX_METADATA_BYTES {
                 return Err(FormatError::CountTooLarge {
-                    what: format!("section {name} decoded length"),
+                    what: format!("section {} decoded length", s.name()),
                     count: s.raw_length,
                     limit: MAX_METADATA_BYTES,
                 });
             }
+            s.raw_length
         }
+    };
+    if expected != s.raw_length {
+        return Err(FormatError::SectionLength {
+            section: s.name(),
+            expected,
+            found: s.raw_length,
+        });
+    }
+    let bad = |reason: String| FormatError::BadCodec {
+        section: s.name(),
+        reason,
+    };
+    let width = u64::from(s.shuffle);
+    if s.codec == SectionCodec::Raw {
+        if s.shuffle != 0 {
+            return Err(bad(format!("raw section with shuffle width {}", s.shuffle)));
+        }
+        if s.stored_length != s.raw_length {
+            return Err(bad(format!(
+                "raw section stores {} bytes but declares {} decoded",
+                s.stored_length, s.raw_length
+            )));
+        }
+    } else {
+        if width > 1 && s.raw_length % width != 0 {
+            return Err(bad(format!(
+                "shuffle width {width} does not divide decoded length {}",
+                s.raw_length
+            )));
+        }
+        check_plausible(s.raw_length, s.stored_length, || format!("section {}", s.name()))?;
+    }
+    Ok(())
+}
+
+/// Checks a chunked section's entry (`DENS`, `COEF`, `VCOF`) whose bricks decode to
+/// `bytes_per_brick` bytes: its decoded length (`brick_count × bytes_per_brick`), its
+/// shuffle width (dividing a brick) and the decoded size of a chunk (≤ 4 MiB).
+fn validate_chunked_entry(header: &Header, s: &SectionEntry, bytes_per_brick: u64) -> Result<()> {
+    let expected = u64::from(header.brick_count) * bytes_per_brick;
+    if expected != s.raw_length {
+        return Err(FormatError::SectionLength {
+            section: s.name(),
+            expected,
+            found: s.raw_length,
+        });
     }
     let width = u64::from(s.shuffle);
-    match s.codec {
-        SectionCodec::Raw => {
-            if s.shuffle != 0 {
-                return Err(bad(format!("raw section with shuffle width {}", s.shuffle)));
-            }
-            if s.stored_length != s.raw_length {
-                return Err(bad(format!(
-                    "raw section stores {} bytes but declares {} decoded",
-                    s.stored_length, s.raw_length
-                )));
-            }
-        }
-        SectionCodec::Zstd => {
-            if width > 1 && s.raw_length % width != 0 {
-                return Err(bad(format!(
-                    "shuffle width {width} does not divide decoded length {}",
-                    s.raw_length
-                )));
-            }
-            check_plausible(s.raw_length, s.stored_length, || format!("section {name}"))?;
-        }
-        SectionCodec::ChunkedZstd => {
-            let per_brick = if s.kind == KIND_DENSITY {
-                2 * BRICK_VOXELS as u64
-            } else {
-                header.coefficient_bytes_per_brick()
-            };
-            if width > 1 && per_brick % width != 0 {
-                return Err(bad(format!(
-                    "shuffle width {width} does not divide the {per_brick} bytes of a brick"
-                )));
-            }
-            if u64::from(header.chunk_bricks) * per_brick > MAX_CHUNK_RAW_BYTES {
-                return Err(FormatError::CountTooLarge {
-                    what: format!("section {name} chunk decoded bytes"),
-                    count: u64::from(header.chunk_bricks) * per_brick,
-                    limit: MAX_CHUNK_RAW_BYTES,
-                });
-            }
-        }
-        SectionCodec::Unknown(_) => {}
+    if width > 1 && bytes_per_brick % width != 0 {
+        return Err(FormatError::BadCodec {
+            section: s.name(),
+            reason: format!("shuffle width {width} does not divide the {bytes_per_brick} bytes of a brick"),
+        });
+    }
+    let chunk = u64::from(header.chunk_bricks) * bytes_per_brick;
+    if chunk > MAX_CHUNK_RAW_BYTES {
+        return Err(FormatError::CountTooLarge {
+            what: format!("section {} chunk decoded bytes", s.name()),
+            count: chunk,
+            limit: MAX_CHUNK_RAW_BYTES,
+        });
     }
     Ok(())
 }
@@ -827,37 +932,10 @@ fn f16s(bytes: &[u8]) -> Vec<f16> {
         .collect()
 }
 
-/// Dequantizes one brick's stored coefficients to `f32`, rejecting non-finite `f16`s.
-fn dequantize(
-    raw: &[u8],
-    header: &Header,
-    quant_params: Option<&(Vec<f32>, Vec<f32>)>,
-    first_voxel: usize,
-) -> Result<Vec<f32>> {
-    let rank = header.pca_rank as usize;
-    // `quant_params` is present exactly when the encoding is 8-bit (checked at open).
-    if let Some((scale, offset)) = quant_params {
-        return Ok(raw
-            .iter()
-            .enumerate()
-            .map(|(i, &code)| offset[i % rank] + scale[i % rank] * f32::from(code))
-            .collect());
-    }
-    let values = f16s(raw);
-    check_finite_f16(&values, rank, first_voxel)?;
-    Ok(values.iter().map(|v| v.to_f32()).collect())
-}
-
-/// Rejects NaN or infinite `f16` coefficients, naming the voxel and component.
-fn check_finite_f16(values: &[f16], rank: usize, first_voxel: usize) -> Result<()> {
-    match values.iter().position(|v| !v.is_finite()) {
-        Some(i) => Err(FormatError::NonFinite {
-            what: format!(
-                "section COEF voxel {} component {}",
-                first_voxel + i / rank.max(1),
-                i % rank.max(1)
-            ),
-        }),
-        None => Ok(()),
-    }
+/// Splits interleaved `(scale, offset)` pairs (`QPRM`, the end of `VDEP`).
+fn pairs(floats: &[f32]) -> (Vec<f32>, Vec<f32>) {
+    (
+        floats.iter().step_by(2).copied().collect(),
+        floats.iter().skip(1).step_by(2).copied().collect(),
+    )
 }

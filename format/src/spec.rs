@@ -8,15 +8,20 @@
 use glam::DMat3;
 
 use crate::asset::{CoefficientEncoding, GridGeometry};
-use crate::conventions::{ENV_H, ENV_W, LT_DIM, is_rotation};
+use crate::conventions::{ENV_H, ENV_W, LT_DIM, VIEW_HARMONICS, is_rotation};
 use crate::error::{FormatError, Result};
 
 /// File magic: `\x89 N E L F \r \n \x1a` (a high byte and line endings catch text-mode damage).
 pub const MAGIC: [u8; 8] = [0x89, b'N', b'E', b'L', b'F', 0x0D, 0x0A, 0x1A];
 /// Major version this crate reads and writes; a reader rejects any other.
 pub const VERSION_MAJOR: u16 = 1;
-/// Minor version this crate writes; readers accept any minor of their major.
-pub const VERSION_MINOR: u16 = 1;
+/// Newest minor version this crate writes: 2 for an asset with a view-dependent part
+/// (`VDEP`, `VCOF`), [`VERSION_MINOR_WITHOUT_VIEW`] for one without. Readers accept any
+/// minor of their major.
+pub const VERSION_MINOR: u16 = 2;
+/// Minor version this crate writes for an asset without a view-dependent part: such a
+/// file is exactly what a 1.1 writer wrote.
+pub const VERSION_MINOR_WITHOUT_VIEW: u16 = 1;
 /// Size of the fixed header in bytes.
 pub const HEADER_SIZE: usize = 256;
 /// Size of one section-table entry in bytes.
@@ -66,6 +71,37 @@ pub const KIND_QUANT_PARAMS: SectionKind = *b"QPRM";
 pub const KIND_COEFFICIENTS: SectionKind = *b"COEF";
 /// Metadata, UTF-8 JSON object.
 pub const KIND_METADATA: SectionKind = *b"META";
+/// The view-dependent part's parameters (1.2, optional): a [`ViewHeader`], the lobes'
+/// harmonic weights, the view basis and 8-bit dequantisation parameters, `f32`.
+pub const KIND_VIEW: SectionKind = *b"VDEP";
+/// The view-dependent part's per-voxel coefficients (1.2, optional), `J·K_v` per voxel,
+/// `u8` or `f16`, chunked like [`KIND_COEFFICIENTS`].
+pub const KIND_VIEW_COEFFICIENTS: SectionKind = *b"VCOF";
+/// Every kind this reader knows, in the order the writer lays them out.
+pub const KNOWN_KINDS: [SectionKind; 8] = [
+    KIND_BRICKS,
+    KIND_DENSITY,
+    KIND_PCA,
+    KIND_QUANT_PARAMS,
+    KIND_COEFFICIENTS,
+    KIND_VIEW,
+    KIND_VIEW_COEFFICIENTS,
+    KIND_METADATA,
+];
+/// Size of the [`ViewHeader`] at the start of `VDEP`.
+pub const VIEW_HEADER_SIZE: usize = 16;
+/// Largest decoded `VDEP`: its header, 8 lobes, 384 basis vectors and 384 pairs of 8-bit
+/// parameters (no file reaches it: `J·K_v ≤ 384`); a larger declared length is refused
+/// before anything is decoded.
+pub const MAX_VIEW_PARAMS_BYTES: u64 = VIEW_HEADER_SIZE as u64
+    + 4 * (VIEW_HARMONICS * VIEW_HARMONICS) as u64
+    + 4 * (LT_DIM * LT_DIM) as u64
+    + 8 * LT_DIM as u64;
+
+/// Whether this reader knows section kind `kind` (unknown kinds are skipped when optional).
+pub fn is_known_kind(kind: SectionKind) -> bool {
+    KNOWN_KINDS.contains(&kind)
+}
 
 /// A section kind as text for messages (`BRCK`, or escaped bytes if not ASCII).
 pub fn kind_name(kind: SectionKind) -> String {
@@ -453,6 +489,91 @@ impl Header {
                 count: chunk_raw,
                 limit: MAX_CHUNK_RAW_BYTES,
             });
+        }
+        Ok(header)
+    }
+}
+
+/// The first 16 bytes of `VDEP` (format 1.2): the shape of the view-dependent part,
+/// `u32 J`, `u32 K_v`, `u32 encoding`, `u32` reserved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ViewHeader {
+    /// Lobes `J`, 1..=8.
+    pub lobes: u32,
+    /// View basis rank `K_v`, ≥ 1, with `J·K_v ≤ 384`.
+    pub rank: u32,
+    /// How `VCOF` stores the coefficients (numbered as the header's `coefficient_encoding`).
+    pub encoding: CoefficientEncoding,
+}
+
+impl ViewHeader {
+    /// Coefficients per voxel, `R = J·K_v`.
+    pub fn coefficients_per_voxel(&self) -> u64 {
+        u64::from(self.lobes) * u64::from(self.rank)
+    }
+
+    /// Decoded length of the whole `VDEP` section: header, `J·8` lobe weights, `K_v·384`
+    /// basis values, and `R` (scale, offset) pairs when 8-bit, all `f32`.
+    pub fn section_length(&self) -> u64 {
+        let params = match self.encoding {
+            CoefficientEncoding::U8Affine => 8 * self.coefficients_per_voxel(),
+            CoefficientEncoding::F16 => 0,
+        };
+        VIEW_HEADER_SIZE as u64
+            + 4 * VIEW_HARMONICS as u64 * u64::from(self.lobes)
+            + 4 * LT_DIM as u64 * u64::from(self.rank)
+            + params
+    }
+
+    /// Decoded bytes of one brick of `VCOF`: `512·R·w`.
+    pub fn bytes_per_brick(&self) -> u64 {
+        BRICK_VOXELS as u64 * self.coefficients_per_voxel() * self.encoding.bytes_per_value() as u64
+    }
+
+    /// Packs the header (reserved field zero).
+    pub fn to_bytes(&self) -> [u8; VIEW_HEADER_SIZE] {
+        let mut b = [0u8; VIEW_HEADER_SIZE];
+        b[0..4].copy_from_slice(&self.lobes.to_le_bytes());
+        b[4..8].copy_from_slice(&self.rank.to_le_bytes());
+        b[8..12].copy_from_slice(&self.encoding.to_u32().to_le_bytes());
+        b
+    }
+
+    /// Unpacks and checks the header from the start of a decoded `VDEP` (any length):
+    /// at least 16 bytes, `J` in 1..=8, `K_v ≥ 1` with `J·K_v ≤ 384`, a known encoding,
+    /// and a section length equal to [`Self::section_length`]. The reserved field is ignored.
+    pub fn from_section(b: &[u8]) -> Result<Self> {
+        let bad = |reason: String| FormatError::InvalidView(format!("section VDEP: {reason}"));
+        if b.len() < VIEW_HEADER_SIZE {
+            return Err(bad(format!(
+                "{} decoded bytes, shorter than its {VIEW_HEADER_SIZE}-byte header",
+                b.len()
+            )));
+        }
+        let (lobes, rank, code) = (u32_at(b, 0), u32_at(b, 4), u32_at(b, 8));
+        if lobes == 0 || lobes as usize > VIEW_HARMONICS {
+            return Err(bad(format!("{lobes} lobes, must be 1 to {VIEW_HARMONICS}")));
+        }
+        let per_voxel = u64::from(lobes) * u64::from(rank);
+        if rank == 0 || per_voxel > LT_DIM as u64 {
+            return Err(bad(format!(
+                "{lobes} lobes × rank {rank} = {per_voxel} coefficients per voxel, must be 1 to {LT_DIM}"
+            )));
+        }
+        let encoding = CoefficientEncoding::from_u32(code)
+            .ok_or_else(|| bad(format!("unknown coefficient encoding {code}")))?;
+        let header = Self {
+            lobes,
+            rank,
+            encoding,
+        };
+        if header.section_length() != b.len() as u64 {
+            return Err(bad(format!(
+                "{} decoded bytes, but {lobes} lobes × rank {rank} with {} coefficients need {}",
+                b.len(),
+                encoding.name(),
+                header.section_length()
+            )));
         }
         Ok(header)
     }

@@ -1,19 +1,21 @@
 //! `.nelf` writer: packs an [`Asset`] into the v1 layout of `SPEC.md` (header,
 //! section table, 8-byte aligned sections, chunked zstd for density and
-//! coefficients) and writes it atomically (temporary file in the same folder,
+//! coefficients; version 1.2 with the optional view-dependent sections `VDEP` and
+//! `VCOF` when the asset has a view-dependent part, 1.1 otherwise) and writes it atomically (temporary file in the same folder,
 //! then rename). Output depends only on the asset and the options, so writing
 //! the same asset twice gives byte-identical files.
 
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
-use crate::asset::{Asset, Coefficients, has_negative_density};
+use crate::asset::{Asset, CoefficientEncoding, Coefficients, has_negative_density};
 use crate::error::{FormatError, Result};
 use crate::spec::{
     BRICK_VOXELS, CHUNK_ENTRY_SIZE, FLAG_SIGNED_DENSITY, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header,
-    KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS,
-    MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind,
-    VERSION_MAJOR, VERSION_MINOR, checksum, header_checksum, kind_name, shuffle,
+    KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_VIEW,
+    KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, SECTION_ENTRY_SIZE, SectionCodec,
+    SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_WITHOUT_VIEW, ViewHeader,
+    checksum, header_checksum, kind_name, shuffle,
 };
 
 /// Choices the writer makes; none of them changes what a reader gets back.
@@ -83,7 +85,16 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
     let rank = asset.rank();
     let encoding = asset.coefficients.encoding();
     let coef_brick_bytes = (BRICK_VOXELS * rank * encoding.bytes_per_value()) as u64;
-    let max_chunk_bricks = (MAX_CHUNK_RAW_BYTES / coef_brick_bytes.max(2 * BRICK_VOXELS as u64)).max(1);
+    let view_header = asset.view.as_ref().map(|view| ViewHeader {
+        lobes: view.lobe_count() as u32,
+        rank: view.rank() as u32,
+        encoding: view.coefficients.encoding(),
+    });
+    let view_brick_bytes = view_header.map_or(0, |h| h.bytes_per_brick());
+    let largest_brick = coef_brick_bytes
+        .max(view_brick_bytes)
+        .max(2 * BRICK_VOXELS as u64);
+    let max_chunk_bricks = (MAX_CHUNK_RAW_BYTES / largest_brick).max(1);
     let chunk_bricks = u64::from(options.chunk_bricks).clamp(1, max_chunk_bricks) as u32;
     let mut zstd = Zstd::new(options.zstd_level)?;
     let shuffle_width = |w: u32| if options.shuffle { w } else { 0 };
@@ -121,12 +132,8 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
         .collect();
     payloads.push(zstd.whole(KIND_PCA, &pca_bytes, shuffle_width(4))?);
 
-    if let Coefficients::U8Affine { scale, offset, .. } = &asset.coefficients {
-        let params: Vec<u8> = scale
-            .iter()
-            .zip(offset)
-            .flat_map(|(s, o)| s.to_le_bytes().into_iter().chain(o.to_le_bytes()))
-            .collect();
+    if asset.coefficients.encoding() == CoefficientEncoding::U8Affine {
+        let params = quant_param_bytes(&asset.coefficients);
         payloads.push(zstd.whole(KIND_QUANT_PARAMS, &params, 0)?);
     }
 
@@ -139,6 +146,27 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
         chunk_bricks as usize,
         shuffle_width(record),
     )?);
+
+    // The view-dependent part (1.2): optional sections, so that a 1.1 reader skips them
+    // and renders the PCA part, which is the view-averaged asset.
+    if let (Some(view), Some(view_header)) = (&asset.view, view_header) {
+        let mut params = view_header.to_bytes().to_vec();
+        params.extend(view.lobes.iter().chain(&view.basis).flat_map(|v| v.to_le_bytes()));
+        params.extend(quant_param_bytes(&view.coefficients));
+        let mut vdep = zstd.whole(KIND_VIEW, &params, shuffle_width(4))?;
+        vdep.entry.required = false;
+        payloads.push(vdep);
+        let record = (view.coefficients.rank() * view_header.encoding.bytes_per_value()) as u32;
+        let mut vcof = zstd.chunked(
+            KIND_VIEW_COEFFICIENTS,
+            &view.coefficients.value_bytes(),
+            view_brick_bytes as usize,
+            chunk_bricks as usize,
+            shuffle_width(record),
+        )?;
+        vcof.entry.required = false;
+        payloads.push(vcof);
+    }
 
     let metadata = serde_json::to_vec(&asset.metadata)?;
     if metadata.len() as u64 > MAX_METADATA_BYTES {
@@ -163,7 +191,11 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
     let file_size = offset;
     let header = Header {
         version_major: VERSION_MAJOR,
-        version_minor: VERSION_MINOR,
+        version_minor: if asset.view.is_some() {
+            VERSION_MINOR
+        } else {
+            VERSION_MINOR_WITHOUT_VIEW
+        },
         section_count: section_count as u32,
         flags: if has_negative_density(&asset.density) {
             FLAG_SIGNED_DENSITY
@@ -194,6 +226,19 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
     }
     debug_assert_eq!(out.len() as u64, file_size);
     Ok((out, payloads.into_iter().map(|p| p.entry).collect()))
+}
+
+/// The 8-bit dequantisation parameters of `coefficients` as stored (`QPRM`, the end of
+/// `VDEP`): `(scale, offset)` `f32` pairs per component; nothing for `f16`.
+fn quant_param_bytes(coefficients: &Coefficients) -> Vec<u8> {
+    match coefficients {
+        Coefficients::U8Affine { scale, offset, .. } => scale
+            .iter()
+            .zip(offset)
+            .flat_map(|(s, o)| s.to_le_bytes().into_iter().chain(o.to_le_bytes()))
+            .collect(),
+        Coefficients::F16 { .. } => Vec::new(),
+    }
 }
 
 /// A section's stored bytes and its table entry (offset filled in at layout).

@@ -683,9 +683,12 @@ fn c_code(err: &FormatError) -> &'static str {
         E::UnsupportedFeature { .. } => "NELF_ERR_UNSUPPORTED_FEATURE",
         E::NonFinite { what } if what.starts_with("header field") => "NELF_ERR_NONFINITE_HEADER",
         E::NonFinite { what } if what.starts_with("PCA") => "NELF_ERR_NONFINITE_PCA",
+        E::NonFinite { what } if what.contains("VDEP") => "NELF_ERR_NONFINITE_VIEW",
         E::NonFinite { what } if what.contains("QPRM") => "NELF_ERR_NONFINITE_QPRM",
         E::NonFinite { what } if what.contains("DENS") => "NELF_ERR_NONFINITE_DENSITY",
-        E::NonFinite { what } if what.contains("COEF") => "NELF_ERR_NONFINITE_COEFFICIENT",
+        E::NonFinite { what } if what.contains("COEF") || what.contains("VCOF") => {
+            "NELF_ERR_NONFINITE_COEFFICIENT"
+        }
         E::NonFinite { .. } => "unmapped NonFinite",
         E::BadRank { .. } => "NELF_ERR_BAD_RANK",
         E::TooManySections { .. } => "NELF_ERR_TOO_MANY_SECTIONS",
@@ -713,6 +716,7 @@ fn c_code(err: &FormatError) -> &'static str {
         E::InvalidValue { .. } => "NELF_ERR_NEGATIVE_SCALE",
         E::NonZeroPadding { .. } => "NELF_ERR_NONZERO_PADDING",
         E::BrickOutOfRange { .. } => "NELF_ERR_BRICK_OUT_OF_RANGE",
+        E::InvalidView(_) => "NELF_ERR_BAD_VIEW",
         E::InvalidAsset(_) => "unmapped InvalidAsset",
     }
 }
@@ -720,7 +724,7 @@ fn c_code(err: &FormatError) -> &'static str {
 /// The places a Rust error message names (known section kinds, "chunk 3", "voxel 700",
 /// "offset 1234", ...), which the C reader's message must name too.
 fn anchors(message: &str) -> Vec<String> {
-    let mut out: Vec<String> = ["BRCK", "DENS", "PCAB", "QPRM", "COEF", "META"]
+    let mut out: Vec<String> = ["BRCK", "DENS", "PCAB", "QPRM", "COEF", "VDEP", "VCOF", "META"]
         .into_iter()
         .filter(|k| message.contains(k))
         .map(String::from)
