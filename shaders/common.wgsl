@@ -6,6 +6,10 @@
 //   x and y, so slot coordinates are bit operations.
 // * Indirection grid: one u32 per brick cell: a present brick's or a halo cell's slot,
 //   or a far cell's distance to the nearest present brick (see `FAR_FLAG`).
+// * Writing a voxel into the atlas: the texels (own slot and neighbours' aprons) that
+//   hold it, shared by the relight and view passes.
+// * f16 bits to f32, the view harmonics of format 1.2 and the per-voxel lobe buffer layout
+//   the relight pass writes for the view pass.
 // * Full-screen triangle, ray–box slab test, hashing for jitter, ACES (Narkowicz 2015 fit) tone mapping,
 //   and the sRGB transfer function (IEC 61966-2-1).
 
@@ -63,6 +67,145 @@ fn has_slot(entry: u32) -> bool {
 fn slot_of(entry: u32) -> u32 {
     return (entry & SLOT_BITS) - 1u;
 }
+
+// Brick-cell coordinates of a stored brick, packed by viewer/src/atlas.rs
+// (`pack_brick_cells`): (x | y << 16, z).
+fn brick_cell(packed: vec2<u32>) -> vec3<i32> {
+    return vec3<i32>(vec3<u32>(packed.x & 0xffffu, packed.x >> 16u, packed.y));
+}
+
+// Local coordinates (x fastest) of stored voxel `voxel` within its brick (voxel / 512).
+fn voxel_local(voxel: u32) -> vec3<i32> {
+    return vec3<i32>(vec3<u32>(voxel & 7u, (voxel >> 3u) & 7u, (voxel >> 6u) & 7u));
+}
+
+// The atlas texels that hold voxel `local` ∈ [0, 8)³ of the brick in cell `cell`, written
+// to `texels`; returns how many (1 to 8). They are its own slot's texel and the apron
+// texel (local − 8d) of the slot of each neighbouring cell `cell + d`, d ∈ {−1, 0, 1}³,
+// that the voxel borders (d_a = −1 where l_a = 0, +1 where l_a = 7) and that has a slot
+// (a present brick or a halo cell, viewer/src/atlas.rs). So a texel (slot s, local
+// m ∈ [−1, 8]³) holds the voxel at global voxel coordinates 8·cell(s) + m — its own
+// brick's inside, a neighbour's in the apron, and 0 where that brick is missing (never
+// written: wgpu creates textures zeroed; the CPU reference counts missing voxels as 0) —
+// so hardware trilinear filtering inside a slot equals the reference's trilinear across
+// brick borders. The caller stores its value at each (a storage texture cannot be passed
+// to a function in every language the shaders are exported to).
+fn voxel_texels(
+    indirection: texture_3d<u32>,
+    grid_bricks: vec3<i32>,
+    packing: SlotPacking,
+    cell: vec3<i32>,
+    local: vec3<i32>,
+    texels: ptr<function, array<vec3<i32>, 8>>,
+) -> u32 {
+    let low = select(vec3<i32>(0), vec3<i32>(-1), local == vec3<i32>(0));
+    let high = select(vec3<i32>(0), vec3<i32>(1), local == vec3<i32>(BRICK - 1));
+    var count = 0u;
+    for (var dz = low.z; dz <= high.z; dz++) {
+        for (var dy = low.y; dy <= high.y; dy++) {
+            for (var dx = low.x; dx <= high.x; dx++) {
+                let d = vec3<i32>(dx, dy, dz);
+                let entry = brick_entry(indirection, cell + d, grid_bricks);
+                if has_slot(entry) {
+                    (*texels)[count] = slot_coords(slot_of(entry), packing) * SLOT + local - d * BRICK + vec3<i32>(1);
+                    count++;
+                }
+            }
+        }
+    }
+    return count;
+}
+
+// IEEE binary16 bits (low 16 bits of `bits`) to f32, exactly, for finite values (the
+// reader has rejected non-finite ones); written out so no f16 capability is needed.
+fn half_to_f32(bits: u32) -> f32 {
+    let sign = (bits & 0x8000u) << 16u;
+    let exponent = (bits >> 10u) & 0x1fu;
+    let mantissa = bits & 0x3ffu;
+    if exponent == 0u {
+        // Zero or subnormal: mantissa · 2⁻²⁴.
+        let magnitude = f32(mantissa) * 5.9604645e-8;
+        return select(magnitude, -magnitude, sign != 0u);
+    }
+    return bitcast<f32>(sign | ((exponent + 112u) << 23u) | (mantissa << 13u));
+}
+
+// Half `index & 1` of the pair packed in `word` (low half first).
+fn half_of(word: u32, index: u32) -> f32 {
+    return half_to_f32((word >> (16u * (index & 1u))) & 0xffffu);
+}
+
+// f32 to IEEE binary16 bits, rounded to nearest (ties to even), as `half::f16::from_f32`:
+// subnormal results kept, magnitudes past the f16 range (and NaN) give ±infinity. Written
+// out, as `half_to_f32`, so no f16 capability is needed (`pack2x16float` needs one).
+fn f32_to_half(x: f32) -> u32 {
+    let bits = bitcast<u32>(x);
+    let sign = (bits >> 16u) & 0x8000u;
+    let exponent = i32((bits >> 23u) & 0xffu) - 112;
+    let mantissa = bits & 0x7fffffu;
+    if exponent >= 31 {
+        return sign | 0x7c00u;
+    }
+    if exponent <= 0 {
+        // Subnormal: the 24-bit significand shifted to units of 2⁻²⁴.
+        if exponent < -10 {
+            return sign;
+        }
+        let significand = mantissa | 0x800000u;
+        let shift = u32(14 - exponent);
+        let half = significand >> shift;
+        let rest = significand & ((1u << shift) - 1u);
+        let halfway = 1u << (shift - 1u);
+        return sign | (half + u32(rest > halfway || (rest == halfway && (half & 1u) == 1u)));
+    }
+    let half = (u32(exponent) << 10u) | (mantissa >> 13u);
+    let rest = mantissa & 0x1fffu;
+    // A carry out of the mantissa rounds up into the exponent (to infinity at the top).
+    return sign | (half + u32(rest > 0x1000u || (rest == 0x1000u && (half & 1u) == 1u)));
+}
+
+// Two f32 as binary16 halves in one word (`a` in the low half).
+fn pack_halves(a: f32, b: f32) -> u32 {
+    return f32_to_half(a) | (f32_to_half(b) << 16u);
+}
+
+// The real spherical harmonics of degrees 0, 1 and 2 at direction `omega` (normalised
+// here; a zero vector gives zeros), in the order of nelf_format::conventions::view_harmonics
+// (degree by degree, m = −l … l): [0] = (c₀, a·y, a·z, a·x), [1] = (b·xy, b·yz,
+// c·(3z² − 1), b·xz), [2] = (b/2·(x² − y²), 0, 0, 0); c₀ = 1/(2√π), a = √(3/4π),
+// b = √(15/4π), c = √(5/16π). (A convention without degree 0 gives y_0 weight 0:
+// viewer/src/gpu/view.rs places lobe weights.)
+fn view_harmonics(omega: vec3<f32>) -> array<vec4<f32>, 3> {
+    let len = length(omega);
+    if !(len > 0.0) {
+        return array<vec4<f32>, 3>(vec4<f32>(0.0), vec4<f32>(0.0), vec4<f32>(0.0));
+    }
+    let w = omega / len;
+    let c0 = 0.2820948;
+    let a = 0.4886025;
+    let b = 1.0925484;
+    let c = 0.31539157;
+    return array<vec4<f32>, 3>(
+        vec4<f32>(c0, a * w.y, a * w.z, a * w.x),
+        vec4<f32>(b * w.x * w.y, b * w.y * w.z, c * (3.0 * w.z * w.z - 1.0), b * w.x * w.z),
+        vec4<f32>(0.5 * b * (w.x * w.x - w.y * w.y), 0.0, 0.0, 0.0),
+    );
+}
+
+// The per-voxel lobe buffer of a view-dependent asset (written by relight.wgsl's
+// `relight_lobes` once per lighting change, read by view.wgsl per camera move): per
+// voxel, halves (f16) h = 0, 1, 2: the view-independent radiance (rgb), h = 3: σ (the
+// stored f16 bits), h = 4 + 3j + c: lobe j's colour in channel c; two halves per u32
+// word, low half first, word-major like the coefficients (word q of voxel v at
+// q · voxels + v). Words per voxel for `lobes` lobes:
+fn lobe_buffer_words(lobes: u32) -> u32 {
+    return 2u + (3u * lobes + 1u) / 2u;
+}
+
+// Largest lobe count (nelf_format::conventions::VIEW_HARMONICS, 9) and the lobe colours'
+// halves it takes, rounded up to whole words.
+const MAX_LOBES: u32 = 9u;
+const MAX_LOBE_HALVES: u32 = 28u;
 
 // Full-screen triangle: vertex `index` (0, 1, 2) has uv (0, 0), (2, 0), (0, 2); uv (0, 0)
 // is the top-left of the viewport and (1, 1) its bottom-right.

@@ -7,16 +7,18 @@
 // and for f16 coefficients light_mean = P_mean, light[k] = P_k, q_k = c_k. Shading is
 // linear in T = mean + Σ c_k B_k, so this equals shading every sample (DESIGN.md).
 //
-// One invocation per stored voxel (brick b, local l ∈ [0, 8)³): its K-term dot product,
-// with its density, is written to every atlas texel that holds it — its own slot at
-// local l, and the apron (local l − 8d) of the slot of each neighbouring cell b + d,
-// d ∈ {−1, 0, 1}³, that the voxel borders (a present brick or a halo cell; see
-// viewer/src/atlas.rs). So a texel (slot s, local m ∈ [−1, 8]³) holds the voxel at global
-// voxel coordinates 8·cell(s) + m — its own brick's inside, a neighbour's in the apron,
-// and 0 where that brick is missing (never written: wgpu creates textures zeroed; the
-// CPU reference counts missing voxels as 0) — so hardware trilinear filtering inside a
-// slot equals the reference's trilinear across brick borders. rgb = radiance, a = σ
-// (1/m). Each voxel is shaded once however many texels show it.
+// `relight`: one invocation per stored voxel (brick b, local l ∈ [0, 8)³): its K-term
+// dot product, with its density, is written to every atlas texel that holds it — its own
+// slot and the aprons of the neighbouring slots (common.wgsl, `voxel_texels`). rgb =
+// radiance, a = σ (1/m). Each voxel is shaded once however many texels show it.
+//
+// `relight_lobes` (view-dependent assets, format 1.2; mirrors nelf_render::view): the
+// same dot product, and the voxel's J lobe colours c_j = Σ_i d_ji P^v_i from the
+// lighting projected onto the view basis (nelf_render::project_view_light, folded with
+// the view coefficients' dequantisation the same way: c_j = lobe_mean_j + Σ_i q_ji ·
+// view_light[j·K_v + i]), written as halves to the per-voxel lobe buffer (common.wgsl,
+// `lobe_buffer_words`) instead of the atlas: view.wgsl adds the lobes toward the eye and
+// fills the atlas whenever the camera moves.
 
 #import "common.wgsl"
 
@@ -32,6 +34,9 @@ struct RelightParams {
     light_mean: vec4<f32>,
     // x: stored voxels; y: invocations per row of the dispatch (workgroups along x · 64).
     dispatch: vec4<u32>,
+    // View part (relight_lobes only): lobes J, view rank K_v, u32 words of view
+    // coefficients per voxel, their encoding (1 = 8-bit affine, 2 = f16).
+    view: vec4<u32>,
 }
 
 @group(0) @binding(0) var<uniform> params: RelightParams;
@@ -46,31 +51,19 @@ const MAX_RANK: u32 = 384u;
 @group(0) @binding(2) var<storage, read> coefficients: array<u32>;
 // Density σ (1/m) as f16, two voxels per word.
 @group(0) @binding(3) var<storage, read> density: array<u32>;
-// Per present brick, 27 slots: that of cell b + d for d = (dx, dy, dz) ∈ {−1, 0, 1}³ at
-// index (dx + 1) + 3 (dy + 1) + 9 (dz + 1) (13: its own), or NO_SLOT.
-@group(0) @binding(4) var<storage, read> neighbour_slots: array<u32>;
+// Brick-cell coordinates of every present brick (common.wgsl, `brick_cell`).
+@group(0) @binding(4) var<storage, read> brick_cells: array<vec2<u32>>;
 @group(0) @binding(5) var atlas: texture_storage_3d<rgba16float, write>;
+@group(0) @binding(6) var indirection: texture_3d<u32>;
 
-const NO_SLOT: u32 = 0xffffffffu;
-
-// IEEE binary16 bits (low 16 bits of `bits`) to f32, exactly, for finite values (the
-// reader has rejected non-finite ones); written out so no f16 capability is needed.
-fn half_to_f32(bits: u32) -> f32 {
-    let sign = (bits & 0x8000u) << 16u;
-    let exponent = (bits >> 10u) & 0x1fu;
-    let mantissa = bits & 0x3ffu;
-    if exponent == 0u {
-        // Zero or subnormal: mantissa · 2⁻²⁴.
-        let magnitude = f32(mantissa) * 5.9604645e-8;
-        return select(magnitude, -magnitude, sign != 0u);
-    }
-    return bitcast<f32>(sign | ((exponent + 112u) << 23u) | (mantissa << 13u));
-}
-
-// Half `index & 1` of the pair packed in `word` (low half first).
-fn half_of(word: u32, index: u32) -> f32 {
-    return half_to_f32((word >> (16u * (index & 1u))) & 0xffffu);
-}
+// relight_lobes only. The view lighting folded with the view dequantisation: entry
+// j < MAX_LOBES is lobe j's mean colour (rgb), entry MAX_LOBES + n the per-code colour of
+// view coefficient n = j·K_v + i (J·K_v ≤ 384): 9 + 384 entries.
+@group(0) @binding(7) var<uniform> view_light: array<vec4<f32>, 393>;
+// View coefficients, packed as the PCA ones (word-major, 4 codes or 2 halves per word).
+@group(0) @binding(8) var<storage, read> view_coefficients: array<u32>;
+// The per-voxel lobe buffer (common.wgsl, `lobe_buffer_words`).
+@group(0) @binding(9) var<storage, read_write> voxel_lobes: array<u32>;
 
 // Σ_k q_k · light[k] over the components used, a word (4 codes or 2 halves) at a time.
 fn shade_voxel(voxel: u32) -> vec3<f32> {
@@ -98,10 +91,16 @@ fn voxel_density(voxel: u32) -> f32 {
     return half_of(density[voxel >> 1u], voxel);
 }
 
+// The voxel of invocation `gid`, or voxels (out of range).
+fn invocation_voxel(gid: vec3<u32>) -> u32 {
+    let v = gid.x + gid.y * params.dispatch.y;
+    return select(v, params.dispatch.x, gid.x >= params.dispatch.y || v >= params.dispatch.x);
+}
+
 @compute @workgroup_size(64, 1, 1)
 fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let v = gid.x + gid.y * params.dispatch.y;
-    if gid.x >= params.dispatch.y || v >= params.dispatch.x {
+    let v = invocation_voxel(gid);
+    if v >= params.dispatch.x {
         return;
     }
     var rgb = shade_voxel(v);
@@ -109,21 +108,55 @@ fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
         rgb = abs(rgb);
     }
     let value = vec4<f32>(rgb, voxel_density(v));
-    let brick = v / 512u;
-    let local = vec3<i32>(vec3<u32>(v & 7u, (v >> 3u) & 7u, (v >> 6u) & 7u));
-    // Neighbours whose apron holds this voxel: d_a = −1 where l_a = 0, +1 where l_a = 7.
-    let low = select(vec3<i32>(0), vec3<i32>(-1), local == vec3<i32>(0));
-    let high = select(vec3<i32>(0), vec3<i32>(1), local == vec3<i32>(BRICK - 1));
-    let packing = SlotPacking(params.atlas.x, params.atlas.y);
-    for (var dz = low.z; dz <= high.z; dz++) {
-        for (var dy = low.y; dy <= high.y; dy++) {
-            for (var dx = low.x; dx <= high.x; dx++) {
-                let slot = neighbour_slots[brick * 27u + u32((dx + 1) + 3 * (dy + 1) + 9 * (dz + 1))];
-                if slot != NO_SLOT {
-                    let d = vec3<i32>(dx, dy, dz);
-                    textureStore(atlas, slot_coords(slot, packing) * SLOT + local - d * BRICK + vec3<i32>(1), value);
-                }
-            }
+    var texels: array<vec3<i32>, 8>;
+    let count = voxel_texels(
+        indirection,
+        params.grid_bricks.xyz,
+        SlotPacking(params.atlas.x, params.atlas.y),
+        brick_cell(brick_cells[v / 512u]),
+        voxel_local(v),
+        &texels,
+    );
+    for (var i = 0u; i < count; i++) {
+        textureStore(atlas, texels[i], value);
+    }
+}
+
+// View coefficient n of voxel `voxel`: its 8-bit code or its f16 value.
+fn view_code(voxel: u32, n: u32) -> f32 {
+    let voxels = params.dispatch.x;
+    if params.view.w == 1u {
+        return f32((view_coefficients[(n / 4u) * voxels + voxel] >> (8u * (n & 3u))) & 0xffu);
+    }
+    return half_of(view_coefficients[(n / 2u) * voxels + voxel], n);
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn relight_lobes(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let v = invocation_voxel(gid);
+    if v >= params.dispatch.x {
+        return;
+    }
+    let voxels = params.dispatch.x;
+    let lobes = min(params.view.x, MAX_LOBES);
+    let rank = params.view.y;
+    let rgb = shade_voxel(v);
+    let sigma_bits = (density[v >> 1u] >> (16u * (v & 1u))) & 0xffffu;
+    voxel_lobes[v] = pack_halves(rgb.x, rgb.y);
+    voxel_lobes[voxels + v] = f32_to_half(rgb.z) | (sigma_bits << 16u);
+    // c_j = lobe_mean_j + Σ_i q_ji · view_light[MAX_LOBES + j·K_v + i], i ascending.
+    var halves: array<f32, MAX_LOBE_HALVES>;
+    for (var j = 0u; j < lobes; j++) {
+        var c = view_light[j].xyz;
+        for (var i = 0u; i < rank; i++) {
+            let n = j * rank + i;
+            c += view_code(v, n) * view_light[MAX_LOBES + n].xyz;
         }
+        halves[3u * j] = c.x;
+        halves[3u * j + 1u] = c.y;
+        halves[3u * j + 2u] = c.z;
+    }
+    for (var q = 0u; q < (3u * lobes + 1u) / 2u; q++) {
+        voxel_lobes[(2u + q) * voxels + v] = pack_halves(halves[2u * q], halves[2u * q + 1u]);
     }
 }

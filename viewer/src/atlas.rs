@@ -238,34 +238,15 @@ pub fn indirection_grid(grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Result<In
     Ok(Indirection { entries, slot_cells })
 }
 
-/// Marker of "no slot" in [`neighbour_slots`].
-pub const NO_SLOT: u32 = u32::MAX;
-
-/// For every present brick `b` (file order), the atlas slots of the 27 cells `b + d`,
-/// `d ∈ {−1, 0, 1}³`, at index `(dx + 1) + 3 (dy + 1) + 9 (dz + 1)` (13 is its own slot),
-/// [`NO_SLOT`] for far cells and cells outside the grid: where the relight pass writes
-/// each voxel (its own slot and the aprons of the neighbours it borders).
-pub fn neighbour_slots(indirection: &Indirection, grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Vec<u32> {
-    let [nx, ny, _] = grid_bricks.map(|n| n as usize);
-    let mut out = Vec::with_capacity(bricks.len() * 27);
-    for b in bricks {
-        for d in 0..27usize {
-            let offset = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i64 - 1);
-            let c: [i64; 3] = std::array::from_fn(|a| i64::from(b[a]) + offset[a]);
-            let slot = if (0..3).all(|a| c[a] >= 0 && c[a] < i64::from(grid_bricks[a])) {
-                let entry = indirection.entries[c[0] as usize + nx * (c[1] as usize + ny * c[2] as usize)];
-                if entry & FAR_FLAG != 0 {
-                    NO_SLOT
-                } else {
-                    (entry & SLOT_BITS) - 1
-                }
-            } else {
-                NO_SLOT
-            };
-            out.push(slot);
-        }
-    }
-    out
+/// Brick-cell coordinates of the present bricks (file order) as the relight and view
+/// passes read them (`brick_cell` in `common.wgsl`): `[x | y << 16, z]`. With the
+/// indirection grid they give the slots that hold each voxel (its own and the
+/// neighbours' aprons) and each voxel's centre.
+pub fn pack_brick_cells(bricks: &[[u16; 3]]) -> Vec<[u32; 2]> {
+    bricks
+        .iter()
+        .map(|b| [u32::from(b[0]) | (u32::from(b[1]) << 16), u32::from(b[2])])
+        .collect()
 }
 
 /// Coefficients as the relight pass reads them: word-major (word `q` of every voxel,
@@ -431,6 +412,52 @@ pub fn fold_light(
     }
 }
 
+/// Lobe count the view lighting buffer and the shaders have room for: the 9 real
+/// spherical harmonics of degrees 0–2, the most [`nelf_format::conventions::VIEW_HARMONICS`]
+/// allows.
+pub const MAX_LOBES: usize = 9;
+const _: () = assert!(nelf_format::conventions::VIEW_HARMONICS <= MAX_LOBES);
+
+/// The view part's lighting with its coefficient dequantisation folded in, as
+/// `relight.wgsl`'s `relight_lobes` reads it: entry `j <` [`MAX_LOBES`] is lobe `j`'s mean
+/// colour, entry `MAX_LOBES + n` the per-code colour of view coefficient `n = j·K_v + i`.
+///
+/// Lobe `j`'s colour is `c_j = Σ_i d_ji P^v_i` (`P^v` from
+/// [`nelf_render::project_view_light`]); with 8-bit codes `d_n = o_n + s_n q_n`, so
+/// `mean_j = Σ_i o_n P^v_i` and `light_n = s_n P^v_i` (sums in `f64`); f16 values pass
+/// through (`mean_j = 0`, `light_n = P^v_i`). `dequantization` is the view coefficients'
+/// (rank `J·K_v`); `lobes` is `J`.
+pub fn fold_view_light(
+    view_light: &[[f32; 3]],
+    dequantization: &Dequantization,
+    lobes: usize,
+) -> Vec<[f32; 4]> {
+    let rank = view_light.len();
+    let codes = dequantization
+        .rank()
+        .min(lobes.min(MAX_LOBES) * rank)
+        .min(nelf_format::conventions::LT_DIM);
+    let mut out = vec![[0.0f32; 4]; MAX_LOBES + nelf_format::conventions::LT_DIM];
+    let mut means = [[0.0f64; 3]; MAX_LOBES];
+    for n in 0..codes {
+        let (j, p) = (n / rank, view_light[n % rank]);
+        match dequantization {
+            Dequantization::Affine { scale, offset } => {
+                let (o, s) = (f64::from(offset[n]), f64::from(scale[n]));
+                for c in 0..3 {
+                    means[j][c] += o * f64::from(p[c]);
+                    out[MAX_LOBES + n][c] = (s * f64::from(p[c])) as f32;
+                }
+            }
+            Dequantization::Identity { .. } => out[MAX_LOBES + n] = [p[0], p[1], p[2], 0.0],
+        }
+    }
+    for (o, m) in out.iter_mut().zip(means) {
+        *o = [m[0] as f32, m[1] as f32, m[2] as f32, 0.0];
+    }
+    out
+}
+
 /// Bytes of GPU memory an asset occupies.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct GpuMemory {
@@ -442,9 +469,12 @@ pub struct GpuMemory {
     pub density_bytes: u64,
     /// Indirection grid.
     pub indirection_bytes: u64,
-    /// Where the relight pass writes each brick's voxels (27 slots per brick).
-    pub neighbour_bytes: u64,
-    /// Brick coordinates and the lighting buffer.
+    /// Brick-cell coordinates (8 bytes per brick).
+    pub brick_cell_bytes: u64,
+    /// A view-dependent asset's view part: its packed coefficients, the per-voxel lobe
+    /// buffer and their uniforms (0 for a view-independent asset).
+    pub view_bytes: u64,
+    /// Uniforms and the lighting buffer.
     pub other_bytes: u64,
 }
 
@@ -455,6 +485,8 @@ impl GpuMemory {
             + self.coefficient_bytes
             + self.density_bytes
             + self.indirection_bytes
+            + self.brick_cell_bytes
+            + self.view_bytes
             + self.other_bytes
     }
 }
@@ -554,23 +586,24 @@ mod tests {
         assert!(none.entries.iter().all(|&e| e == FAR_FLAG | !FAR_FLAG));
         assert!(indirection_grid([65536, 65536, 2], &[]).is_err());
         assert!(indirection_grid([2, 2, 2], &[[5, 0, 0]]).is_err());
-        // Neighbour slots point at the cells around each brick.
-        let table = neighbour_slots(&ind, grid, &bricks);
-        assert_eq!(table.len(), 2 * 27);
-        for (b, brick) in bricks.iter().enumerate() {
-            assert_eq!(table[b * 27 + 13], b as u32);
-            for d in 0..27 {
-                let slot = table[b * 27 + d];
-                let offset = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i32 - 1);
+        // Every cell around an inner brick has a slot (the view and relight passes write
+        // the brick's border voxels into their aprons), at that cell.
+        for brick in &bricks {
+            for d in 0..27i32 {
+                let offset = [d % 3, (d / 3) % 3, d / 9].map(|o| o - 1);
                 let cell: [i32; 3] = std::array::from_fn(|a| i32::from(brick[a]) + offset[a]);
-                assert_ne!(slot, NO_SLOT, "every neighbour of an inner brick is a halo cell");
+                let entry = ind.entries[(cell[0] + 7 * (cell[1] + 5 * cell[2])) as usize];
+                assert_eq!(
+                    entry & FAR_FLAG,
+                    0,
+                    "every neighbour of an inner brick is a halo cell"
+                );
+                let slot = (entry & SLOT_BITS) - 1;
                 assert_eq!(ind.slot_cells[slot as usize], cell.map(|c| c as u32));
             }
         }
-        let edge = indirection_grid([2, 1, 1], &[[0, 0, 0]]).unwrap();
-        let table = neighbour_slots(&edge, [2, 1, 1], &[[0, 0, 0]]);
-        assert_eq!(table.iter().filter(|&&s| s != NO_SLOT).count(), 2);
-        assert_eq!(table[14], 1);
+        let cells = pack_brick_cells(&[[1, 2, 3], [65535, 40000, 7]]);
+        assert_eq!(cells, [[1 | 2 << 16, 3], [65535 | 40000 << 16, 7]]);
     }
 
     #[test]
@@ -600,6 +633,59 @@ mod tests {
         assert_eq!(d.len(), 2);
         assert_eq!(f16::from_bits((d[0] >> 16) as u16).to_f32(), 2.0);
         assert_eq!(f16::from_bits(d[1] as u16).to_f32(), 3.0);
+    }
+
+    #[test]
+    fn folded_view_light_reproduces_reference_lobe_colours() {
+        use nelf_format::ViewDependence;
+        use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS};
+        let (lobes, rank, voxels) = (3usize, 4usize, 7usize);
+        let values: Vec<f32> = (0..voxels * lobes * rank)
+            .map(|i| (i as f32 * 0.91).sin() * 1.5 - 0.2)
+            .collect();
+        let view_light: Vec<[f32; 3]> = (0..rank)
+            .map(|i| [0.5 - i as f32, 0.25 * i as f32, (i as f32).cos()])
+            .collect();
+        for encoding in [CoefficientEncoding::U8Affine, CoefficientEncoding::F16] {
+            let coefficients = Coefficients::quantize(&values, lobes * rank, encoding).unwrap();
+            let packed = pack_coefficients(&coefficients);
+            let view = ViewDependence {
+                lobes: vec![1.0; lobes * VIEW_HARMONICS],
+                basis: vec![0.0; rank * LT_DIM],
+                coefficients,
+            };
+            let want = nelf_render::voxel_lobe_radiance(&view, &view_light, voxels);
+            let folded = fold_view_light(&view_light, &Dequantization::of(&view.coefficients), lobes);
+            assert_eq!(folded.len(), MAX_LOBES + LT_DIM);
+            for v in 0..voxels {
+                for j in 0..lobes {
+                    let mut got = folded[j];
+                    for i in 0..rank {
+                        let n = j * rank + i;
+                        let code = if packed.encoding == 1 {
+                            ((packed.words[(n / 4) * voxels + v] >> (8 * (n % 4))) & 0xff) as f32
+                        } else {
+                            let w = packed.words[(n / 2) * voxels + v] >> (16 * (n % 2));
+                            f16::from_bits((w & 0xffff) as u16).to_f32()
+                        };
+                        for c in 0..3 {
+                            got[c] += code * folded[MAX_LOBES + n][c];
+                        }
+                    }
+                    for c in 0..3 {
+                        let w = want[v * lobes + j][c];
+                        assert!(
+                            (got[c] - w).abs() < 1e-5 * (1.0 + w.abs()),
+                            "{encoding:?} voxel {v} lobe {j}: {got:?} vs {:?}",
+                            want[v * lobes + j]
+                        );
+                    }
+                }
+            }
+            // Entries past the codes are zero.
+            assert!(folded[lobes..MAX_LOBES].iter().all(|m| *m == [0.0; 4]));
+            assert!(folded[MAX_LOBES + lobes * rank..].iter().all(|m| *m == [0.0; 4]));
+        }
     }
 
     #[test]

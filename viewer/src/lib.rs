@@ -5,7 +5,9 @@
 //!   once per lighting change (the environment map projected onto the asset's PCA basis,
 //!   then a `K`-term dot product per voxel), and a ray-march compute pass per frame that
 //!   mirrors the CPU reference renderer `nelf_render` (same rays, sample lattice,
-//!   trilinear interpolation, compositing and early termination).
+//!   trilinear interpolation, compositing and early termination). A view-dependent asset
+//!   (format 1.2) adds a per-voxel view pass between them, run when the eye or the
+//!   lighting changes, that adds the radiance's view-dependent lobes toward the eye.
 //! * [`app`] — the interactive viewer (eframe/egui on the same renderer): orbit, zoom,
 //!   pan, environment maps, rotation, exposure, PCA rank, debug views, screenshots.
 //! * [`shaders`] — the WGSL passes in `../shaders/` and their Rust mirrors.
@@ -23,5 +25,6 @@ pub use app::{NamedEnvmap, ViewerConfig, run_viewer};
 pub use atlas::{GpuMemory, RelightView};
 pub use error::ViewerError;
 pub use gpu::{
-    AssetInfo, DisplayImage, DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewSettings,
+    AssetInfo, DisplayImage, DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewInfo,
+    ViewSettings,
 };

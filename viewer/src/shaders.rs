@@ -1,6 +1,8 @@
 //! The `#[repr(C)]` mirrors of the structs the WGSL shaders read. The shader text and
 //! its `#import` preprocessing live in `nelf_render::wgsl` (shared with the exporter's
-//! GLSL/HLSL translation) and are re-exported here.
+//! GLSL/HLSL translation) and are re-exported here, except the view pass
+//! (`shaders/view.wgsl`, [`VIEW_WGSL`]), which only the viewer runs so far; [`VIEWER_PASSES`]
+//! lists every pass the viewer compiles.
 //!
 //! **Mirrors.** Every uniform struct has a Rust twin with the same field order, made only
 //! of 16-byte vectors so WGSL's uniform layout rules (vec4 alignment 16) and `repr(C)`
@@ -10,6 +12,18 @@ pub use nelf_render::wgsl::{
     COMMON_WGSL, DENSE_MARCH_WGSL, DISPLAY_WGSL, LIBRARY, MARCH_WGSL, PASSES, PreprocessError, RELIGHT_WGSL,
     preprocess,
 };
+
+/// The view pass of view-dependent assets (format 1.2; compute, one invocation per voxel).
+pub const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
+
+/// Every entry shader the viewer compiles: `nelf_render::wgsl::PASSES` and the view pass.
+pub const VIEWER_PASSES: &[(&str, &str)] = &[
+    ("relight.wgsl", RELIGHT_WGSL),
+    ("march.wgsl", MARCH_WGSL),
+    ("display.wgsl", DISPLAY_WGSL),
+    ("dense_march.wgsl", DENSE_MARCH_WGSL),
+    ("view.wgsl", VIEW_WGSL),
+];
 
 /// Uniform of the relight pass (`RelightParams` in `relight.wgsl`).
 #[repr(C)]
@@ -23,8 +37,28 @@ pub struct RelightParams {
     pub words: [u32; 4],
     /// Folded mean radiance (rgb), unused.
     pub light_mean: [f32; 4],
-    /// Stored voxels, invocations per row of the `shade` dispatch, unused ×2.
+    /// Stored voxels, invocations per row of the dispatch, unused ×2.
     pub dispatch: [u32; 4],
+    /// View part (`relight_lobes` only): lobes `J`, view rank `K_v`, u32 words of view
+    /// coefficients per voxel, their encoding (1 = 8-bit affine, 2 = f16).
+    pub view: [u32; 4],
+}
+
+/// Uniform of the view pass (`ViewParams` in `view.wgsl`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ViewParams {
+    /// Slot packing `x_bits`, `y_bits`; lobes `J`; stored voxels.
+    pub atlas: [u32; 4],
+    /// Grid extent in bricks, unused.
+    pub grid_bricks: [i32; 4],
+    /// The eye in lattice coordinates `(p − bbox_min)/voxel − 0.5`, unused.
+    pub eye_u: [f32; 4],
+    /// Invocations per row of the dispatch, unused ×3.
+    pub dispatch: [u32; 4],
+    /// Lobe weights over the 9 harmonics of degrees 0–2: lobe `j`'s over harmonics 0–3
+    /// in `lobes[3j]`, 4–7 in `lobes[3j + 1]`, 8 in `lobes[3j + 2][0]`.
+    pub lobes: [[f32; 4]; 27],
 }
 
 /// Uniform of the march pass (`MarchParams` in `march.wgsl`).
@@ -97,7 +131,7 @@ mod tests {
 
     #[test]
     fn every_shader_parses_and_validates() {
-        for (name, text) in PASSES {
+        for (name, text) in VIEWER_PASSES {
             let source = preprocess(name, text).unwrap();
             let module = module(name, text);
             let mut validator = naga::valid::Validator::new(
@@ -143,8 +177,10 @@ mod tests {
         assert_mirror!(
             relight,
             RelightParams,
-            [atlas, grid_bricks, words, light_mean, dispatch]
+            [atlas, grid_bricks, words, light_mean, dispatch, view]
         );
+        let view = module("view.wgsl", VIEW_WGSL);
+        assert_mirror!(view, ViewParams, [atlas, grid_bricks, eye_u, dispatch, lobes]);
         let march = module("march.wgsl", MARCH_WGSL);
         assert_mirror!(
             march,
@@ -194,9 +230,20 @@ mod tests {
             Err(PreprocessError::Cycle(_))
         ));
         // Every pass imports the shared helpers rather than copying them.
-        for (name, text) in PASSES {
+        for (name, text) in VIEWER_PASSES {
             assert!(text.contains("#import \"common.wgsl\""), "{name}");
-            assert!(!text.contains("fn pcg_hash"), "{name} copies a helper");
+            for helper in [
+                "fn pcg_hash",
+                "fn voxel_texels",
+                "fn view_harmonics",
+                "fn half_to_f32",
+            ] {
+                assert!(!text.contains(helper), "{name} copies {helper}");
+            }
+        }
+        // The viewer compiles every pass the renderer crate lists.
+        for pass in PASSES {
+            assert!(VIEWER_PASSES.contains(pass), "{}", pass.0);
         }
     }
 }

@@ -3,15 +3,20 @@
 //! * The GPU image equals the CPU reference renderer's (`nelf_render::render_asset`) for
 //!   the same asset — written and read back through the file format — camera and
 //!   lighting: PSNR ≥ 45 dB, for 8-bit and f16 coefficients, all and truncated ranks.
+//! * A view-dependent asset (format 1.2) too, from two eyes on opposite sides, for 8-bit
+//!   and f16 view coefficients; its image differs from the view-independent asset's and
+//!   from the one with the view direction reversed by far more than the GPU's error.
 //! * Relighting after an environment rotation equals a fresh relight with the rotated map.
 //! * A damaged or invalid asset is an error value, and the renderer keeps working.
 
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
 use glam::{DMat3, DVec3};
-use nelf_format::conventions::{ENV_W, LatLong, PinholeCamera, rotation_y};
+use nelf_format::conventions::{ENV_W, LatLong, PinholeCamera, VIEW_HARMONICS, rotation_y};
 use nelf_format::synthetic::SyntheticField;
-use nelf_format::{Asset, CoefficientEncoding, Coefficients, WriteOptions, read_asset, write_asset};
+use nelf_format::{
+    Asset, CoefficientEncoding, Coefficients, ViewDependence, WriteOptions, read_asset, write_asset,
+};
 use nelf_render::{Image, MarchSettings, render_asset};
 use nelf_viewer::{
     DisplaySettings, GpuRenderer, MarchPass, MarchView, RelightView, ToneMap, ViewSettings, ViewerError,
@@ -66,6 +71,76 @@ fn without_bricks(asset: &Asset, drop: impl Fn([u16; 3]) -> bool) -> Asset {
         },
     };
     out.validate().unwrap();
+    out
+}
+
+/// A uniform number in [−1, 1) from `i` (splitmix64).
+fn noise(i: u64) -> f32 {
+    let mut z = i.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^= z >> 31;
+    (z >> 40) as f32 / (1u64 << 23) as f32 - 1.0
+}
+
+/// Index of the first degree-1 harmonic among a lobe's weights (degree 0, if the
+/// convention has it, comes first).
+const DEGREE_1: usize = VIEW_HARMONICS - 8;
+
+/// `asset` with a view-dependent part (format 1.2), built by hand: `J = 4` lobes — the
+/// three degree-1 harmonics (y, z, x: odd, so reversing the view direction flips them)
+/// and a mix of the five degree-2 ones (and degree 0, if the convention has it) — over a
+/// view basis of rank `K_v = 3`: the asset's normalised PCA mean (so a lobe brightens or
+/// darkens the whole voxel) and its first two PCA components. Coefficients are seeded
+/// noise around a few tens of percent of the voxel's own transport, quantized with
+/// `encoding`.
+fn with_view(asset: &Asset, encoding: CoefficientEncoding, seed: u64) -> Asset {
+    const LOBES: usize = 4;
+    const RANK: usize = 3;
+    let mut lobes = vec![0.0f32; LOBES * VIEW_HARMONICS];
+    for j in 0..3 {
+        lobes[j * VIEW_HARMONICS + DEGREE_1 + j] = 1.0;
+    }
+    let mix = &mut lobes[3 * VIEW_HARMONICS..];
+    mix[DEGREE_1 + 3..].copy_from_slice(&[0.6, -0.5, 0.8, 0.4, -0.7]);
+    mix[..DEGREE_1].fill(0.3);
+    let mean_norm = asset.pca.mean.iter().map(|m| m * m).sum::<f32>().sqrt();
+    let mut basis: Vec<f32> = asset.pca.mean.iter().map(|m| m / mean_norm).collect();
+    basis.extend_from_slice(asset.pca.component(0));
+    basis.extend_from_slice(asset.pca.component(1));
+    let pca = asset.coefficients.to_f32();
+    let k = asset.rank();
+    let strength = [0.6f32, 0.5, 0.7, 0.5];
+    let mut values = Vec::with_capacity(asset.voxel_count() * LOBES * RANK);
+    for v in 0..asset.voxel_count() {
+        for (j, s) in strength.iter().enumerate() {
+            let n = (((v * LOBES + j) as u64) << 4) ^ seed;
+            values.push(mean_norm * s * (1.0 + 0.3 * noise(n)));
+            values.push(0.5 * pca[v * k] * noise(n + 1));
+            values.push(0.5 * pca[v * k + 1] * noise(n + 2));
+        }
+    }
+    let mut out = asset.clone();
+    out.view = Some(ViewDependence {
+        lobes,
+        basis,
+        coefficients: Coefficients::quantize(&values, LOBES * RANK, encoding).unwrap(),
+    });
+    out.validate().unwrap();
+    out
+}
+
+/// `asset` with its view part seen from the opposite side: `ω → −ω` negates the
+/// degree-1 harmonics' weights (what a sign error in the view direction renders).
+fn reversed_view(asset: &Asset) -> Asset {
+    let mut out = asset.clone();
+    if let Some(view) = &mut out.view {
+        for lobe in view.lobes.chunks_exact_mut(VIEW_HARMONICS) {
+            for w in lobe.iter_mut().skip(DEGREE_1).take(3) {
+                *w = -*w;
+            }
+        }
+    }
     out
 }
 
@@ -189,6 +264,179 @@ fn gpu_matches_cpu_reference() {
             db >= 45.0,
             "{encoding:?} rank {rank} truncated {truncate:?} holes {holes} signed {signed}: PSNR {db:.2} dB"
         );
+    }
+}
+
+#[test]
+fn gpu_matches_cpu_for_view_dependent_assets() {
+    let mut gpu = renderer();
+    let env = sky(64, 32);
+    let env_rotation = rotation_y(0.7);
+    let target = DVec3::new(0.0, 0.01, 0.0);
+    // Two eyes on opposite sides of the head (and above / below it).
+    let cameras = [DVec3::new(0.17, 0.09, 0.42), DVec3::new(-0.36, -0.12, -0.22)]
+        .map(|eye| PinholeCamera::look_at(eye, target, DVec3::Y, 96, 80, 0.65));
+    let reference = |asset: &Asset, cam: &PinholeCamera, rotation: DMat3| {
+        render_asset(asset, cam, &env, rotation, None, &MarchSettings::default()).unwrap()
+    };
+    for encoding in [CoefficientEncoding::U8Affine, CoefficientEncoding::F16] {
+        let flat = SyntheticField::new(40_000, 5).asset(6, encoding).unwrap();
+        let asset = with_view(&flat, encoding, 3);
+        // The view-independent asset first: the renderer then switches to the view path.
+        gpu.load_asset(&flat).unwrap();
+        assert_eq!(gpu.asset_info().unwrap().view, None);
+        gpu.set_lighting(&env, env_rotation).unwrap();
+        let flat_images = cameras.map(|cam| gpu.render(&cam, &no_jitter()).unwrap());
+        let info = gpu.load_asset(&asset).unwrap();
+        let view = info.view.unwrap();
+        assert_eq!((view.lobes, view.rank, view.encoding), (4, 3, encoding));
+        assert!(info.memory.view_bytes > 0);
+        gpu.set_lighting(&env, env_rotation).unwrap();
+        let mut images = Vec::new();
+        for (i, cam) in cameras.iter().enumerate() {
+            let got = gpu.render(cam, &no_jitter()).unwrap();
+            let want = reference(&asset, cam, env_rotation);
+            let covered = want.alpha.iter().filter(|&&a| a > 0.5).count();
+            assert!(covered > 500, "the head covers only {covered} pixels");
+            let compute = ViewSettings {
+                pass: MarchPass::Compute,
+                ..no_jitter()
+            };
+            assert_eq!(gpu.render(cam, &compute).unwrap(), got);
+            let db = psnr(&want, &got);
+            // The view part matters far beyond the GPU's error: without it, or toward the
+            // opposite direction (a sign error of ω), the image is much further off.
+            let without = psnr(&want, &flat_images[i]);
+            let reversed = psnr(&want, &reference(&reversed_view(&asset), cam, env_rotation));
+            eprintln!(
+                "{encoding:?} eye {i}: PSNR {db:.1} dB; view-independent {without:.1} dB, ω reversed {reversed:.1} dB"
+            );
+            assert!(db >= 45.0, "{encoding:?} eye {i}: PSNR {db:.2} dB");
+            assert!(
+                without < 35.0 && reversed < 35.0,
+                "{encoding:?} eye {i}: the view part barely shows ({without:.1} dB without it, {reversed:.1} dB reversed)"
+            );
+            images.push(got);
+        }
+        // Back to the first eye, lighting unchanged: the view pass runs again.
+        assert_eq!(gpu.render(&cameras[0], &no_jitter()).unwrap(), images[0]);
+        // A debug view of one PCA component and back.
+        gpu.set_relight_view(RelightView::Component(1));
+        assert_ne!(gpu.render(&cameras[0], &no_jitter()).unwrap(), images[0]);
+        gpu.set_relight_view(RelightView::Shaded);
+        assert_eq!(gpu.render(&cameras[0], &no_jitter()).unwrap(), images[0]);
+        // A lighting change at the same eye relights and reruns the view pass.
+        let turned = rotation_y(-1.1);
+        gpu.set_light_rotation(turned).unwrap();
+        let got = gpu.render(&cameras[1], &no_jitter()).unwrap();
+        let db = psnr(&reference(&asset, &cameras[1], turned), &got);
+        assert!(db >= 45.0, "{encoding:?} after a light rotation: PSNR {db:.2} dB");
+        assert!(psnr(&images[1], &got) < 40.0, "the rotation changed nothing");
+    }
+}
+
+/// Runs `f32_to_half` and `half_to_f32` (common.wgsl; the lobe buffer's conversions) on
+/// the GPU over `values`: (half bits, the half back as f32) per value.
+fn convert_halves_on_gpu(gpu: &GpuRenderer, values: &[f32]) -> Vec<(u16, f32)> {
+    use wgpu::util::DeviceExt as _;
+    let device = gpu.device();
+    let source = nelf_viewer::shaders::preprocess(
+        "halves.wgsl",
+        "#import \"common.wgsl\"
+@group(0) @binding(0) var<storage, read_write> data: array<u32>;
+@compute @workgroup_size(64)
+fn convert(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let n = arrayLength(&data) / 2u;
+    if gid.x < n {
+        let half = f32_to_half(bitcast<f32>(data[gid.x]));
+        data[n + gid.x] = half;
+        data[gid.x] = bitcast<u32>(half_of(half, 0u));
+    }
+}
+",
+    )
+    .unwrap();
+    let module = device.create_shader_module(wgpu::ShaderModuleDescriptor {
+        label: Some("halves.wgsl"),
+        source: wgpu::ShaderSource::Wgsl(source.into()),
+    });
+    let pipeline = device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+        label: Some("halves"),
+        layout: None,
+        module: &module,
+        entry_point: Some("convert"),
+        compilation_options: wgpu::PipelineCompilationOptions::default(),
+        cache: None,
+    });
+    let mut words: Vec<u32> = values.iter().map(|v| v.to_bits()).collect();
+    words.resize(2 * values.len(), 0);
+    let size = (words.len() * 4) as u64;
+    let data = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
+        label: Some("halves"),
+        contents: bytemuck::cast_slice(&words),
+        usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+    });
+    let readback = device.create_buffer(&wgpu::BufferDescriptor {
+        label: Some("halves read-back"),
+        size,
+        usage: wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::MAP_READ,
+        mapped_at_creation: false,
+    });
+    let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
+        label: Some("halves"),
+        layout: &pipeline.get_bind_group_layout(0),
+        entries: &[wgpu::BindGroupEntry {
+            binding: 0,
+            resource: data.as_entire_binding(),
+        }],
+    });
+    let mut encoder = device.create_command_encoder(&wgpu::CommandEncoderDescriptor::default());
+    {
+        let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor::default());
+        pass.set_pipeline(&pipeline);
+        pass.set_bind_group(0, &bind_group, &[]);
+        pass.dispatch_workgroups((values.len() as u32).div_ceil(64), 1, 1);
+    }
+    encoder.copy_buffer_to_buffer(&data, 0, &readback, 0, size);
+    gpu.queue().submit([encoder.finish()]);
+    readback.map_async(wgpu::MapMode::Read, .., |r| r.unwrap());
+    device.poll(wgpu::PollType::wait_indefinitely()).unwrap();
+    let out: Vec<u32> = bytemuck::cast_slice(&readback.get_mapped_range(..).unwrap()).to_vec();
+    let n = values.len();
+    (0..n)
+        .map(|i| (out[n + i] as u16, f32::from_bits(out[i])))
+        .collect()
+}
+
+#[test]
+fn shader_half_conversions_round_to_nearest_even() {
+    let gpu = renderer();
+    // Every f16 value and the midpoints between neighbours (ties), just below and above
+    // them, past the largest half, zeros and a spread of f32 bit patterns.
+    let mut values = Vec::new();
+    for bits in 0..=0x7bffu16 {
+        let h = half::f16::from_bits(bits).to_f32();
+        let next = half::f16::from_bits(bits + 1).to_f32();
+        let mid = 0.5 * (h + next);
+        for v in [
+            h,
+            mid,
+            f32::from_bits(mid.to_bits() - 1),
+            f32::from_bits(mid.to_bits() + 1),
+        ] {
+            values.extend([v, -v]);
+        }
+    }
+    values.extend([65520.0, 1e6, f32::MAX, -0.0, 1e-30, 2.9e-8, 3.0e-8]);
+    values.extend((0..20_000u32).map(|i| f32::from_bits(i.wrapping_mul(2_654_435_761) & 0x7fff_ffff)));
+    values.retain(|v| v.is_finite());
+    let got = convert_halves_on_gpu(&gpu, &values);
+    for (v, (bits, back)) in values.iter().zip(got) {
+        let want = half::f16::from_f32(*v);
+        assert_eq!(bits, want.to_bits(), "f32_to_half({v:e})");
+        if want.is_finite() {
+            assert_eq!(back.to_bits(), want.to_f32().to_bits(), "half_to_f32 of {v:e}");
+        }
     }
 }
 

@@ -10,22 +10,30 @@
 //! atlas ([`crate::atlas`]). Shading is linear, so marching the relit atlas equals
 //! shading every sample; a frame without a lighting change costs only the march.
 //!
+//! A view-dependent asset (format 1.2) adds one small per-voxel pass between the two,
+//! run only when the camera's eye or the lighting changed: the relight pass then writes
+//! each voxel's radiance and lobe colours to a buffer and the view pass adds the lobes
+//! toward the eye into the atlas ([`view`]); the march is the same. A view-independent
+//! asset takes exactly the path above.
+//!
 //! One module per pass, as the shaders are (`shaders/*.wgsl`): `relight` (relight.wgsl),
-//! `march` (march.wgsl, compute, counting and fragment variants), `display`
-//! (display.wgsl: exposure, tone map, sRGB); `common` holds the layout and pipeline
-//! helpers they share and `readback` the headless read-back. This module owns the device,
-//! the asset upload, the public API and the frame encoding that calls the passes.
+//! `view` (view.wgsl and relight.wgsl's `relight_lobes`), `march` (march.wgsl, compute,
+//! counting and fragment variants), `display` (display.wgsl: exposure, tone map, sRGB);
+//! `common` holds the layout and pipeline helpers they share and `readback` the headless
+//! read-back. This module owns the device, the asset upload, the public API and the frame
+//! encoding that calls the passes.
 
 mod common;
 mod display;
 mod march;
 mod readback;
 mod relight;
+mod view;
 
 use glam::DMat3;
 use nelf_format::conventions::{LT_DIM, LatLong, PinholeCamera};
-use nelf_format::{Asset, GridGeometry, PcaModel};
-use nelf_render::{ProjectedLight, project_light};
+use nelf_format::{Asset, CoefficientEncoding, GridGeometry, PcaModel};
+use nelf_render::{ProjectedLight, project_light, project_view_light};
 use wgpu::util::DeviceExt as _;
 
 pub use self::display::{DisplayImage, DisplaySettings, ToneMap};
@@ -33,8 +41,9 @@ use self::display::{DisplayPipelines, display_params};
 use self::march::{MARCH_FORMAT, MarchPipelines};
 pub use self::march::{MarchPass, MarchView, ViewSettings};
 use self::relight::RelightPipeline;
+use self::view::{GpuView, ViewBindings, ViewPipelines, lobe_buffer_words};
 use crate::atlas::{
-    AtlasLayout, Dequantization, GpuMemory, RelightView, indirection_grid, neighbour_slots,
+    AtlasLayout, Dequantization, GpuMemory, RelightView, indirection_grid, pack_brick_cells,
     pack_coefficients, pack_density,
 };
 use crate::error::ViewerError;
@@ -55,6 +64,19 @@ pub struct AssetInfo {
     pub memory: GpuMemory,
     /// Largest voxel density (1/m).
     pub max_density_per_m: f32,
+    /// The view-dependent part (format 1.2), if the asset has one.
+    pub view: Option<ViewInfo>,
+}
+
+/// What a view-dependent asset's view part holds ([`nelf_format::ViewDependence`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ViewInfo {
+    /// Lobes `J`.
+    pub lobes: usize,
+    /// View basis rank `K_v`.
+    pub rank: usize,
+    /// Encoding of its per-voxel coefficients.
+    pub encoding: CoefficientEncoding,
 }
 
 /// Compute and render pipelines, created once per device: one set per pass.
@@ -62,6 +84,8 @@ struct Pipelines {
     relight: RelightPipeline,
     march: MarchPipelines,
     display: DisplayPipelines,
+    /// Created with the first view-dependent asset.
+    view: Option<ViewPipelines>,
 }
 
 impl Pipelines {
@@ -70,6 +94,7 @@ impl Pipelines {
             relight: RelightPipeline::new(device)?,
             march: MarchPipelines::new(device)?,
             display: DisplayPipelines::new(device)?,
+            view: None,
         })
     }
 }
@@ -89,6 +114,8 @@ struct GpuAsset {
     relight_params: wgpu::Buffer,
     light: wgpu::Buffer,
     relight_bind_group: wgpu::BindGroup,
+    /// The view part of a view-dependent asset.
+    view: Option<GpuView>,
     voxel_count: usize,
     info: AssetInfo,
 }
@@ -98,6 +125,8 @@ struct Lighting {
     env: LatLong,
     world_from_env: DMat3,
     projected: ProjectedLight,
+    /// A view-dependent asset's lighting projected onto its view basis (`P^v_i`, rgb).
+    view_projected: Option<Vec<[f32; 3]>>,
 }
 
 /// The march's output image and the bind groups that use it.
@@ -126,6 +155,11 @@ pub struct GpuRenderer {
     rank: Option<usize>,
     relight_view: RelightView,
     relight_dirty: bool,
+    /// The eye (lattice coordinates) the atlas of a view-dependent asset shows radiance
+    /// toward; `None` when the view pass must run before the next march.
+    view_eye: Option<[f32; 3]>,
+    /// The eye of the last frame encoded.
+    last_eye: Option<[f32; 3]>,
     target: Option<Target>,
 }
 
@@ -216,6 +250,8 @@ impl GpuRenderer {
             rank: None,
             relight_view: RelightView::Shaded,
             relight_dirty: true,
+            view_eye: None,
+            last_eye: None,
             target: None,
         })
     }
@@ -249,8 +285,9 @@ impl GpuRenderer {
 
     /// Uploads `asset` (validated first; an invalid one is an error and leaves the
     /// previous asset in place): coefficients, densities, brick list, indirection grid,
-    /// and an atlas the relight pass fills. Lighting, if set, is re-projected onto the
-    /// new basis.
+    /// and an atlas the relight pass fills; for a view-dependent asset also its view
+    /// coefficients and a per-voxel lobe buffer ([`view`]). Lighting, if set, is
+    /// re-projected onto the new basis.
     pub fn load_asset(&mut self, asset: &Asset) -> Result<AssetInfo, ViewerError> {
         asset.validate()?;
         let limits = self.device.limits();
@@ -265,13 +302,22 @@ impl GpuRenderer {
         let layout = AtlasLayout::for_bricks(indirection.slot_cells.len(), limits.max_texture_dimension_3d)?;
         let coefficients = pack_coefficients(&asset.coefficients);
         let density = pack_density(&asset.density);
-        let neighbours = neighbour_slots(&indirection, grid_bricks, &asset.bricks);
+        let brick_cells = pack_brick_cells(&asset.bricks);
+        let view_coefficients = asset.view.as_ref().map(|v| pack_coefficients(&v.coefficients));
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let voxel_count = asset.voxel_count();
+        let lobe_bytes = asset.view.as_ref().map_or(0, |v| {
+            (voxel_count * lobe_buffer_words(v.lobe_count())) as u64 * 4
+        });
         for (what, bytes) in [
             ("coefficients", coefficients.words.len() as u64 * 4),
             ("densities", density.len() as u64 * 4),
-            ("neighbour slots", neighbours.len() as u64 * 4),
+            ("brick cells", brick_cells.len() as u64 * 8),
+            (
+                "view coefficients",
+                view_coefficients.as_ref().map_or(0, |p| p.words.len() as u64 * 4),
+            ),
+            ("per-voxel view lobes", lobe_bytes),
         ] {
             if bytes > max_binding {
                 return Err(ViewerError::TooLarge(format!(
@@ -296,7 +342,7 @@ impl GpuRenderer {
         };
         let coefficient_buffer = storage("coefficients", bytemuck::cast_slice(&coefficients.words));
         let density_buffer = storage("density", bytemuck::cast_slice(&density));
-        let neighbour_buffer = storage("neighbour slots", bytemuck::cast_slice(&neighbours));
+        let brick_cell_buffer = storage("brick cells", bytemuck::cast_slice(&brick_cells));
         let rank = asset.rank();
         let light = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("light"),
@@ -355,16 +401,39 @@ impl GpuRenderer {
                 &light,
                 &coefficient_buffer,
                 &density_buffer,
-                &neighbour_buffer,
+                &brick_cell_buffer,
             ],
             &atlas_view,
+            &indirection_view,
         );
+        let view = match (&asset.view, &view_coefficients) {
+            (Some(v), Some(packed)) => {
+                if self.pipelines.view.is_none() {
+                    self.pipelines.view = Some(ViewPipelines::new(&self.device)?);
+                }
+                let pipelines = self.pipelines.view.as_ref().ok_or(ViewerError::NoAsset)?;
+                let mut view = GpuView::upload(&self.device, v, packed, voxel_count, storage);
+                view.bind(
+                    &self.device,
+                    pipelines,
+                    &ViewBindings {
+                        relight: [&relight_params, &light, &coefficient_buffer, &density_buffer],
+                        brick_cells: &brick_cell_buffer,
+                        indirection: &indirection_view,
+                        atlas: &atlas_view,
+                    },
+                );
+                Some(view)
+            }
+            _ => None,
+        };
         let memory = GpuMemory {
             atlas_bytes: u64::from(texels[0]) * u64::from(texels[1]) * u64::from(texels[2]) * 8,
             coefficient_bytes: coefficient_buffer.size(),
             density_bytes: density_buffer.size(),
             indirection_bytes: indirection.entries.len() as u64 * 4,
-            neighbour_bytes: neighbour_buffer.size(),
+            brick_cell_bytes: brick_cell_buffer.size(),
+            view_bytes: view.as_ref().map_or(0, GpuView::bytes),
             other_bytes: light.size() + relight_params.size(),
         };
         let max_density_per_m = asset.density.iter().map(|d| d.to_f32()).fold(0.0f32, f32::max);
@@ -375,6 +444,11 @@ impl GpuRenderer {
             atlas_texels: texels,
             memory,
             max_density_per_m,
+            view: asset.view.as_ref().map(|v| ViewInfo {
+                lobes: v.lobe_count(),
+                rank: v.rank(),
+                encoding: v.coefficients.encoding(),
+            }),
         };
         self.asset = Some(GpuAsset {
             layout,
@@ -390,12 +464,15 @@ impl GpuRenderer {
             relight_params,
             light,
             relight_bind_group,
+            view,
             voxel_count,
             info,
         });
         // Bind groups of the old atlas are stale.
         self.target = None;
         self.relight_dirty = true;
+        self.view_eye = None;
+        self.last_eye = None;
         if let Some(lighting) = self.lighting.take() {
             self.set_lighting(&lighting.env, lighting.world_from_env)?;
         }
@@ -404,15 +481,26 @@ impl GpuRenderer {
 
     /// Sets the environment map (any resolution, lat-long, world frame) and its rotation
     /// `world_from_env`, projecting it onto the asset's basis
-    /// ([`nelf_render::project_light`]). Needs an asset. The relight pass runs before the
-    /// next frame.
+    /// ([`nelf_render::project_light`]) and a view-dependent asset's view basis
+    /// ([`nelf_render::project_view_light`]). Needs an asset. The relight pass runs before
+    /// the next frame.
     pub fn set_lighting(&mut self, env: &LatLong, world_from_env: DMat3) -> Result<(), ViewerError> {
         let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
         let projected = project_light(&asset.pca, asset.world_from_light, env, world_from_env)?;
+        let view_projected = match &asset.view {
+            Some(view) => Some(project_view_light(
+                &view.model,
+                asset.world_from_light,
+                env,
+                world_from_env,
+            )?),
+            None => None,
+        };
         self.lighting = Some(Lighting {
             env: env.clone(),
             world_from_env,
             projected,
+            view_projected,
         });
         self.relight_dirty = true;
         Ok(())
@@ -504,8 +592,9 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Encodes the relight pass (if needed) and the march of `camera` into `encoder`;
-    /// the result lands in the internal target that [`GpuRenderer::paint`] displays.
+    /// Encodes the relight pass (if needed), for a view-dependent asset the view pass (if
+    /// the eye or the lighting changed) and the march of `camera` into `encoder`; the
+    /// result lands in the internal target that [`GpuRenderer::paint`] displays.
     pub fn encode_frame(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -527,6 +616,9 @@ impl GpuRenderer {
             return Err(ViewerError::NoLighting);
         }
         self.encode_relight_if_needed(encoder)?;
+        let eye = [params.origin_u[0], params.origin_u[1], params.origin_u[2]];
+        self.last_eye = Some(eye);
+        self.encode_view_if_needed(encoder, eye)?;
         self.ensure_target(camera.width, camera.height)?;
         self.queue
             .write_buffer(&self.march_params, 0, bytemuck::bytes_of(&params));
@@ -566,6 +658,20 @@ impl GpuRenderer {
         self.relight_dirty = true;
         let mut encoder = self.encoder("relight");
         self.encode_relight_if_needed(&mut encoder)?;
+        self.submit_and_wait(encoder)
+    }
+
+    /// Runs the view pass of a view-dependent asset toward `camera`'s eye now (relighting
+    /// first if needed) and waits (benchmarks); nothing for a view-independent asset.
+    pub fn view_pass_blocking(&mut self, camera: &PinholeCamera) -> Result<(), ViewerError> {
+        let params = self.march_params(camera, &ViewSettings::default())?;
+        let mut encoder = self.encoder("view");
+        self.encode_relight_if_needed(&mut encoder)?;
+        self.view_eye = None;
+        self.encode_view_if_needed(
+            &mut encoder,
+            [params.origin_u[0], params.origin_u[1], params.origin_u[2]],
+        )?;
         self.submit_and_wait(encoder)
     }
 

@@ -177,12 +177,17 @@ impl GpuRenderer {
     }
 
     /// Reads the relit atlas back (`[r, g, b, σ]` per texel, x fastest, then y, then z;
-    /// size [`AssetInfo::atlas_texels`]), relighting first if needed. For tests.
+    /// size [`AssetInfo::atlas_texels`]), relighting first if needed. For tests. A
+    /// view-dependent asset's atlas shows the radiance toward the last frame's eye (the
+    /// view pass runs first if needed), or holds zeros before any frame.
     ///
     /// [`AssetInfo::atlas_texels`]: super::AssetInfo::atlas_texels
     pub fn read_atlas(&mut self) -> Result<Vec<[f32; 4]>, ViewerError> {
         let mut encoder = self.encoder("relight");
         self.encode_relight_if_needed(&mut encoder)?;
+        if let Some(eye) = self.last_eye {
+            self.encode_view_if_needed(&mut encoder, eye)?;
+        }
         self.submit_and_wait(encoder)?;
         let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
         let bytes = self.read_texture(&asset.atlas, asset.atlas.size(), 8)?;

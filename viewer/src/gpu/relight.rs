@@ -12,14 +12,20 @@
 //!
 //! (`q_k` the stored codes), written with its density σ as `[r, g, b, σ]` into the
 //! RGBA16F brick atlas — the voxel's own slot and the aprons of the neighbouring slots
-//! ([`crate::atlas`]). Shading is linear, so marching the relit atlas equals shading every
-//! sample.
+//! ([`crate::atlas`]), found through the indirection grid from the brick's cell. Shading
+//! is linear, so marching the relit atlas equals shading every sample.
+//!
+//! A view-dependent asset runs the `relight_lobes` entry instead (see [`super::view`]):
+//! the same dot product plus the lobe colours, into the lobe buffer the view pass reads.
 
 use nelf_format::conventions::LT_DIM;
 
 use super::GpuRenderer;
-use super::common::{compute_pipeline, shader_module, storage_entry, storage_texture_entry, uniform_entry};
-use crate::atlas::{RelightView, fold_light};
+use super::common::{
+    compute_pipeline, shader_module, storage_entry, storage_texture_entry, texture_entry, uniform_entry,
+};
+use super::view::{VIEW_LIGHT_ENTRIES, voxel_dispatch};
+use crate::atlas::{MAX_LOBES, RelightView, fold_light, fold_view_light};
 use crate::error::ViewerError;
 use crate::shaders::{RELIGHT_WGSL, RelightParams};
 
@@ -42,6 +48,7 @@ impl RelightPipeline {
                 storage_entry(3, true, S::COMPUTE),
                 storage_entry(4, true, S::COMPUTE),
                 storage_texture_entry(5, wgpu::TextureFormat::Rgba16Float, D::D3),
+                texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
             ],
         });
         let module = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
@@ -50,19 +57,21 @@ impl RelightPipeline {
     }
 
     /// The bind group of an asset: `buffers` = (relight params, light, coefficients,
-    /// densities, neighbour slots), bindings 0 to 4, and the atlas the pass writes.
+    /// densities, brick cells), bindings 0 to 4, the atlas the pass writes and the
+    /// indirection grid.
     pub(super) fn bind_group(
         &self,
         device: &wgpu::Device,
         buffers: [&wgpu::Buffer; 5],
         atlas_view: &wgpu::TextureView,
+        indirection_view: &wgpu::TextureView,
     ) -> wgpu::BindGroup {
         let [
             relight_params,
             light,
             coefficient_buffer,
             density_buffer,
-            neighbour_buffer,
+            brick_cell_buffer,
         ] = buffers;
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("relight"),
@@ -86,11 +95,15 @@ impl RelightPipeline {
                 },
                 wgpu::BindGroupEntry {
                     binding: 4,
-                    resource: neighbour_buffer.as_entire_binding(),
+                    resource: brick_cell_buffer.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 5,
                     resource: wgpu::BindingResource::TextureView(atlas_view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: wgpu::BindingResource::TextureView(indirection_view),
                 },
             ],
         })
@@ -98,7 +111,9 @@ impl RelightPipeline {
 }
 
 impl GpuRenderer {
-    /// Encodes the relight pass if the lighting, rank or view changed since the last one.
+    /// Encodes the relight pass if the lighting, rank or view changed since the last one:
+    /// `relight` into the atlas, or for a view-dependent asset showing radiance
+    /// `relight_lobes` into its lobe buffer (the view pass then fills the atlas).
     pub(super) fn encode_relight_if_needed(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -124,9 +139,27 @@ impl GpuRenderer {
         self.queue
             .write_buffer(&asset.light, 0, bytemuck::cast_slice(&components));
         let g = asset.grid.grid_bricks;
-        // 64 voxels per workgroup, rows of at most 32768 workgroups.
-        let groups = (asset.voxel_count as u32).div_ceil(64).max(1);
-        let groups = [groups.min(32_768), groups.div_ceil(32_768)];
+        let (groups, per_row) = voxel_dispatch(asset.voxel_count);
+        // The view part, when the atlas is to show radiance: its pipeline, bind group and
+        // (lobes, rank, words, encoding).
+        let lobes = match (&asset.view, &self.pipelines.view, &lighting.view_projected) {
+            (Some(view), Some(pipelines), Some(view_light)) if self.relight_view == RelightView::Shaded => {
+                let lobes = view.model.lobe_count().min(MAX_LOBES);
+                let folded_view = fold_view_light(view_light, &view.dequantization, lobes);
+                debug_assert_eq!(folded_view.len(), VIEW_LIGHT_ENTRIES);
+                self.queue
+                    .write_buffer(&view.view_light, 0, bytemuck::cast_slice(&folded_view));
+                let bind_group = view.lobes_bind_group.as_ref().ok_or(ViewerError::NoAsset)?;
+                let shape = [
+                    lobes as u32,
+                    view.model.rank() as u32,
+                    view.coefficient_words_per_voxel,
+                    view.coefficient_encoding as u32,
+                ];
+                Some((&pipelines.lobes, bind_group, shape))
+            }
+            _ => None,
+        };
         let params = RelightParams {
             atlas: [
                 asset.layout.x_bits,
@@ -142,7 +175,8 @@ impl GpuRenderer {
                 0,
             ],
             light_mean: [folded.mean_rgb[0], folded.mean_rgb[1], folded.mean_rgb[2], 0.0],
-            dispatch: [asset.voxel_count as u32, groups[0] * 64, 0, 0],
+            dispatch: [asset.voxel_count as u32, per_row, 0, 0],
+            view: lobes.map_or([0; 4], |(_, _, shape)| shape),
         };
         self.queue
             .write_buffer(&asset.relight_params, 0, bytemuck::bytes_of(&params));
@@ -150,11 +184,18 @@ impl GpuRenderer {
             label: Some("relight"),
             timestamp_writes: None,
         });
-        pass.set_bind_group(0, &asset.relight_bind_group, &[]);
-        pass.set_pipeline(&self.pipelines.relight.pipeline);
+        if let Some((pipeline, bind_group, _)) = lobes {
+            pass.set_bind_group(0, bind_group, &[]);
+            pass.set_pipeline(pipeline);
+        } else {
+            pass.set_bind_group(0, &asset.relight_bind_group, &[]);
+            pass.set_pipeline(&self.pipelines.relight.pipeline);
+        }
         pass.dispatch_workgroups(groups[0], groups[1], 1);
         drop(pass);
         self.relight_dirty = false;
+        // The atlas no longer shows radiance toward any eye.
+        self.view_eye = None;
         Ok(())
     }
 }

@@ -1,0 +1,81 @@
+// view.wgsl — the view pass (compute) of a view-dependent asset (format 1.2), run
+// before the march whenever the camera's eye (or the lighting) changed since the last
+// frame; a view-independent asset never runs it.
+//
+// Mirrors nelf_render::view::radiance_seen_from: each stored voxel's radiance toward the
+// eye e is
+//   radiance = base + Σ_j Y_j(ω) c_j,   ω = normalize(e − voxel centre),
+//   Y_j(ω) = Σ_l w_jl · y_l(ω)   (y: the 9 harmonics of common.wgsl's `view_harmonics`),
+// with base (the PCA part's radiance) and the lobe colours c_j read from the lobe buffer
+// the relight pass wrote once per lighting change (common.wgsl, `lobe_buffer_words`).
+// The direction is taken per voxel, not per sample, so the march is unchanged: the
+// result is written with σ into every atlas texel that holds the voxel (its slot and the
+// neighbours' aprons, common.wgsl `voxel_texels`), as the relight pass does for a
+// view-independent asset. Positions are lattice coordinates (voxel centres at
+// 8·cell + local), which give world directions: the lattice is the world scaled and
+// shifted.
+
+#import "common.wgsl"
+
+// Mirrors `ViewParams` in viewer/src/shaders.rs.
+struct ViewParams {
+    // x_bits, y_bits of the slot packing; lobes J; stored voxels.
+    atlas: vec4<u32>,
+    // Grid extent in bricks (xyz); w: unused.
+    grid_bricks: vec4<i32>,
+    // The eye in lattice coordinates (p − bbox_min)/voxel − 0.5 (xyz); w: unused.
+    eye_u: vec4<f32>,
+    // x: invocations per row of the dispatch (workgroups along x · 64); yzw: unused.
+    dispatch: vec4<u32>,
+    // Lobe weights w_jl: lobe j's over harmonics 0–3 in lobes[3j], 4–7 in lobes[3j + 1],
+    // 8 in lobes[3j + 2].x (yzw: 0).
+    lobes: array<vec4<f32>, 27>,
+}
+
+@group(0) @binding(0) var<uniform> params: ViewParams;
+// The per-voxel lobe buffer (common.wgsl, `lobe_buffer_words`).
+@group(0) @binding(1) var<storage, read> voxel_lobes: array<u32>;
+// Brick-cell coordinates of every present brick (common.wgsl, `brick_cell`).
+@group(0) @binding(2) var<storage, read> brick_cells: array<vec2<u32>>;
+@group(0) @binding(3) var indirection: texture_3d<u32>;
+@group(0) @binding(4) var atlas: texture_storage_3d<rgba16float, write>;
+
+@compute @workgroup_size(64, 1, 1)
+fn view(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let voxels = params.atlas.w;
+    let v = gid.x + gid.y * params.dispatch.x;
+    if gid.x >= params.dispatch.x || v >= voxels {
+        return;
+    }
+    let lobes = min(params.atlas.z, MAX_LOBES);
+    let cell = brick_cell(brick_cells[v / 512u]);
+    let local = voxel_local(v);
+    let y = view_harmonics(params.eye_u.xyz - vec3<f32>(cell * BRICK + local));
+    let base_rg = voxel_lobes[v];
+    let base_b_sigma = voxel_lobes[voxels + v];
+    var rgb = vec3<f32>(half_of(base_rg, 0u), half_of(base_rg, 1u), half_of(base_b_sigma, 0u));
+    var halves: array<f32, MAX_LOBE_HALVES>;
+    for (var q = 0u; q < (3u * lobes + 1u) / 2u; q++) {
+        let pair = voxel_lobes[(2u + q) * voxels + v];
+        halves[2u * q] = half_of(pair, 0u);
+        halves[2u * q + 1u] = half_of(pair, 1u);
+    }
+    for (var j = 0u; j < lobes; j++) {
+        let weight = dot(params.lobes[3u * j], y[0]) + dot(params.lobes[3u * j + 1u], y[1])
+            + dot(params.lobes[3u * j + 2u], y[2]);
+        rgb += weight * vec3<f32>(halves[3u * j], halves[3u * j + 1u], halves[3u * j + 2u]);
+    }
+    let value = vec4<f32>(rgb, half_of(base_b_sigma, 1u));
+    var texels: array<vec3<i32>, 8>;
+    let count = voxel_texels(
+        indirection,
+        params.grid_bricks.xyz,
+        SlotPacking(params.atlas.x, params.atlas.y),
+        cell,
+        local,
+        &texels,
+    );
+    for (var i = 0u; i < count; i++) {
+        textureStore(atlas, texels[i], value);
+    }
+}
