@@ -30,7 +30,7 @@ use nelf_render::MarchSettings;
 
 use crate::atlas::RelightView;
 use crate::error::ViewerError;
-use crate::gpu::{DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewSettings};
+use crate::gpu::{DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewInfo, ViewSettings};
 
 /// A named environment map offered in the picker.
 #[derive(Debug, Clone)]
@@ -240,6 +240,8 @@ struct ViewerApp {
     env_path_text: String,
     asset_path: Option<PathBuf>,
     asset_rank: usize,
+    /// The loaded asset's view-dependent part, if any (shown in the stats line).
+    asset_view: Option<ViewInfo>,
     max_density_per_m: f32,
     orbit: Option<Orbit>,
     rotation_deg: f32,
@@ -282,6 +284,21 @@ struct Screenshots {
     receiver: Receiver<ScreenshotMessage>,
 }
 
+/// The stats line of an asset: its PCA rank and whether it is view-dependent (format
+/// 1.2: `J` lobes over a view basis of rank `K_v`).
+fn asset_stats(rank: usize, view: Option<ViewInfo>) -> String {
+    match view {
+        Some(v) => format!(
+            "K = {rank}; view-dependent: J = {} lobe{}, K_v = {} ({:?})",
+            v.lobes,
+            if v.lobes == 1 { "" } else { "s" },
+            v.rank,
+            v.encoding
+        ),
+        None => format!("K = {rank}; view-independent"),
+    }
+}
+
 /// Rendering options of the UI.
 #[derive(Debug, Clone, Copy)]
 struct Rendering {
@@ -312,6 +329,7 @@ impl ViewerApp {
             env_path_text: String::new(),
             asset_path: None,
             asset_rank: 0,
+            asset_view: None,
             max_density_per_m: 1.0,
             orbit: None,
             rotation_deg: 0.0,
@@ -404,6 +422,7 @@ impl ViewerApp {
             Some(Ok(info)) => {
                 self.asset_path = Some(path.to_path_buf());
                 self.asset_rank = info.rank;
+                self.asset_view = info.view;
                 self.rank = info.rank;
                 self.component = self.component.min(info.rank.saturating_sub(1));
                 self.max_density_per_m = info.max_density_per_m.max(1e-6);
@@ -535,6 +554,9 @@ impl ViewerApp {
             )),
             None => ui.label("no asset: drop a .nelf file here"),
         };
+        if self.asset_path.is_some() {
+            ui.label(asset_stats(self.asset_rank, self.asset_view));
+        }
         ui.label(format!(
             "frame interval {:.1} ms ({:.0} fps), march {}×{}",
             self.frame_ms_smoothed,
@@ -870,6 +892,20 @@ mod tests {
         assert_eq!(
             capture_light_beside(&asset),
             Some(dir.path().join("head.light.exr"))
+        );
+    }
+
+    #[test]
+    fn stats_line_says_whether_the_asset_is_view_dependent() {
+        assert_eq!(asset_stats(12, None), "K = 12; view-independent");
+        let view = ViewInfo {
+            lobes: 3,
+            rank: 8,
+            encoding: nelf_format::CoefficientEncoding::U8Affine,
+        };
+        assert_eq!(
+            asset_stats(12, Some(view)),
+            "K = 12; view-dependent: J = 3 lobes, K_v = 8 (U8Affine)"
         );
     }
 
