@@ -1,5 +1,5 @@
 /* Prints a .nelf file's size and the radiance of one voxel under white light.
- * cc -std=c99 -O2 -I include include/example.c -o nelf_example -lzstd -lxxhash */
+ * cc -std=c99 -O2 -I include include/example.c -o nelf_example -lzstd -lxxhash -lm */
 #define NELF_IMPLEMENTATION
 #include "nelf.h"
 #include <stdio.h>

@@ -1,26 +1,27 @@
 /*
  * nelf.h: single-header C99 reader for `.nelf` relightable light-transport files
- * (format version 1.x, see format/SPEC.md in the nelf repository).
+ * (format version 1.x, see format/SPEC.md in the nelf repository), including the
+ * optional view-dependent part of version 1.2 (sections VDEP and VCOF).
  *
  * Use:   in exactly one .c file,
  *            #define NELF_IMPLEMENTATION
  *            #include "nelf.h"
- *        elsewhere just #include "nelf.h". Link with -lzstd -lxxhash.
+ *        elsewhere just #include "nelf.h". Link with -lzstd -lxxhash -lm.
  *
  * The reader validates everything SPEC.md section 11 asks, in the same order as the
  * reference reader (`nelf-format`'s read.rs), and reports the first problem as a
  * distinct `nelf_result` code with a message naming where it is. Every allocation is
  * bounded before it is made: by the actual file length (brick list, chunk tables,
  * stored bytes of a section read from a FILE), or by the format's limits (PCA model
- * <= 591 360 bytes, QPRM <= 3 KiB, metadata <= 1 MiB, one decoded chunk <= 4 MiB and
- * <= 32768 x its stored size).
+ * <= 591 360 bytes, QPRM <= 3 KiB, VDEP <= 593 168 bytes, metadata <= 1 MiB, one decoded
+ * chunk <= 4 MiB and <= 32768 x its stored size).
  *
  * Numbers: reconstruction, relighting and shading follow the reference's arithmetic
  * operation by operation (float sums in ascending index order starting from -0.0f,
- * the light projection in double), so results are bit-identical to the Rust reader
- * when the compiler does not contract a*b+c into fused multiply-adds: GCC in -std=c99
- * mode does not; otherwise pass -ffp-contract=off. FLT_EVAL_METHOD must be 0 (any
- * SSE2 or AArch64 target).
+ * the light projection in double, the direction's length with sqrtf), so results are
+ * bit-identical to the Rust reader when the compiler does not contract a*b+c into fused
+ * multiply-adds: GCC in -std=c99 mode does not; otherwise pass -ffp-contract=off.
+ * FLT_EVAL_METHOD must be 0 (any SSE2 or AArch64 target).
  *
  * A reader is not thread-safe (it caches one decoded chunk); use one per thread.
  *
@@ -61,6 +62,7 @@ extern "C" {
 #define NELF_ENCODING_U8_AFFINE 1
 #define NELF_ENCODING_F16 2
 #define NELF_FLAG_SIGNED_DENSITY 1u  /* header flag bit 0: DENS may hold negative values */
+#define NELF_VIEW_HARMONICS 9        /* harmonics a view lobe weighs: degrees 0, 1 and 2 (1.2) */
 #define NELF_DETAIL_SIZE 512
 
 /*
@@ -118,7 +120,9 @@ extern "C" {
     X(NELF_ERR_NEGATIVE_DENSITY, "negative density without the signed-density flag")         \
     X(NELF_ERR_NONFINITE_COEFFICIENT, "non-finite f16 coefficient")                          \
     X(NELF_ERR_NONZERO_PADDING, "non-zero padding byte between sections")                    \
-    X(NELF_ERR_BRICK_OUT_OF_RANGE, "brick index out of range")
+    X(NELF_ERR_BRICK_OUT_OF_RANGE, "brick index out of range")                               \
+    X(NELF_ERR_BAD_VIEW, "malformed view-dependent part (VDEP and VCOF)")                    \
+    X(NELF_ERR_NONFINITE_VIEW, "non-finite value in the view lobes, basis or parameters")
 
 #define NELF__ENUM_ENTRY(name, text) name,
 typedef enum nelf_result { NELF__RESULTS(NELF__ENUM_ENTRY) NELF_RESULT_COUNT } nelf_result;
@@ -168,7 +172,25 @@ typedef struct nelf_brick {
     const float *density;                    /* 512 sigma values (1/m), x fastest */
     const float *coefficients;               /* 512 x K dequantized, voxel-major */
     const unsigned char *stored_coefficients;/* 512 x K codes (u8) or little-endian f16 */
+    /* The view-dependent part (1.2), NULL without one: 512 x R (R = J K_v) dequantized,
+     * voxel-major, d_ji of a voxel at j * K_v + i; and as stored (u8 or f16). */
+    const float *view_coefficients;
+    const unsigned char *stored_view_coefficients;
 } nelf_brick;
+
+/* The view-dependent part's parameters (format 1.2, section VDEP, SPEC.md section 6):
+ * T(x, w) = T_pca(x) + sum_j Y_j(w) sum_i d_ji(x) V_i with Y_j(w) = sum_l lobes[j * 9 + l]
+ * y_l(w) (nelf_view_harmonics). Pointers belong to the reader (valid while it is open). */
+typedef struct nelf_view {
+    uint32_t lobe_count;           /* J, 1..9 */
+    uint32_t rank;                 /* K_v, >= 1, J K_v <= 384 */
+    uint32_t coefficients_per_voxel; /* R = J K_v */
+    uint32_t encoding;             /* of VCOF: NELF_ENCODING_U8_AFFINE or NELF_ENCODING_F16 */
+    const float *lobes;            /* J x NELF_VIEW_HARMONICS, lobe-major */
+    const float *basis;            /* K_v x 384, vector i at i * 384 (channel-major as PCAB) */
+    const float *scale;            /* R 8-bit dequantization steps, NULL for f16 */
+    const float *offset;           /* R 8-bit offsets, NULL for f16 */
+} nelf_view;
 
 /* Lighting projected onto the PCA basis (SPEC.md section 8): the radiance of a voxel
  * with coefficients c is mean_rgb + sum_k c_k component_rgb[k]. */
@@ -223,6 +245,8 @@ NELF_API const float *nelf_quant_offset(const nelf_reader *reader);
 /* The metadata's raw UTF-8 JSON bytes (not NUL-terminated; checked to be a JSON
  * object). A file without metadata gives "{}" like the reference reader. */
 NELF_API const char *nelf_metadata(const nelf_reader *reader, size_t *length);
+/* The view-dependent part's parameters (1.2), NULL when the file has none (or none is open). */
+NELF_API const nelf_view *nelf_get_view(const nelf_reader *reader);
 
 /* --- bricks and voxels --- */
 /* Reads brick `index`: decodes (and checksums) only the chunk holding it, keeping
@@ -238,6 +262,25 @@ NELF_API void nelf_reconstruct(const nelf_reader *reader, const float *coefficie
 /* T of voxel `local` (0..511) of brick `brick_index` (reads the brick). */
 NELF_API nelf_result nelf_voxel_transport(nelf_reader *reader, uint32_t brick_index, uint32_t local,
                                           float out_lt[NELF_LT_DIM]);
+
+/* --- the view-dependent part (format 1.2) --- */
+/* The real spherical harmonics of degrees 0-2 at world direction `omega` (from the voxel
+ * toward the eye; normalised first, in float with sqrtf; zero or non-finite gives zeros):
+ * (c0, a y, a z, a x, b x y, b y z, c (3 z^2 - 1), b x z, b/2 (x^2 - y^2)),
+ * c0 = 1/(2 sqrt pi), a = sqrt(3/4pi), b = sqrt(15/4pi), c = sqrt(5/16pi). */
+NELF_API void nelf_view_harmonics(const float omega[3], float out[NELF_VIEW_HARMONICS]);
+/* The lobe values Y_j(omega) = sum_l lobes[j * 9 + l] y_l(omega), j < J, summed l = 0, 1, ...
+ * from -0.0f. Returns J (0, leaving out untouched, without a view part). */
+NELF_API uint32_t nelf_view_lobe_values(const nelf_reader *reader, const float omega[3],
+                                        float out[NELF_VIEW_HARMONICS]);
+/* out_lt += sum_j Y_j(omega) sum_i d_ji V_i for one voxel's R dequantized view coefficients
+ * (j then i ascending, w = Y_j d_ji, then out[e] += w V_i[e]). Nothing without a view part. */
+NELF_API void nelf_add_view_transport(const nelf_reader *reader, const float *view_coefficients,
+                                      const float omega[3], float out_lt[NELF_LT_DIM]);
+/* T(x, omega) of voxel `local` of brick `brick_index`: nelf_voxel_transport plus, with a
+ * view part, nelf_add_view_transport (reads the brick). */
+NELF_API nelf_result nelf_voxel_transport_toward(nelf_reader *reader, uint32_t brick_index, uint32_t local,
+                                                 const float omega[3], float out_lt[NELF_LT_DIM]);
 
 /* --- lighting --- */
 /* `light_rgb`: 128 texels x 3 channels (texel-major: light_rgb[t * 3 + c]), the mean
@@ -269,6 +312,7 @@ NELF_API float nelf_half_to_float(uint16_t bits);
 #include <stdlib.h>
 #include <string.h>
 #include <limits.h>
+#include <math.h>
 #include <xxhash.h>
 #include <zstd.h>
 
@@ -287,9 +331,17 @@ NELF_API float nelf_half_to_float(uint16_t bits);
 #define NELF__MAX_ZSTD_EXPANSION ((uint64_t)32768)
 #define NELF__MAX_GRID_BRICKS 65536u
 #define NELF__PIECE ((uint64_t)1 << 20)
+#define NELF__VIEW_HEADER_SIZE 16u
+/* Largest decoded VDEP: header, 9 lobes, 384 basis vectors, 384 (scale, offset) pairs. */
+#define NELF__MAX_VIEW_PARAMS_BYTES \
+    ((uint64_t)NELF__VIEW_HEADER_SIZE + 4u * NELF_VIEW_HARMONICS * NELF_VIEW_HARMONICS + \
+     4u * (uint64_t)NELF_LT_DIM * NELF_LT_DIM + 8u * NELF_LT_DIM)
 
-enum { NELF__BRCK, NELF__DENS, NELF__PCAB, NELF__QPRM, NELF__COEF, NELF__META, NELF__KNOWN };
-static const char nelf__kinds[NELF__KNOWN][5] = {"BRCK", "DENS", "PCAB", "QPRM", "COEF", "META"};
+enum { NELF__BRCK, NELF__DENS, NELF__PCAB, NELF__QPRM, NELF__COEF, NELF__VDEP, NELF__VCOF, NELF__META, NELF__KNOWN };
+static const char nelf__kinds[NELF__KNOWN][5] = {"BRCK", "DENS", "PCAB", "QPRM", "COEF", "VDEP", "VCOF", "META"};
+/* The chunked sections, in the order a full read visits them (index "which"). */
+#define NELF__CHUNKED 3
+static const int nelf__chunked_kind[NELF__CHUNKED] = {NELF__DENS, NELF__COEF, NELF__VCOF};
 
 struct nelf_reader {
     nelf_result status;
@@ -308,17 +360,22 @@ struct nelf_reader {
     float *qparams;         /* scale[K] then offset[K], or NULL */
     unsigned char *meta;
     size_t meta_length;
-    unsigned char *chunk_table[2]; /* DENS, COEF: 24 bytes per chunk */
+    int has_view;                  /* VDEP and VCOF present */
+    nelf_view view;
+    float *view_params;            /* lobes, basis, scale[R], offset[R] (see view) */
+    int chunked;                   /* chunked sections: 2, or 3 with a view part */
+    unsigned char *chunk_table[NELF__CHUNKED]; /* DENS, COEF, VCOF: 24 bytes per chunk */
     uint64_t chunk_count;
-    uint64_t bytes_per_brick[2];
+    uint64_t bytes_per_brick[NELF__CHUNKED];
     /* working memory */
     ZSTD_DCtx *dctx;
     unsigned char *io;  size_t io_cap;   /* stored bytes read from a FILE */
     unsigned char *tmp; size_t tmp_cap;  /* decoded bytes before unshuffling */
-    unsigned char *raw[2]; size_t raw_cap[2]; /* decoded chunk of DENS, COEF */
+    unsigned char *raw[NELF__CHUNKED]; size_t raw_cap[NELF__CHUNKED]; /* decoded chunk of each */
     int64_t cached_chunk;
     float *brick_density;   /* 512 */
     float *brick_coef;      /* 512 K */
+    float *brick_view;      /* 512 R */
 };
 
 /* ---------------------------------------------------------------- small helpers */
@@ -960,32 +1017,59 @@ static uint64_t nelf__expected_raw(const nelf_header *h, int kind) {
     uint64_t bricks = h->brick_count, rank = h->pca_rank;
     switch (kind) {
     case NELF__BRCK: return 6 * bricks;
-    case NELF__DENS: return 2u * NELF_BRICK_VOXELS * bricks;
     case NELF__PCAB: return 4u * NELF_LT_DIM * (rank + 1);
     case NELF__QPRM: return 8 * rank;
-    case NELF__COEF: return nelf__coef_bytes_per_brick(h) * bricks;
-    default: return UINT64_MAX; /* metadata: variable */
+    default: return UINT64_MAX; /* metadata, VDEP: variable */
     }
+}
+
+/* Checks a chunked section's entry (DENS, COEF, VCOF) whose bricks decode to `per_brick`
+ * bytes: decoded length B x per_brick, shuffle dividing a brick, a chunk <= 4 MiB. */
+static nelf_result nelf__check_chunked_entry(nelf_reader *r, const nelf_section *s, uint64_t per_brick) {
+    const nelf_header *h = &r->header;
+    uint64_t width = s->shuffle, expected = per_brick * h->brick_count;
+    char name[17];
+    nelf__kind_text(s->kind, name);
+    if (expected != s->raw_length)
+        return nelf__fail(r, NELF_ERR_SECTION_LENGTH,
+                          "section %s declares %llu decoded bytes but the header's counts need %llu", name,
+                          (unsigned long long)s->raw_length, (unsigned long long)expected);
+    if (width > 1 && per_brick % width != 0)
+        return nelf__fail(r, NELF_ERR_BAD_CODEC, "section %s: shuffle width %llu does not divide the %llu bytes of a brick",
+                          name, (unsigned long long)width, (unsigned long long)per_brick);
+    if ((uint64_t)h->chunk_bricks * per_brick > NELF__MAX_CHUNK_RAW_BYTES)
+        return nelf__fail(r, NELF_ERR_CHUNK_TOO_LARGE, "section %s chunk decoded bytes = %llu is too large (limit 4194304)",
+                          name, (unsigned long long)((uint64_t)h->chunk_bricks * per_brick));
+    return NELF_OK;
 }
 
 static nelf_result nelf__check_entry(nelf_reader *r, const nelf_section *s, int kind) {
     const nelf_header *h = &r->header;
     char name[17];
-    int chunked = kind == NELF__DENS || kind == NELF__COEF;
+    int chunked = kind == NELF__DENS || kind == NELF__COEF || kind == NELF__VCOF;
     uint64_t width = s->shuffle;
     nelf__kind_text(s->kind, name);
     if (!((s->codec == 0 && !chunked) || (s->codec == 2 && chunked) || (s->codec == 1 && !chunked && kind != NELF__BRCK)))
         return nelf__fail(r, NELF_ERR_BAD_CODEC, "section %s: codec %u is not allowed for this section", name, s->codec);
-    if (kind != NELF__META) {
+    if (kind == NELF__DENS) return nelf__check_chunked_entry(r, s, 2u * NELF_BRICK_VOXELS);
+    if (kind == NELF__COEF) return nelf__check_chunked_entry(r, s, nelf__coef_bytes_per_brick(h));
+    if (kind == NELF__VCOF) return NELF_OK; /* checked once VDEP gives its brick size */
+    if (kind == NELF__META) {
+        if (s->raw_length > NELF__MAX_METADATA_BYTES)
+            return nelf__fail(r, NELF_ERR_METADATA_TOO_LARGE,
+                              "section %s decoded length = %llu is too large (limit 1048576)", name,
+                              (unsigned long long)s->raw_length);
+    } else if (kind == NELF__VDEP) {
+        if (s->raw_length > NELF__MAX_VIEW_PARAMS_BYTES)
+            return nelf__fail(r, NELF_ERR_BAD_VIEW,
+                              "invalid view-dependent part: section VDEP declares %llu decoded bytes, more than the largest possible %llu",
+                              (unsigned long long)s->raw_length, (unsigned long long)NELF__MAX_VIEW_PARAMS_BYTES);
+    } else {
         uint64_t expected = nelf__expected_raw(h, kind);
         if (expected != s->raw_length)
             return nelf__fail(r, NELF_ERR_SECTION_LENGTH,
                               "section %s declares %llu decoded bytes but the header's counts need %llu", name,
                               (unsigned long long)s->raw_length, (unsigned long long)expected);
-    } else if (s->raw_length > NELF__MAX_METADATA_BYTES) {
-        return nelf__fail(r, NELF_ERR_METADATA_TOO_LARGE,
-                          "section %s decoded length = %llu is too large (limit 1048576)", name,
-                          (unsigned long long)s->raw_length);
     }
     if (s->codec == 0) {
         if (s->shuffle != 0)
@@ -1002,14 +1086,6 @@ static nelf_result nelf__check_entry(nelf_reader *r, const nelf_section *s, int 
             return nelf__fail(r, NELF_ERR_IMPLAUSIBLE_LENGTH,
                               "section %s: declared decoded length %llu is implausible for %llu stored bytes", name,
                               (unsigned long long)s->raw_length, (unsigned long long)s->stored_length);
-    } else {
-        uint64_t per_brick = kind == NELF__DENS ? 2u * NELF_BRICK_VOXELS : nelf__coef_bytes_per_brick(h);
-        if (width > 1 && per_brick % width != 0)
-            return nelf__fail(r, NELF_ERR_BAD_CODEC, "section %s: shuffle width %llu does not divide the %llu bytes of a brick",
-                              name, (unsigned long long)width, (unsigned long long)per_brick);
-        if ((uint64_t)h->chunk_bricks * per_brick > NELF__MAX_CHUNK_RAW_BYTES)
-            return nelf__fail(r, NELF_ERR_CHUNK_TOO_LARGE, "section %s chunk decoded bytes = %llu is too large (limit 4194304)",
-                              name, (unsigned long long)((uint64_t)h->chunk_bricks * per_brick));
     }
     return NELF_OK;
 }
@@ -1074,6 +1150,14 @@ static nelf_result nelf__check_table(nelf_reader *r) {
             if (r->known[required[i]] < 0)
                 return nelf__fail(r, NELF_ERR_MISSING_SECTION, "required section %s is missing", nelf__kinds[required[i]]);
     }
+    /* The view-dependent part is optional, but whole. */
+    if ((r->known[NELF__VDEP] >= 0) != (r->known[NELF__VCOF] >= 0)) {
+        int present = r->known[NELF__VDEP] >= 0 ? NELF__VDEP : NELF__VCOF;
+        return nelf__fail(r, NELF_ERR_BAD_VIEW, "invalid view-dependent part: section %s is present without section %s",
+                          nelf__kinds[present], nelf__kinds[present == NELF__VDEP ? NELF__VCOF : NELF__VDEP]);
+    }
+    r->has_view = r->known[NELF__VDEP] >= 0;
+    r->chunked = r->has_view ? 3 : 2;
     return NELF_OK;
 }
 
@@ -1104,10 +1188,10 @@ static nelf_result nelf__whole_section(nelf_reader *r, const nelf_section *s, un
     return NELF_OK;
 }
 
-/* Reads and checks the chunk table at the start of DENS (which = 0) or COEF (1). */
+/* Reads and checks the chunk table at the start of chunked section `which` (DENS, COEF, VCOF). */
 static nelf_result nelf__chunk_table(nelf_reader *r, int which) {
     const nelf_header *h = &r->header;
-    const nelf_section *s = &r->sections[r->known[which ? NELF__COEF : NELF__DENS]];
+    const nelf_section *s = &r->sections[r->known[nelf__chunked_kind[which]]];
     const unsigned char *view;
     uint64_t count = r->chunk_count, table_length = count * NELF__CHUNK_ENTRY_SIZE, expected, i;
     size_t cap = 0;
@@ -1146,6 +1230,89 @@ static nelf_result nelf__chunk_table(nelf_reader *r, int which) {
     return NELF_OK;
 }
 
+/* Checks 8-bit dequantization parameters (QPRM, the end of VDEP) as the reference does:
+ * scale, offset and offset + 255 scale finite, then scale >= 0 (-0 passes). */
+static nelf_result nelf__check_qparams(nelf_reader *r, const float *scale, const float *offset, uint64_t count,
+                                       const char *section) {
+    uint64_t i;
+    for (i = 0; i < count; i++) {
+        float s = scale[i], o = offset[i];
+        float top = o + 255.0f * s;
+        if (!(nelf__finite32(s) && nelf__finite32(o) && nelf__finite32(top)))
+            return nelf__fail(r, strcmp(section, "QPRM") == 0 ? NELF_ERR_NONFINITE_QPRM : NELF_ERR_NONFINITE_VIEW,
+                              "non-finite value in section %s component %llu (scale %.9g, offset %.9g)", section,
+                              (unsigned long long)i, (double)s, (double)o);
+        if (s < 0.0f)
+            return nelf__fail(r, NELF_ERR_NEGATIVE_SCALE, "invalid value in section %s component %llu: negative scale %.9g",
+                              section, (unsigned long long)i, (double)s);
+    }
+    return NELF_OK;
+}
+
+/* Decodes VDEP (`length` bytes, SPEC.md section 6): u32 J, K_v, encoding, reserved; then
+ * f32 lobes[J 9], basis[K_v 384] and, 8-bit, R (scale, offset) pairs; all checked. */
+static nelf_result nelf__parse_view(nelf_reader *r, const unsigned char *bytes, uint64_t length) {
+    uint64_t lobes, rank, per_voxel, expected, values, i, floats;
+    uint32_t encoding;
+    nelf_view *v = &r->view;
+    if (length < NELF__VIEW_HEADER_SIZE)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW,
+                          "invalid view-dependent part: section VDEP: %llu decoded bytes, shorter than its 16-byte header",
+                          (unsigned long long)length);
+    lobes = nelf__u32(bytes);
+    rank = nelf__u32(bytes + 4);
+    encoding = nelf__u32(bytes + 8);
+    if (lobes == 0 || lobes > NELF_VIEW_HARMONICS)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW, "invalid view-dependent part: section VDEP: %llu lobes, must be 1 to %d",
+                          (unsigned long long)lobes, NELF_VIEW_HARMONICS);
+    per_voxel = lobes * rank;
+    if (rank == 0 || per_voxel > NELF_LT_DIM)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW,
+                          "invalid view-dependent part: section VDEP: %llu lobes x rank %llu = %llu coefficients per voxel, must be 1 to 384",
+                          (unsigned long long)lobes, (unsigned long long)rank, (unsigned long long)per_voxel);
+    if (encoding != NELF_ENCODING_U8_AFFINE && encoding != NELF_ENCODING_F16)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW, "invalid view-dependent part: section VDEP: unknown coefficient encoding %lu",
+                          (unsigned long)encoding);
+    values = NELF_VIEW_HARMONICS * lobes + (uint64_t)NELF_LT_DIM * rank;
+    floats = values + (encoding == NELF_ENCODING_U8_AFFINE ? 2 * per_voxel : 0);
+    expected = NELF__VIEW_HEADER_SIZE + 4 * floats;
+    if (expected != length)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW,
+                          "invalid view-dependent part: section VDEP: %llu decoded bytes, but %llu lobes x rank %llu with %s coefficients need %llu",
+                          (unsigned long long)length, (unsigned long long)lobes, (unsigned long long)rank,
+                          encoding == NELF_ENCODING_F16 ? "f16" : "u8-affine", (unsigned long long)expected);
+    r->view_params = (float *)NELF_MALLOC((size_t)floats * sizeof(float));
+    if (!r->view_params) return nelf__fail(r, NELF_ERR_OUT_OF_MEMORY, "out of memory for VDEP");
+    for (i = 0; i < values; i++) r->view_params[i] = nelf__f32(bytes + NELF__VIEW_HEADER_SIZE + 4 * i);
+    v->lobe_count = (uint32_t)lobes;
+    v->rank = (uint32_t)rank;
+    v->coefficients_per_voxel = (uint32_t)per_voxel;
+    v->encoding = encoding;
+    v->lobes = r->view_params;
+    v->basis = r->view_params + NELF_VIEW_HARMONICS * lobes;
+    v->scale = v->offset = NULL;
+    for (i = 0; i < NELF_VIEW_HARMONICS * lobes; i++)
+        if (!nelf__finite32(v->lobes[i]))
+            return nelf__fail(r, NELF_ERR_NONFINITE_VIEW, "non-finite value in section VDEP lobe %llu weight %llu",
+                              (unsigned long long)(i / NELF_VIEW_HARMONICS), (unsigned long long)(i % NELF_VIEW_HARMONICS));
+    for (i = 0; i < (uint64_t)NELF_LT_DIM * rank; i++)
+        if (!nelf__finite32(v->basis[i]))
+            return nelf__fail(r, NELF_ERR_NONFINITE_VIEW, "non-finite value in section VDEP basis vector %llu element %llu",
+                              (unsigned long long)(i / NELF_LT_DIM), (unsigned long long)(i % NELF_LT_DIM));
+    if (encoding == NELF_ENCODING_U8_AFFINE) {
+        float *scale = r->view_params + values, *offset = scale + per_voxel;
+        const unsigned char *pairs = bytes + NELF__VIEW_HEADER_SIZE + 4 * values;
+        for (i = 0; i < per_voxel; i++) {
+            scale[i] = nelf__f32(pairs + 8 * i);
+            offset[i] = nelf__f32(pairs + 8 * i + 4);
+        }
+        v->scale = scale;
+        v->offset = offset;
+        return nelf__check_qparams(r, scale, offset, per_voxel, "VDEP");
+    }
+    return NELF_OK;
+}
+
 /* ---------------------------------------------------------------- open / close */
 
 static void nelf__release(nelf_reader *r) {
@@ -1157,7 +1324,12 @@ static void nelf__release(nelf_reader *r) {
     NELF_FREE(r->pca);
     NELF_FREE(r->qparams);
     NELF_FREE(r->meta);
-    for (i = 0; i < 2; i++) {
+    NELF_FREE(r->view_params);
+    r->view_params = NULL;
+    memset(&r->view, 0, sizeof r->view);
+    r->has_view = 0;
+    r->chunked = 0;
+    for (i = 0; i < NELF__CHUNKED; i++) {
         NELF_FREE(r->chunk_table[i]);
         NELF_FREE(r->raw[i]);
         r->chunk_table[i] = NULL;
@@ -1168,6 +1340,8 @@ static void nelf__release(nelf_reader *r) {
     NELF_FREE(r->tmp);
     NELF_FREE(r->brick_density);
     NELF_FREE(r->brick_coef);
+    NELF_FREE(r->brick_view);
+    r->brick_view = NULL;
     r->bricks = NULL;
     r->pca = NULL;
     r->qparams = NULL;
@@ -1300,19 +1474,24 @@ static nelf_result nelf__open(nelf_reader *r) {
         }
         NELF_FREE(bytes);
         bytes = NULL;
-        for (i = 0; i < rank; i++) {
-            float s = r->qparams[i], o = r->qparams[rank + i];
-            float top = o + 255.0f * s;
-            if (!(nelf__finite32(s) && nelf__finite32(o) && nelf__finite32(top)))
-                return nelf__fail(r, NELF_ERR_NONFINITE_QPRM, "non-finite value in section QPRM component %llu (scale %.9g, offset %.9g)",
-                                  (unsigned long long)i, (double)s, (double)o);
-            if (s < 0.0f)
-                return nelf__fail(r, NELF_ERR_NEGATIVE_SCALE, "invalid value in section QPRM component %llu: negative scale %.9g",
-                                  (unsigned long long)i, (double)s);
-        }
+        if ((rc = nelf__check_qparams(r, r->qparams, r->qparams + rank, rank, "QPRM")) != NELF_OK) return rc;
     } else if (r->known[NELF__QPRM] >= 0) {
         return nelf__fail(r, NELF_ERR_UNEXPECTED_QPRM,
                           "invalid header field coefficient_encoding: f16 coefficients need no QPRM section, but one is present");
+    }
+
+    /* VDEP: the view-dependent part's sizes, lobes, basis and 8-bit parameters; then
+     * VCOF's entry, whose brick size VDEP gives. */
+    if (r->has_view) {
+        if ((rc = nelf__whole_section(r, &r->sections[r->known[NELF__VDEP]], &bytes)) != NELF_OK) return rc;
+        rc = nelf__parse_view(r, bytes, r->sections[r->known[NELF__VDEP]].raw_length);
+        NELF_FREE(bytes);
+        bytes = NULL;
+        if (rc != NELF_OK) return rc;
+        r->bytes_per_brick[2] = (uint64_t)NELF_BRICK_VOXELS * r->view.coefficients_per_voxel *
+                                (r->view.encoding == NELF_ENCODING_F16 ? 2u : 1u);
+        if ((rc = nelf__check_chunked_entry(r, &r->sections[r->known[NELF__VCOF]], r->bytes_per_brick[2])) != NELF_OK)
+            return rc;
     }
 
     /* META: a JSON object. */
@@ -1323,12 +1502,16 @@ static nelf_result nelf__open(nelf_reader *r) {
         if ((rc = nelf__check_metadata(r, r->meta, r->meta_length)) != NELF_OK) return rc;
     }
 
-    if ((rc = nelf__chunk_table(r, 0)) != NELF_OK) return rc;
-    if ((rc = nelf__chunk_table(r, 1)) != NELF_OK) return rc;
+    for (i = 0; i < (uint64_t)r->chunked; i++)
+        if ((rc = nelf__chunk_table(r, (int)i)) != NELF_OK) return rc;
 
     r->brick_density = (float *)NELF_MALLOC(NELF_BRICK_VOXELS * sizeof(float));
     r->brick_coef = (float *)NELF_MALLOC((size_t)(NELF_BRICK_VOXELS * rank) * sizeof(float));
     if (!r->brick_density || !r->brick_coef) return nelf__fail(r, NELF_ERR_OUT_OF_MEMORY, "out of memory for brick buffers");
+    if (r->has_view) {
+        r->brick_view = (float *)NELF_MALLOC((size_t)NELF_BRICK_VOXELS * r->view.coefficients_per_voxel * sizeof(float));
+        if (!r->brick_view) return nelf__fail(r, NELF_ERR_OUT_OF_MEMORY, "out of memory for brick buffers");
+    }
     r->is_open = 1;
     return nelf__ok(r);
 }
@@ -1386,17 +1569,17 @@ NELF_API const char *nelf_error_detail(const nelf_reader *r) {
 
 /* ---------------------------------------------------------------- chunks and values */
 
-/* Reads chunk `index` of DENS (which = 0) or COEF (1), checks its checksum, decodes it
- * into r->raw[which]; feeds the stored bytes to `section_hash` if given. */
+/* Reads chunk `index` of chunked section `which` (DENS, COEF, VCOF), checks its checksum,
+ * decodes it into r->raw[which]; feeds the stored bytes to `section_hash` if given. */
 static nelf_result nelf__decode_chunk(nelf_reader *r, int which, uint64_t index, XXH3_state_t *section_hash) {
-    const nelf_section *s = &r->sections[r->known[which ? NELF__COEF : NELF__DENS]];
+    const nelf_section *s = &r->sections[r->known[nelf__chunked_kind[which]]];
     const unsigned char *e = r->chunk_table[which] + index * NELF__CHUNK_ENTRY_SIZE;
     uint64_t offset = s->offset + nelf__u64(e), length = nelf__u64(e + 8), sum = nelf__u64(e + 16), computed;
     uint64_t raw_length = nelf__bricks_in_chunk(&r->header, index) * r->bytes_per_brick[which];
     const unsigned char *stored;
     char what[48];
     nelf_result rc;
-    snprintf(what, sizeof what, "section %s chunk %llu", which ? "COEF" : "DENS", (unsigned long long)index);
+    snprintf(what, sizeof what, "section %s chunk %llu", nelf__kinds[nelf__chunked_kind[which]], (unsigned long long)index);
     if ((rc = nelf__view(r, offset, length, &stored, what)) != NELF_OK) return rc;
     computed = XXH3_64bits(stored, (size_t)length);
     if (nelf__checksums_differ(sum, computed))
@@ -1424,15 +1607,42 @@ static nelf_result nelf__check_density(nelf_reader *r, const unsigned char *raw,
     return NELF_OK;
 }
 
-/* Checks `count` f16 coefficients starting at value index first_voxel * K. */
-static nelf_result nelf__check_f16_coefficients(nelf_reader *r, const unsigned char *raw, uint64_t count,
-                                                uint64_t first_voxel) {
-    uint64_t i, rank = r->header.pca_rank;
+/* Checks `count` f16 coefficients of COEF (which = 1, `rank` K) or VCOF (2, R) starting
+ * at value index first_voxel * rank. */
+static nelf_result nelf__check_f16_coefficients(nelf_reader *r, int which, const unsigned char *raw, uint64_t count,
+                                                uint64_t rank, uint64_t first_voxel) {
+    uint64_t i;
     for (i = 0; i < count; i++)
         if (!nelf__half_finite(nelf__u16(raw + 2 * i)))
-            return nelf__fail(r, NELF_ERR_NONFINITE_COEFFICIENT, "non-finite value in section COEF voxel %llu component %llu",
-                              (unsigned long long)(first_voxel + i / rank), (unsigned long long)(i % rank));
+            return nelf__fail(r, NELF_ERR_NONFINITE_COEFFICIENT, "non-finite value in section %s voxel %llu component %llu",
+                              nelf__kinds[nelf__chunked_kind[which]], (unsigned long long)(first_voxel + i / rank),
+                              (unsigned long long)(i % rank));
     return NELF_OK;
+}
+
+/* Checks one decoded chunk's (or brick's) values: `values` voxels from `first_voxel`. */
+static nelf_result nelf__check_values(nelf_reader *r, int which, const unsigned char *raw, uint64_t voxels,
+                                      uint64_t first_voxel) {
+    if (which == 0) return nelf__check_density(r, raw, voxels, first_voxel);
+    if (which == 1 && r->header.coefficient_encoding == NELF_ENCODING_F16)
+        return nelf__check_f16_coefficients(r, 1, raw, voxels * r->header.pca_rank, r->header.pca_rank, first_voxel);
+    if (which == 2 && r->view.encoding == NELF_ENCODING_F16)
+        return nelf__check_f16_coefficients(r, 2, raw, voxels * r->view.coefficients_per_voxel,
+                                            r->view.coefficients_per_voxel, first_voxel);
+    return NELF_OK;
+}
+
+/* Dequantizes `count` stored values with `rank` per voxel: offset[k] + scale[k] code in
+ * float (scale NULL: f16 values, already checked finite). */
+static void nelf__dequantize(float *out, const unsigned char *stored, uint64_t count, uint64_t rank, const float *scale,
+                             const float *offset) {
+    uint64_t i, k;
+    if (scale) {
+        for (i = 0; i < count; i += rank)
+            for (k = 0; k < rank; k++) out[i + k] = offset[k] + scale[k] * (float)stored[i + k];
+    } else {
+        for (i = 0; i < count; i++) out[i] = nelf_half_to_float(nelf__u16(stored + 2 * i));
+    }
 }
 
 /* Checksum of a section read in pieces (file) or at once (memory). */
@@ -1482,30 +1692,26 @@ static nelf_result nelf__verify(nelf_reader *r, XXH3_state_t *state) {
     int which;
     nelf_result rc;
     r->cached_chunk = -1;
-    for (which = 0; which < 2; which++) {
-        const nelf_section *s = &r->sections[r->known[which ? NELF__COEF : NELF__DENS]];
+    for (which = 0; which < r->chunked; which++) {
+        const nelf_section *s = &r->sections[r->known[nelf__chunked_kind[which]]];
         uint64_t computed;
         XXH3_64bits_reset(state);
         XXH3_64bits_update(state, r->chunk_table[which], (size_t)(r->chunk_count * NELF__CHUNK_ENTRY_SIZE));
         for (i = 0; i < r->chunk_count; i++) {
             uint64_t first_voxel = i * h->chunk_bricks * NELF_BRICK_VOXELS;
-            uint64_t values = nelf__bricks_in_chunk(h, i) * NELF_BRICK_VOXELS;
+            uint64_t voxels = nelf__bricks_in_chunk(h, i) * NELF_BRICK_VOXELS;
             if ((rc = nelf__decode_chunk(r, which, i, state)) != NELF_OK) return rc;
-            if (which == 0) {
-                if ((rc = nelf__check_density(r, r->raw[0], values, first_voxel)) != NELF_OK) return rc;
-            } else if (h->coefficient_encoding == NELF_ENCODING_F16) {
-                if ((rc = nelf__check_f16_coefficients(r, r->raw[1], values * h->pca_rank, first_voxel)) != NELF_OK)
-                    return rc;
-            }
+            if ((rc = nelf__check_values(r, which, r->raw[which], voxels, first_voxel)) != NELF_OK) return rc;
         }
         computed = XXH3_64bits_digest(state);
         if (nelf__checksums_differ(s->checksum, computed))
             return nelf__fail(r, NELF_ERR_SECTION_CHECKSUM, "checksum mismatch in section %s: stored 0x%016llx, computed 0x%016llx",
-                              which ? "COEF" : "DENS", (unsigned long long)s->checksum, (unsigned long long)computed);
+                              nelf__kinds[nelf__chunked_kind[which]], (unsigned long long)s->checksum,
+                              (unsigned long long)computed);
     }
     for (a = 0; a < n; a++) {
         const nelf_section *s = &r->sections[a];
-        if ((int)a == r->known[NELF__DENS] || (int)a == r->known[NELF__COEF]) continue;
+        if ((int)a == r->known[NELF__DENS] || (int)a == r->known[NELF__COEF] || (int)a == r->known[NELF__VCOF]) continue;
         if ((rc = nelf__stream_checksum(r, s, state)) != NELF_OK) return rc;
     }
     /* Every byte outside the header, the table and the sections is zero. */
@@ -1543,8 +1749,9 @@ NELF_API nelf_result nelf_verify(nelf_reader *r) {
 
 NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick *out) {
     const nelf_header *h;
-    uint64_t chunk, within, i, rank, per_brick;
-    const unsigned char *dens, *coef;
+    uint64_t chunk, within, i, rank, first_voxel;
+    const unsigned char *dens, *coef, *view = NULL;
+    int which;
     nelf_result rc;
     if (!r || !out) return NELF_ERR_INVALID_ARGUMENT;
     if (!r->is_open) return nelf__fail(r, NELF_ERR_NOT_OPEN, "no file is open in this reader");
@@ -1555,26 +1762,23 @@ NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick 
     chunk = index / h->chunk_bricks;
     if (r->cached_chunk != (int64_t)chunk) {
         r->cached_chunk = -1;
-        if ((rc = nelf__decode_chunk(r, 0, chunk, NULL)) != NELF_OK) return rc;
-        if ((rc = nelf__decode_chunk(r, 1, chunk, NULL)) != NELF_OK) return rc;
+        for (which = 0; which < r->chunked; which++)
+            if ((rc = nelf__decode_chunk(r, which, chunk, NULL)) != NELF_OK) return rc;
         r->cached_chunk = (int64_t)chunk;
     }
     within = index - chunk * h->chunk_bricks;
     rank = h->pca_rank;
-    per_brick = r->bytes_per_brick[1];
-    dens = r->raw[0] + within * 2 * NELF_BRICK_VOXELS;
-    coef = r->raw[1] + within * per_brick;
-    if ((rc = nelf__check_density(r, dens, NELF_BRICK_VOXELS, (uint64_t)index * NELF_BRICK_VOXELS)) != NELF_OK) return rc;
-    if (h->coefficient_encoding == NELF_ENCODING_U8_AFFINE) {
-        const float *scale = r->qparams, *offset = r->qparams + rank;
-        for (i = 0; i < NELF_BRICK_VOXELS * rank; i += rank) {
-            uint64_t k;
-            for (k = 0; k < rank; k++) r->brick_coef[i + k] = offset[k] + scale[k] * (float)coef[i + k];
-        }
-    } else {
-        if ((rc = nelf__check_f16_coefficients(r, coef, NELF_BRICK_VOXELS * rank, (uint64_t)index * NELF_BRICK_VOXELS)) != NELF_OK)
-            return rc;
-        for (i = 0; i < NELF_BRICK_VOXELS * rank; i++) r->brick_coef[i] = nelf_half_to_float(nelf__u16(coef + 2 * i));
+    first_voxel = (uint64_t)index * NELF_BRICK_VOXELS;
+    dens = r->raw[0] + within * r->bytes_per_brick[0];
+    coef = r->raw[1] + within * r->bytes_per_brick[1];
+    if ((rc = nelf__check_values(r, 0, dens, NELF_BRICK_VOXELS, first_voxel)) != NELF_OK) return rc;
+    if ((rc = nelf__check_values(r, 1, coef, NELF_BRICK_VOXELS, first_voxel)) != NELF_OK) return rc;
+    nelf__dequantize(r->brick_coef, coef, NELF_BRICK_VOXELS * rank, rank, r->qparams, r->qparams ? r->qparams + rank : NULL);
+    if (r->has_view) {
+        view = r->raw[2] + within * r->bytes_per_brick[2];
+        if ((rc = nelf__check_values(r, 2, view, NELF_BRICK_VOXELS, first_voxel)) != NELF_OK) return rc;
+        nelf__dequantize(r->brick_view, view, (uint64_t)NELF_BRICK_VOXELS * r->view.coefficients_per_voxel,
+                         r->view.coefficients_per_voxel, r->view.scale, r->view.offset);
     }
     for (i = 0; i < NELF_BRICK_VOXELS; i++) r->brick_density[i] = nelf_half_to_float(nelf__u16(dens + 2 * i));
     out->index = index;
@@ -1582,6 +1786,8 @@ NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick 
     out->density = r->brick_density;
     out->coefficients = r->brick_coef;
     out->stored_coefficients = coef;
+    out->view_coefficients = view ? r->brick_view : NULL;
+    out->stored_view_coefficients = view;
     return nelf__ok(r);
 }
 
@@ -1598,6 +1804,9 @@ NELF_API const float *nelf_pca_basis(const nelf_reader *r) { return r && r->is_o
 NELF_API const float *nelf_quant_scale(const nelf_reader *r) { return r && r->is_open ? r->qparams : NULL; }
 NELF_API const float *nelf_quant_offset(const nelf_reader *r) {
     return r && r->is_open && r->qparams ? r->qparams + r->header.pca_rank : NULL;
+}
+NELF_API const nelf_view *nelf_get_view(const nelf_reader *r) {
+    return r && r->is_open && r->has_view ? &r->view : NULL;
 }
 NELF_API const char *nelf_metadata(const nelf_reader *r, size_t *length) {
     if (!r || !r->is_open) {
@@ -1665,6 +1874,70 @@ NELF_API nelf_result nelf_voxel_transport(nelf_reader *r, uint32_t brick_index, 
     if (!r || !out || local >= NELF_BRICK_VOXELS) return NELF_ERR_INVALID_ARGUMENT;
     if ((rc = nelf_read_brick(r, brick_index, &brick)) != NELF_OK) return rc;
     nelf_reconstruct(r, brick.coefficients + (size_t)local * r->header.pca_rank, r->header.pca_rank, out);
+    return NELF_OK;
+}
+
+NELF_API void nelf_view_harmonics(const float omega[3], float out[NELF_VIEW_HARMONICS]) {
+    const float c0 = 0.2820948f, a = 0.4886025f, b = 1.0925484f, c = 0.31539157f;
+    float len, x, y, z;
+    int l;
+    if (!omega || !out) return;
+    len = sqrtf(omega[0] * omega[0] + omega[1] * omega[1] + omega[2] * omega[2]);
+    if (!(len > 0.0f && nelf__finite32(len))) {
+        for (l = 0; l < NELF_VIEW_HARMONICS; l++) out[l] = 0.0f;
+        return;
+    }
+    x = omega[0] / len;
+    y = omega[1] / len;
+    z = omega[2] / len;
+    out[0] = c0;
+    out[1] = a * y;
+    out[2] = a * z;
+    out[3] = a * x;
+    out[4] = b * x * y;
+    out[5] = b * y * z;
+    out[6] = c * (3.0f * z * z - 1.0f);
+    out[7] = b * x * z;
+    out[8] = 0.5f * b * (x * x - y * y);
+}
+
+NELF_API uint32_t nelf_view_lobe_values(const nelf_reader *r, const float omega[3], float out[NELF_VIEW_HARMONICS]) {
+    float y[NELF_VIEW_HARMONICS];
+    uint32_t j;
+    int l;
+    if (!r || !r->is_open || !r->has_view || !omega || !out) return 0;
+    nelf_view_harmonics(omega, y);
+    for (j = 0; j < r->view.lobe_count; j++) {
+        float acc = -0.0f;
+        for (l = 0; l < NELF_VIEW_HARMONICS; l++) acc += r->view.lobes[(size_t)j * NELF_VIEW_HARMONICS + (size_t)l] * y[l];
+        out[j] = acc;
+    }
+    return r->view.lobe_count;
+}
+
+NELF_API void nelf_add_view_transport(const nelf_reader *r, const float *d, const float omega[3], float out[NELF_LT_DIM]) {
+    float lobe[NELF_VIEW_HARMONICS];
+    uint32_t j, i, count, rank;
+    int e;
+    if (!d || !out || (count = nelf_view_lobe_values(r, omega, lobe)) == 0) return;
+    rank = r->view.rank;
+    for (j = 0; j < count; j++)
+        for (i = 0; i < rank; i++) {
+            const float w = lobe[j] * d[(size_t)j * rank + i];
+            const float *v = r->view.basis + (size_t)NELF_LT_DIM * i;
+            for (e = 0; e < NELF_LT_DIM; e++) out[e] += w * v[e];
+        }
+}
+
+NELF_API nelf_result nelf_voxel_transport_toward(nelf_reader *r, uint32_t brick_index, uint32_t local,
+                                                 const float omega[3], float out[NELF_LT_DIM]) {
+    nelf_brick brick;
+    nelf_result rc;
+    if (!r || !out || !omega || local >= NELF_BRICK_VOXELS) return NELF_ERR_INVALID_ARGUMENT;
+    if ((rc = nelf_read_brick(r, brick_index, &brick)) != NELF_OK) return rc;
+    nelf_reconstruct(r, brick.coefficients + (size_t)local * r->header.pca_rank, r->header.pca_rank, out);
+    if (brick.view_coefficients)
+        nelf_add_view_transport(r, brick.view_coefficients + (size_t)local * r->view.coefficients_per_voxel, omega, out);
     return NELF_OK;
 }
 

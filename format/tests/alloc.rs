@@ -13,8 +13,9 @@ mod common;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use common::{boundaries, resign, small_asset};
-use nelf_format::spec::{HEADER_SIZE, MAX_CHUNK_RAW_BYTES, SECTION_ENTRY_SIZE};
+use common::{FileParts, boundaries, damage, resign, small_asset};
+use nelf_format::spec::{HEADER_SIZE, KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, SECTION_ENTRY_SIZE};
+use nelf_format::synthetic::synthetic_view;
 use nelf_format::{CoefficientEncoding, WriteOptions, encode_asset, read_asset_bytes};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -81,8 +82,18 @@ fn peak_while_reading(bytes: &[u8]) -> (usize, bool) {
 fn damaged_files_never_allocate_more_than_intact_ones() {
     let mut rng = Pcg64::seed_from_u64(3);
     let mut worst = 0usize;
-    for encoding in [CoefficientEncoding::U8Affine, CoefficientEncoding::F16] {
-        let asset = small_asset(encoding, 8, 4);
+    let cases = [
+        (CoefficientEncoding::U8Affine, false),
+        (CoefficientEncoding::F16, false),
+        (CoefficientEncoding::U8Affine, true),
+        (CoefficientEncoding::F16, true),
+    ];
+    for (encoding, view) in cases {
+        let mut asset = small_asset(encoding, 8, 4);
+        if view {
+            // Format 1.2: a view part of 4 lobes × rank 6 (24 coefficients per voxel).
+            asset.view = Some(synthetic_view(&asset, 4, 6, encoding, 2).unwrap());
+        }
         let options = WriteOptions {
             chunk_bricks: 2,
             ..WriteOptions::default()
@@ -103,7 +114,8 @@ fn damaged_files_never_allocate_more_than_intact_ones() {
             damaged.push(b);
         }
         // Extreme values in every aligned header and table field, re-signed.
-        let table_end = HEADER_SIZE + 6 * SECTION_ENTRY_SIZE;
+        let sections = u32::from_le_bytes(bytes[16..20].try_into().unwrap()) as usize;
+        let table_end = HEADER_SIZE + sections * SECTION_ENTRY_SIZE;
         for at in (8..table_end.min(bytes.len())).step_by(4) {
             for v in [u64::MAX, u64::from(u32::MAX), 1 << 40] {
                 for width in [4, 8] {
@@ -115,14 +127,58 @@ fn damaged_files_never_allocate_more_than_intact_ones() {
                 }
             }
         }
+        if view {
+            // VCOF lying about its sizes, with valid checksums: every chunk-table length
+            // and offset (each chunk claiming the whole rest of the section, or nothing),
+            // and the section's declared decoded length.
+            let parts = FileParts::parse(&bytes);
+            let (entry, table) = parts
+                .sections
+                .iter()
+                .find(|(e, _)| e.kind == KIND_VIEW_COEFFICIENTS)
+                .unwrap()
+                .clone();
+            let chunks = asset.bricks.len().div_ceil(2);
+            for chunk in 0..chunks {
+                for (field, value) in [(8, entry.stored_length), (8, 0), (8, 1), (0, 24), (8, u64::MAX)] {
+                    let mut lying = table.clone();
+                    let at = 24 * chunk + field;
+                    lying[at..at + 8].copy_from_slice(&value.to_le_bytes());
+                    let mut p = parts.clone();
+                    p.replace(
+                        KIND_VIEW_COEFFICIENTS,
+                        entry.codec,
+                        entry.shuffle,
+                        lying,
+                        entry.raw_length,
+                    );
+                    damaged.push(p.build());
+                }
+            }
+            for raw in [0, entry.raw_length / 2, entry.raw_length * 2, u64::MAX / 2] {
+                let mut p = parts.clone();
+                p.section_mut(KIND_VIEW_COEFFICIENTS).0.raw_length = raw;
+                damaged.push(p.build());
+            }
+            // And every hostile view-dependent file (VDEP claiming other sizes included).
+            damaged.extend(
+                damage::hostile_view_sections()
+                    .into_iter()
+                    .filter(|case| matches!(case.expect, damage::Expect::Error(_)))
+                    .map(|case| case.bytes),
+            );
+        }
         for b in &damaged {
             let (peak, ok) = peak_while_reading(b);
-            assert!(!ok || b.len() == bytes.len(), "a damaged file was accepted");
+            assert!(
+                !ok || b.len() == bytes.len() || view,
+                "a damaged file was accepted"
+            );
             assert!(peak <= bound, "peak {peak} bytes > intact {intact} + one chunk");
             worst = worst.max(peak);
         }
         eprintln!(
-            "{encoding:?}: file {} bytes, intact read peak {intact} bytes, worst damaged {worst} bytes over {} cases",
+            "{encoding:?} (view part: {view}): file {} bytes, intact read peak {intact} bytes, worst damaged {worst} bytes over {} cases",
             bytes.len(),
             damaged.len()
         );

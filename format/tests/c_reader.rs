@@ -33,11 +33,12 @@ use std::sync::OnceLock;
 
 use common::damage::{self, Expect};
 use common::{FileParts, small_asset};
-use nelf_format::conventions::{ENV_TEXELS, LT_DIM, LatLong, shade};
+use nelf_format::conventions::VIEW_HARMONICS;
+use nelf_format::conventions::{ENV_TEXELS, LT_DIM, LatLong, shade, view_harmonics};
 use nelf_format::spec::{
     BRICK_VOXELS, KIND_METADATA, KIND_PCA, SectionCodec, SectionEntry, checksum, shuffle, unshuffle,
 };
-use nelf_format::synthetic::SyntheticField;
+use nelf_format::synthetic::{SyntheticField, synthetic_view};
 use nelf_format::{
     Asset, AssetReader, CoefficientEncoding, Coefficients, FormatError, PcaModel, WriteOptions, encode_asset,
     encode_density, read_asset_bytes,
@@ -114,7 +115,7 @@ fn compile() -> CPrograms {
             .arg(&source)
             .arg("-o")
             .arg(&binary)
-            .args(["-lzstd", "-lxxhash"])
+            .args(["-lzstd", "-lxxhash", "-lm"])
             .output()
             .unwrap();
         assert!(
@@ -188,14 +189,24 @@ fn random_pca_asset(rank: usize, encoding: CoefficientEncoding, seed: u64) -> As
     field.asset_with(pca, coefficients).unwrap()
 }
 
-/// `asset` without any brick.
+/// `asset` without any brick (nor view coefficients).
 fn without_bricks(mut asset: Asset) -> Asset {
     asset.bricks.clear();
     asset.density.clear();
-    match &mut asset.coefficients {
+    let clear = |c: &mut Coefficients| match c {
         Coefficients::U8Affine { codes, .. } => codes.clear(),
         Coefficients::F16 { values, .. } => values.clear(),
+    };
+    clear(&mut asset.coefficients);
+    if let Some(view) = &mut asset.view {
+        clear(&mut view.coefficients);
     }
+    asset
+}
+
+/// `asset` with a synthetic view-dependent part (format 1.2).
+fn with_view(mut asset: Asset, lobes: usize, rank: usize, encoding: CoefficientEncoding) -> Asset {
+    asset.view = Some(synthetic_view(&asset, lobes, rank, encoding, 31).unwrap());
     asset
 }
 
@@ -339,6 +350,58 @@ fn valid_files() -> Vec<(&'static str, Vec<u8>, bool)> {
         ),
         ("extra sections", with_extra_sections(&u8_k4_bytes, &u8_k4), true),
         (
+            "view u8 3 lobes rank 2, PCA u8",
+            encode(&with_view(small_asset(U8Affine, 4, 21), 3, 2, U8Affine), default),
+            true,
+        ),
+        (
+            "view f16 1 lobe rank 5, PCA u8, one-brick chunks",
+            encode(&with_view(small_asset(U8Affine, 2, 7), 1, 5, F16), one),
+            true,
+        ),
+        (
+            "view u8 all lobes rank 1, PCA f16, unshuffled",
+            encode(
+                &with_view(small_asset(F16, 3, 5), VIEW_HARMONICS, 1, U8Affine),
+                plain,
+            ),
+            true,
+        ),
+        (
+            "view f16 all lobes × rank 42, PCA f16 rank 384",
+            encode(
+                &with_view(
+                    random_pca_asset(384, F16, 14),
+                    VIEW_HARMONICS,
+                    384 / VIEW_HARMONICS,
+                    F16,
+                ),
+                default,
+            ),
+            true,
+        ),
+        (
+            "view u8 zero bricks",
+            encode(
+                &without_bricks(with_view(small_asset(U8Affine, 3, 2), 2, 3, U8Affine)),
+                default,
+            ),
+            true,
+        ),
+        (
+            "view u8 2 lobes rank 4, 40k voxels",
+            encode(
+                &with_view(
+                    SyntheticField::new(40_000, 3).asset(8, F16).unwrap(),
+                    2,
+                    4,
+                    U8Affine,
+                ),
+                default,
+            ),
+            false,
+        ),
+        (
             "u8 rank 16, 40k voxels",
             encode(
                 &SyntheticField::new(40_000, 3).asset(16, U8Affine).unwrap(),
@@ -395,6 +458,23 @@ fn project(v: &[f32], light: &[[f32; 3]], c: usize) -> f32 {
         .map(|(&t, l)| f64::from(t) * f64::from(l[c]))
         .sum::<f64>() as f32
 }
+
+/// The eye `nelf_dump` evaluates view-dependent transport toward (`ω = EYE − centre`,
+/// the difference in `f64`, then `f32`, as `nelf_render::view` does).
+const EYE: glam::DVec3 = glam::DVec3::new(0.31, 0.17, 0.52);
+
+/// The directions whose harmonics `nelf_dump` prints (zero, axes, unnormalised, tiny,
+/// overflowing, NaN).
+const HARMONIC_DIRECTIONS: [[f32; 3]; 8] = [
+    [0.0, 0.0, 0.0],
+    [1.0, 0.0, 0.0],
+    [0.0, -2.0, 0.0],
+    [3.0, 4.0, 12.0],
+    [-0.3, 0.7, 0.2],
+    [1e-30, 2e-30, -1e-30],
+    [1e20, 0.0, 1.0],
+    [f32::NAN, 1.0, 1.0],
+];
 
 /// What `nelf_dump dump` must print for `bytes`, from the Rust reader.
 fn expected_dump(bytes: &[u8], full: bool) -> String {
@@ -475,6 +555,38 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
         hex32(&mut s, offset);
         s.push('\n');
     }
+    if let Some(view) = &asset.view {
+        writeln!(
+            s,
+            "view {} {} {}",
+            view.lobe_count(),
+            view.rank(),
+            view.coefficients.encoding().to_u32()
+        )
+        .unwrap();
+        if full {
+            s.push_str("view_lobes");
+            hex32(&mut s, &view.lobes);
+            s.push_str("\nview_basis");
+            hex32(&mut s, &view.basis);
+            s.push('\n');
+        } else {
+            writeln!(s, "view_lobes {:016x}", hash_f32(&view.lobes)).unwrap();
+            writeln!(s, "view_basis {:016x}", hash_f32(&view.basis)).unwrap();
+        }
+        if let Coefficients::U8Affine { scale, offset, .. } = &view.coefficients {
+            s.push_str("view_scale");
+            hex32(&mut s, scale);
+            s.push_str("\nview_offset");
+            hex32(&mut s, offset);
+            s.push('\n');
+        }
+    }
+    s.push_str("harmonics");
+    for omega in HARMONIC_DIRECTIONS {
+        hex32(&mut s, &view_harmonics(omega));
+    }
+    s.push('\n');
     let mean_rgb: [f32; 3] = std::array::from_fn(|c| project(&asset.pca.mean, &light, c));
     let components: Vec<[f32; 3]> = (0..rank)
         .map(|k| std::array::from_fn(|c| project(asset.pca.component(k), &light, c)))
@@ -485,7 +597,11 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
     hex32(&mut s, components.iter().flatten());
     s.push('\n');
     let mut c = vec![0.0f32; rank];
+    let per_view = asset.view.as_ref().map_or(0, |v| v.coefficients.rank());
+    let mut d = vec![0.0f32; per_view];
     for (b, coord) in asset.bricks.iter().enumerate() {
+        let mut view_coefficients = Vec::with_capacity(per_view * BRICK_VOXELS);
+        let mut toward = Vec::with_capacity(LT_DIM * BRICK_VOXELS);
         let mut density = Vec::with_capacity(BRICK_VOXELS);
         let mut centres = Vec::with_capacity(3 * BRICK_VOXELS);
         let mut coefficients = Vec::with_capacity(rank * BRICK_VOXELS);
@@ -507,6 +623,12 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
             lts.extend_from_slice(&t);
             relit.extend(rgb);
             relit.extend(shade(&t, &basis_map));
+            if let Some(view) = &asset.view {
+                view.coefficients.voxel_f32(v, &mut d);
+                view_coefficients.extend_from_slice(&d);
+                let omega = (EYE - asset.voxel_position_m(v)).as_vec3().to_array();
+                toward.extend(asset.reconstruct_lt_toward(v, omega));
+            }
         }
         if full {
             writeln!(s, "brick {b} {} {} {}", coord[0], coord[1], coord[2]).unwrap();
@@ -526,6 +648,15 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
                 hex32(&mut s, &lts[LT_DIM * local..LT_DIM * (local + 1)]);
                 s.push_str(" |");
                 hex32(&mut s, &relit[6 * local..6 * local + 6]);
+                if per_view > 0 {
+                    s.push_str(" |");
+                    hex32(
+                        &mut s,
+                        &view_coefficients[per_view * local..per_view * (local + 1)],
+                    );
+                    s.push_str(" |");
+                    hex32(&mut s, &toward[LT_DIM * local..LT_DIM * (local + 1)]);
+                }
                 s.push('\n');
             }
         } else {
@@ -542,6 +673,15 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
                 hash_f32(&relit)
             )
             .unwrap();
+            if per_view > 0 {
+                writeln!(
+                    s,
+                    "view_brick {b} {:016x} {:016x}",
+                    hash_f32(&view_coefficients),
+                    hash_f32(&toward)
+                )
+                .unwrap();
+            }
         }
     }
     s.push_str("end\n");
@@ -807,9 +947,10 @@ fn compare_with_rust(files: &[(String, Vec<u8>)]) -> usize {
             c.path, c.whole
         );
         // Bounded allocation: the reader's own blocks never exceed three times the file
-        // (brick list, its copy, chunk tables) plus the format's fixed limits (three
-        // 4 MiB chunk buffers, 1 MiB metadata and its unshuffle, the PCA model).
-        let bound = 3 * bytes.len() as u64 + (16 << 20);
+        // (brick list, its copy, chunk tables) plus the format's fixed limits (four
+        // 4 MiB chunk buffers, 1 MiB metadata and its unshuffle, the PCA model, VDEP
+        // and the brick buffers).
+        let bound = 3 * bytes.len() as u64 + (21 << 20);
         assert!(c.peak <= bound, "{what}: the C reader allocated {} bytes", c.peak);
         worst_margin = worst_margin.min(i128::from(bound) - i128::from(c.peak));
         match read_asset_bytes(bytes) {
@@ -1051,6 +1192,19 @@ fn fuzz_seeds_are_read_by_the_c_reader() {
             ));
         }
         seeds.push((format!("seed-{i}.nelf"), bytes));
+    }
+    // View-dependent files (format 1.2), both encodings.
+    for (i, encoding) in [U8Affine, F16].into_iter().enumerate() {
+        let asset = with_view(field.asset(2, encoding).unwrap(), 2, 2, encoding);
+        let options = WriteOptions {
+            zstd_level: 3,
+            chunk_bricks: 1,
+            shuffle: i == 0,
+        };
+        seeds.push((
+            format!("seed-view-{i}.nelf"),
+            encode_asset(&asset, &options).unwrap().0,
+        ));
     }
     // A few bricks in one-brick chunks, so that mutations reach the brick-order checks.
     let several = SyntheticField::new(3 * BRICK_VOXELS, 2)

@@ -73,6 +73,21 @@ fn hostile_sections_give_named_errors() {
 }
 
 #[test]
+fn every_byte_of_the_view_sections_is_checked() {
+    check(damage::view_byte_flips());
+}
+
+#[test]
+fn hostile_view_sections_give_named_errors() {
+    // Only the file with a non-zero reserved VDEP field is valid (one per encoding).
+    let accepted = check(damage::hostile_view_sections());
+    assert_eq!(accepted.len(), 2);
+    for asset in accepted {
+        assert_eq!(asset.view.unwrap().lobe_count(), 3);
+    }
+}
+
+#[test]
 fn mini_fuzzer_never_panics() {
     let accepted = check(damage::mutations());
     for asset in &accepted {

@@ -4,7 +4,7 @@
  * whatever was accepted. Build and run with include/fuzz/run.sh:
  *
  *   clang -std=c99 -g -O1 -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all \
- *         -I include include/fuzz/fuzz_nelf.c -o fuzz_nelf -lzstd -lxxhash
+ *         -I include include/fuzz/fuzz_nelf.c -o fuzz_nelf -lzstd -lxxhash -lm
  *
  * Checksum mismatches are ignored (NELF_FUZZING_IGNORE_CHECKSUMS) so that mutated
  * inputs reach the decoders and value checks behind the checksums; define

@@ -23,7 +23,7 @@ cc="${FUZZ_CC:-clang}"
 
 "$cc" -std=c99 -g -O1 -Wall -Wextra -Werror \
   -fsanitize=fuzzer,address,undefined -fno-sanitize-recover=all \
-  -I "$root/include" "$root/include/fuzz/fuzz_nelf.c" -o "$work/fuzz_nelf" -lzstd -lxxhash
+  -I "$root/include" "$root/include/fuzz/fuzz_nelf.c" -o "$work/fuzz_nelf" -lzstd -lxxhash -lm
 
 seeds="$work/seeds"
 if [ ! -d "$seeds" ] || [ -z "$(ls -A "$seeds")" ]; then

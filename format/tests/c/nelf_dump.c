@@ -4,9 +4,11 @@
  *
  *   nelf_dump dump FILE LIGHT mem|path full|hashed
  *       Opens FILE (from memory or by path), verifies it, and prints the header, the
- *       section table, the metadata, the PCA model, then every brick's voxels
+ *       section table, the metadata, the PCA model, the view-dependent parameters (if
+ *       any), the view harmonics of a few fixed directions, then every brick's voxels
  *       (full: one line per voxel with density, centre, coefficients, T and the
- *       relit radiance under LIGHT both ways; hashed: one line per brick with XXH3
+ *       relit radiance under LIGHT both ways, and with a view part the view
+ *       coefficients and T toward the eye at EYE; hashed: one line per brick with XXH3
  *       hashes of the same numbers). Floats are printed as their bit patterns in hex
  *       so that the Rust side compares them exactly. Exit 1 with "error NAME detail"
  *       if the file is refused.
@@ -117,6 +119,15 @@ static void print_floats(const char *tag, const float *v, size_t n) {
     printf("\n");
 }
 
+/* The eye the view-dependent transport is evaluated toward: omega = EYE - centre. */
+static const double EYE[3] = {0.31, 0.17, 0.52};
+
+/* Directions whose harmonics are printed (zero, axes, unnormalised, non-finite, overflowing). */
+static const float HARMONIC_DIRECTIONS[][3] = {
+    {0.0f, 0.0f, 0.0f}, {1.0f, 0.0f, 0.0f}, {0.0f, -2.0f, 0.0f}, {3.0f, 4.0f, 12.0f},
+    {-0.3f, 0.7f, 0.2f}, {1e-30f, 2e-30f, -1e-30f}, {1e20f, 0.0f, 1.0f}, {0.0f, 0.0f, 0.0f},
+};
+
 static int dump(int argc, char **argv) {
     const char *path, *mode;
     unsigned char *data = NULL;
@@ -127,8 +138,9 @@ static int dump(int argc, char **argv) {
     const nelf_header *h;
     nelf_projected_light *projected;
     const char *meta;
+    const nelf_view *view;
     int full;
-    uint32_t b, k, rank;
+    uint32_t b, k, rank, per_view = 0;
     if (argc != 6) die("usage: dump FILE LIGHT mem|path full|hashed");
     path = argv[2];
     mode = argv[4];
@@ -196,6 +208,34 @@ static int dump(int argc, char **argv) {
         print_floats("scale", nelf_quant_scale(r), rank);
         print_floats("offset", nelf_quant_offset(r), rank);
     }
+    view = nelf_get_view(r);
+    if (view) {
+        per_view = view->coefficients_per_voxel;
+        if (per_view != view->lobe_count * view->rank) die("view coefficients per voxel disagree");
+        printf("view %lu %lu %lu\n", (unsigned long)view->lobe_count, (unsigned long)view->rank,
+               (unsigned long)view->encoding);
+        if (full) {
+            print_floats("view_lobes", view->lobes, (size_t)NELF_VIEW_HARMONICS * view->lobe_count);
+            print_floats("view_basis", view->basis, (size_t)NELF_LT_DIM * view->rank);
+        } else {
+            printf("view_lobes %016llx\n",
+                   (unsigned long long)hash_floats(view->lobes, (size_t)NELF_VIEW_HARMONICS * view->lobe_count));
+            printf("view_basis %016llx\n", (unsigned long long)hash_floats(view->basis, (size_t)NELF_LT_DIM * view->rank));
+        }
+        if (view->scale) {
+            print_floats("view_scale", view->scale, per_view);
+            print_floats("view_offset", view->offset, per_view);
+        }
+    }
+    {
+        float y[NELF_VIEW_HARMONICS * 8];
+        float nan_direction[3];
+        for (i = 0; i < 8; i++) nelf_view_harmonics(HARMONIC_DIRECTIONS[i], y + NELF_VIEW_HARMONICS * i);
+        nan_direction[0] = strtof("nan", NULL); /* the last direction: NaN */
+        nan_direction[1] = nan_direction[2] = 1.0f;
+        nelf_view_harmonics(nan_direction, y + NELF_VIEW_HARMONICS * 7);
+        print_floats("harmonics", y, NELF_VIEW_HARMONICS * 8);
+    }
     projected = (nelf_projected_light *)malloc(sizeof *projected);
     if (!projected) die("out of memory");
     if (nelf_project_light(r, light, projected) != NELF_OK) die("projection failed");
@@ -204,19 +244,22 @@ static int dump(int argc, char **argv) {
     for (b = 0; b < h->brick_count; b++) {
         nelf_brick brick;
         float *lt = (float *)malloc(sizeof(float) * NELF_LT_DIM * NELF_BRICK_VOXELS);
+        float *toward = (float *)malloc(sizeof(float) * NELF_LT_DIM * NELF_BRICK_VOXELS);
         float *relit = (float *)malloc(sizeof(float) * 6 * NELF_BRICK_VOXELS);
         double *centre = (double *)malloc(sizeof(double) * 3 * NELF_BRICK_VOXELS);
         float check[NELF_LT_DIM];
         uint32_t v;
-        if (!lt || !relit || !centre) die("out of memory");
+        if (!lt || !toward || !relit || !centre) die("out of memory");
         rc = nelf_read_brick(r, b, &brick);
         if (rc != NELF_OK) {
             printf("error %s %s\n", nelf_error_name(rc), nelf_error_detail(r));
             free(lt);
+            free(toward);
             free(relit);
             free(centre);
             break;
         }
+        if ((brick.view_coefficients != NULL) != (view != NULL)) die("view coefficients without a view part");
         if (nelf_find_brick(r, brick.coord[0], brick.coord[1], brick.coord[2]) != (int64_t)b) die("find_brick disagrees");
         for (v = 0; v < NELF_BRICK_VOXELS; v++) {
             const float *c = brick.coefficients + (size_t)v * rank;
@@ -225,6 +268,19 @@ static int dump(int argc, char **argv) {
             nelf_relight(projected, c, rank, relit + 6 * v);
             nelf_shade(t, light, relit + 6 * v + 3);
             if (nelf_voxel_center(r, b, v % 8, (v / 8) % 8, v / 64, centre + 3 * v) != NELF_OK) die("voxel_center failed");
+            if (view) {
+                float omega[3];
+                for (k = 0; k < 3; k++) omega[k] = (float)(EYE[k] - centre[3 * v + k]);
+                memcpy(toward + (size_t)v * NELF_LT_DIM, t, sizeof(float) * NELF_LT_DIM);
+                nelf_add_view_transport(r, brick.view_coefficients + (size_t)v * per_view, omega,
+                                        toward + (size_t)v * NELF_LT_DIM);
+            }
+        }
+        if (view) { /* nelf_voxel_transport_toward gives the same T(x, omega) */
+            float omega[3];
+            for (k = 0; k < 3; k++) omega[k] = (float)(EYE[k] - centre[3 * 301 + k]);
+            if (nelf_voxel_transport_toward(r, b, 301, omega, check) != NELF_OK) die("voxel_transport_toward failed");
+            if (memcmp(check, toward + 301 * NELF_LT_DIM, sizeof check) != 0) die("voxel_transport_toward disagrees");
         }
         /* nelf_voxel_transport gives the same T (it re-reads the cached brick). */
         if (nelf_voxel_transport(r, b, 137, check) != NELF_OK) die("voxel_transport failed");
@@ -241,6 +297,13 @@ static int dump(int argc, char **argv) {
                 for (k = 0; k < NELF_LT_DIM; k++) printf(" %08lx", (unsigned long)fbits(lt[(size_t)v * NELF_LT_DIM + k]));
                 printf(" |");
                 for (k = 0; k < 6; k++) printf(" %08lx", (unsigned long)fbits(relit[6 * v + k]));
+                if (view) {
+                    printf(" |");
+                    for (k = 0; k < per_view; k++)
+                        printf(" %08lx", (unsigned long)fbits(brick.view_coefficients[(size_t)v * per_view + k]));
+                    printf(" |");
+                    for (k = 0; k < NELF_LT_DIM; k++) printf(" %08lx", (unsigned long)fbits(toward[(size_t)v * NELF_LT_DIM + k]));
+                }
                 printf("\n");
             }
         } else {
@@ -250,7 +313,12 @@ static int dump(int argc, char **argv) {
                    (unsigned long long)hash_floats(brick.coefficients, (size_t)NELF_BRICK_VOXELS * rank),
                    (unsigned long long)hash_floats(lt, (size_t)NELF_LT_DIM * NELF_BRICK_VOXELS),
                    (unsigned long long)hash_floats(relit, 6 * NELF_BRICK_VOXELS));
+            if (view)
+                printf("view_brick %lu %016llx %016llx\n", (unsigned long)b,
+                       (unsigned long long)hash_floats(brick.view_coefficients, (size_t)NELF_BRICK_VOXELS * per_view),
+                       (unsigned long long)hash_floats(toward, (size_t)NELF_LT_DIM * NELF_BRICK_VOXELS));
         }
+        free(toward);
         free(lt);
         free(relit);
         free(centre);

@@ -9,11 +9,15 @@
 //! deletions). Every generator is deterministic (fixed seeds).
 
 use super::{FileParts, boundaries, chunked_payload, resign, small_asset};
+use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS};
 use nelf_format::spec::{
     BRICK_VOXELS, HEADER_SIZE, KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA,
-    KIND_QUANT_PARAMS, SECTION_ENTRY_SIZE, SectionCodec,
+    KIND_QUANT_PARAMS, KIND_VIEW, KIND_VIEW_COEFFICIENTS, SECTION_ENTRY_SIZE, SectionCodec,
 };
-use nelf_format::{Asset, CoefficientEncoding, Coefficients, FormatError, WriteOptions, encode_asset};
+use nelf_format::synthetic::{SyntheticField, synthetic_view};
+use nelf_format::{
+    Asset, CoefficientEncoding, Coefficients, FormatError, ViewDependence, WriteOptions, encode_asset,
+};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
@@ -77,13 +81,44 @@ pub fn encoded(encoding: CoefficientEncoding) -> (Asset, Vec<u8>) {
 
 const ENCODINGS: [CoefficientEncoding; 2] = [CoefficientEncoding::U8Affine, CoefficientEncoding::F16];
 
+/// The other encoding.
+fn other(encoding: CoefficientEncoding) -> CoefficientEncoding {
+    match encoding {
+        CoefficientEncoding::U8Affine => CoefficientEncoding::F16,
+        CoefficientEncoding::F16 => CoefficientEncoding::U8Affine,
+    }
+}
+
+/// The intact view-dependent (format 1.2) asset and file: the PCA part in the other
+/// encoding (so that both mixes are covered), a view part of 3 lobes × rank 2 whose
+/// coefficients are stored with `encoding`.
+pub fn encoded_view(encoding: CoefficientEncoding) -> (Asset, Vec<u8>) {
+    let mut asset = small_asset(other(encoding), 4, 21);
+    asset.view = Some(synthetic_view(&asset, 3, 2, encoding, 5).unwrap());
+    let bytes = encode_asset(&asset, &options()).unwrap().0;
+    (asset, bytes)
+}
+
+/// Every intact file the generators damage, named: both encodings, without and with a
+/// view-dependent part.
+fn intact_files() -> Vec<(String, Vec<u8>)> {
+    ENCODINGS
+        .into_iter()
+        .flat_map(|e| {
+            [
+                (format!("{e:?}"), encoded(e).1),
+                (format!("{e:?} view"), encoded_view(e).1),
+            ]
+        })
+        .collect()
+}
+
 /// Truncations at (and next to) every boundary and at 200 random offsets, per encoding:
 /// each must be reported as [`FormatError::Truncated`].
 pub fn truncations() -> Vec<Damaged> {
     let mut rng = Pcg64::seed_from_u64(1);
     let mut out = Vec::new();
-    for encoding in ENCODINGS {
-        let (_, bytes) = encoded(encoding);
+    for (name, bytes) in intact_files() {
         let mut cuts: Vec<usize> = boundaries(&bytes)
             .into_iter()
             .flat_map(|b| [b.saturating_sub(1), b, b + 1])
@@ -92,7 +127,7 @@ pub fn truncations() -> Vec<Damaged> {
         cuts.extend((0..200).map(|_| rng.random_range(0..bytes.len())));
         for cut in cuts {
             out.push(Damaged::new(
-                format!("{encoding:?} truncation at {cut} of {}", bytes.len()),
+                format!("{name} truncation at {cut} of {}", bytes.len()),
                 bytes[..cut].to_vec(),
                 Expect::error(|e| matches!(e, FormatError::Truncated { .. })),
             ));
@@ -102,12 +137,12 @@ pub fn truncations() -> Vec<Damaged> {
 }
 
 /// Single bit flips: 40 in every section (the error must name the section), every
-/// bit position of the header and table (some bit per byte), and 300 anywhere.
+/// bit position of the header and table (some bit per byte), and 300 anywhere; in the
+/// view-dependent files, 40 in every section.
 pub fn bit_flips() -> Vec<Damaged> {
     let mut rng = Pcg64::seed_from_u64(2);
     let mut out = Vec::new();
-    for encoding in ENCODINGS {
-        let (_, bytes) = encoded(encoding);
+    for (file, bytes) in intact_files() {
         let parts = FileParts::parse(&bytes);
         for (entry, _) in &parts.sections {
             for _ in 0..40 {
@@ -116,19 +151,23 @@ pub fn bit_flips() -> Vec<Damaged> {
                 damaged[at] ^= 1 << rng.random_range(0..8);
                 let name = entry.name();
                 out.push(Damaged::new(
-                    format!("{encoding:?} flip at {at} in {name}"),
+                    format!("{file} flip at {at} in {name}"),
                     damaged,
                     Expect::error(move |e| e.to_string().contains(&name)),
                 ));
             }
         }
+        if file.contains("view") {
+            continue;
+        }
+        let encoding = file;
         // Header and table: caught by the header checksum (or earlier field checks).
         let table_end = HEADER_SIZE + parts.sections.len() * SECTION_ENTRY_SIZE;
         for at in 0..table_end {
             let mut damaged = bytes.clone();
             damaged[at] ^= 1 << (at % 8);
             out.push(Damaged::new(
-                format!("{encoding:?} flip at {at} in header/table"),
+                format!("{encoding} flip at {at} in header/table"),
                 damaged,
                 Expect::any_error(),
             ));
@@ -139,7 +178,7 @@ pub fn bit_flips() -> Vec<Damaged> {
             let mut damaged = bytes.clone();
             damaged[at] ^= 1 << rng.random_range(0..8);
             out.push(Damaged::new(
-                format!("{encoding:?} flip at {at}"),
+                format!("{encoding} flip at {at}"),
                 damaged,
                 Expect::any_error(),
             ));
@@ -630,7 +669,7 @@ pub const MUTATIONS: usize = 1500;
 /// field checks. A few mutations are harmless, so any answer is allowed.
 pub fn mutations() -> Vec<Damaged> {
     let mut rng = Pcg64::seed_from_u64(0x5eed);
-    let files: Vec<Vec<u8>> = ENCODINGS.into_iter().map(|e| encoded(e).1).collect();
+    let files: Vec<Vec<u8>> = intact_files().into_iter().map(|(_, bytes)| bytes).collect();
     let extremes: [u64; 8] = [
         0,
         1,
@@ -643,8 +682,9 @@ pub fn mutations() -> Vec<Damaged> {
     ];
     let mut out = Vec::with_capacity(MUTATIONS);
     for iteration in 0..MUTATIONS {
-        let mut b = files[iteration % 2].clone();
-        let table_end = HEADER_SIZE + 6 * SECTION_ENTRY_SIZE;
+        let mut b = files[iteration % files.len()].clone();
+        let sections = u32::from_le_bytes(b[16..20].try_into().unwrap()) as usize;
+        let table_end = HEADER_SIZE + sections * SECTION_ENTRY_SIZE;
         let mutations = rng.random_range(1..4);
         for _ in 0..mutations {
             match rng.random_range(0..5) {
@@ -697,12 +737,339 @@ pub fn mutations() -> Vec<Damaged> {
     out
 }
 
+/// One bit flipped in every byte of `VDEP` and of `VCOF` (chunk table and chunks) of a
+/// one-brick view-dependent file, per encoding: each must be refused naming the section.
+pub fn view_byte_flips() -> Vec<Damaged> {
+    let mut out = Vec::new();
+    for encoding in ENCODINGS {
+        let field = SyntheticField::new(1, 3);
+        let mut asset = field.asset(2, other(encoding)).unwrap();
+        asset.view = Some(synthetic_view(&asset, 2, 1, encoding, 8).unwrap());
+        let bytes = encode_asset(&asset, &options()).unwrap().0;
+        let parts = FileParts::parse(&bytes);
+        for (entry, _) in &parts.sections {
+            if entry.kind != KIND_VIEW && entry.kind != KIND_VIEW_COEFFICIENTS {
+                continue;
+            }
+            for i in 0..entry.stored_length as usize {
+                let at = entry.offset as usize + i;
+                let mut damaged = bytes.clone();
+                damaged[at] ^= 1 << (i % 8);
+                let name = entry.name();
+                out.push(Damaged::new(
+                    format!("{encoding:?} view flip at {at} in {name}"),
+                    damaged,
+                    Expect::error(move |e| e.to_string().contains(&name)),
+                ));
+            }
+        }
+    }
+    out
+}
+
+/// The decoded bytes of a `VDEP` section: header (`J`, `K_v`, encoding, reserved) and
+/// `f32` values.
+fn vdep_bytes(lobes: u32, rank: u32, encoding: u32, values: &[f32]) -> Vec<u8> {
+    let mut out: Vec<u8> = [lobes, rank, encoding, 0]
+        .iter()
+        .flat_map(|v| v.to_le_bytes())
+        .collect();
+    out.extend(values.iter().flat_map(|v| v.to_le_bytes()));
+    out
+}
+
+/// The `f32` values of `VDEP` for `view`: lobes, basis, then (8-bit) the parameters.
+fn vdep_values(view: &ViewDependence) -> Vec<f32> {
+    let mut values: Vec<f32> = view.lobes.iter().chain(&view.basis).copied().collect();
+    if let Coefficients::U8Affine { scale, offset, .. } = &view.coefficients {
+        values.extend(scale.iter().zip(offset).flat_map(|(s, o)| [*s, *o]));
+    }
+    values
+}
+
+/// Hand-made hostile view-dependent sections (format 1.2) with valid checksums: one of
+/// the two sections without the other, `VDEP` sizes out of range or disagreeing with its
+/// length, non-finite lobes, basis and parameters, a `VCOF` that disagrees with `VDEP`,
+/// bad `VCOF` chunk tables and values, bad codecs, each with the error it must give.
+pub fn hostile_view_sections() -> Vec<Damaged> {
+    let mut out = Vec::new();
+    let mut push = |parts: FileParts, what: &str, expect: Expect| {
+        out.push(Damaged::new(
+            format!("hostile view: {what}"),
+            parts.build(),
+            expect,
+        ));
+    };
+    let invalid_view = |needle: &'static str| {
+        Expect::error(move |e| matches!(e, FormatError::InvalidView(m) if m.contains(needle)))
+    };
+    for encoding in ENCODINGS {
+        let (asset, bytes) = encoded_view(encoding);
+        let view = asset.view.as_ref().unwrap();
+        let code = encoding.to_u32();
+        let values = vdep_values(view);
+        let with_vdep = |raw: Vec<u8>| {
+            let mut p = FileParts::parse(&bytes);
+            let n = raw.len() as u64;
+            p.replace(KIND_VIEW, SectionCodec::Raw, 0, raw, n);
+            p
+        };
+
+        // One section without the other.
+        for (gone, name) in [
+            (KIND_VIEW, "VCOF without VDEP"),
+            (KIND_VIEW_COEFFICIENTS, "VDEP without VCOF"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            p.sections.retain(|(e, _)| e.kind != gone);
+            push(p, name, invalid_view("without section"));
+        }
+
+        // VDEP's sizes.
+        for (lobes, rank, enc, name) in [
+            (0, 2, code, "no lobe"),
+            (VIEW_HARMONICS as u32 + 1, 1, code, "too many lobes"),
+            (3, 0, code, "rank 0"),
+            (3, 129, code, "over 384 coefficients per voxel"),
+            (3, 2, 3, "unknown encoding"),
+        ] {
+            push(
+                with_vdep(vdep_bytes(lobes, rank, enc, &values)),
+                name,
+                invalid_view("section VDEP"),
+            );
+        }
+        let mut long = values.clone();
+        long.push(0.5);
+        push(
+            with_vdep(vdep_bytes(3, 2, code, &long)),
+            "VDEP too long",
+            invalid_view("decoded bytes"),
+        );
+        push(
+            with_vdep(vdep_bytes(3, 2, code, &values[..values.len() - 2])),
+            "VDEP too short",
+            invalid_view("decoded bytes"),
+        );
+        push(
+            with_vdep(vec![3, 0, 0, 0, 2, 0, 0, 0]),
+            "VDEP shorter than its header",
+            invalid_view("header"),
+        );
+        // The reserved field is ignored.
+        let mut reserved = vdep_bytes(3, 2, code, &values);
+        reserved[12] = 0xAB;
+        push(
+            with_vdep(reserved),
+            "reserved VDEP field (accepted)",
+            Expect::Anything,
+        );
+
+        // Non-finite and negative values, named.
+        let lobe_count = 3 * VIEW_HARMONICS;
+        for (at, value, name, needle) in [
+            (5, f32::NAN, "NaN lobe", "lobe 0 weight 5"),
+            (
+                lobe_count + LT_DIM + 7,
+                f32::INFINITY,
+                "infinite basis",
+                "basis vector 1 element 7",
+            ),
+        ] {
+            let mut v = values.clone();
+            v[at] = value;
+            push(
+                with_vdep(vdep_bytes(3, 2, code, &v)),
+                name,
+                Expect::error(
+                    move |e| matches!(e, FormatError::NonFinite { what } if what.contains("VDEP") && what.contains(needle)),
+                ),
+            );
+        }
+        if encoding == CoefficientEncoding::U8Affine {
+            let params = lobe_count + 2 * LT_DIM;
+            // (offset 2 + 255 · 2e36 overflows f32; values chosen to print alike in C and Rust.)
+            for (at, value, name) in [
+                (params + 2 * 4, f32::NAN, "NaN VDEP scale"),
+                (params + 2 * 4, -0.5, "negative VDEP scale"),
+                (params + 2 * 3, 2e36, "VDEP offset + 255 scale overflows"),
+            ] {
+                let mut v = values.clone();
+                v[at] = value;
+                v[params + 2 * 3 + 1] = 2.0;
+                v[params + 2 * 4 + 1] = 2.0;
+                push(
+                    with_vdep(vdep_bytes(3, 2, code, &v)),
+                    name,
+                    Expect::error(|e| {
+                        matches!(
+                            e,
+                            FormatError::NonFinite { what } | FormatError::InvalidValue { what, .. }
+                                if what.contains("section VDEP component")
+                        )
+                    }),
+                );
+            }
+        }
+
+        // A VDEP whose size disagrees with VCOF's length (2 lobes instead of 3).
+        let mut fewer = values[VIEW_HARMONICS..].to_vec();
+        if encoding == CoefficientEncoding::U8Affine {
+            fewer.truncate(fewer.len() - 4);
+        }
+        push(
+            with_vdep(vdep_bytes(2, 2, code, &fewer)),
+            "VDEP says 2 lobes, VCOF holds 3",
+            Expect::error(|e| matches!(e, FormatError::SectionLength { section, .. } if section == "VCOF")),
+        );
+
+        // VCOF's entry and chunk table.
+        let vcof = |p: &mut FileParts| p.section_mut(KIND_VIEW_COEFFICIENTS).clone();
+        let mut p = FileParts::parse(&bytes);
+        let (entry, table) = vcof(&mut p);
+        let mut lying = table.clone();
+        lying[8..16].copy_from_slice(&u64::MAX.to_le_bytes());
+        p.replace(
+            KIND_VIEW_COEFFICIENTS,
+            SectionCodec::ChunkedZstd,
+            entry.shuffle,
+            lying,
+            entry.raw_length,
+        );
+        push(
+            p,
+            "VCOF chunk length",
+            Expect::error(|e| matches!(e, FormatError::BadChunkTable { section, .. } if section == "VCOF")),
+        );
+        let mut p = FileParts::parse(&bytes);
+        let chunks = asset.bricks.len().div_ceil(CHUNK_BRICKS);
+        let mut empty = Vec::new();
+        for _ in 0..chunks {
+            empty.extend_from_slice(&((24 * chunks) as u64).to_le_bytes());
+            empty.extend_from_slice(&0u64.to_le_bytes());
+            empty.extend_from_slice(&nelf_format::spec::checksum(&[]).to_le_bytes());
+        }
+        p.replace(
+            KIND_VIEW_COEFFICIENTS,
+            SectionCodec::ChunkedZstd,
+            entry.shuffle,
+            empty,
+            entry.raw_length,
+        );
+        push(
+            p,
+            "VCOF empty chunks",
+            Expect::error(
+                |e| matches!(e, FormatError::ImplausibleLength { what, .. } if what.contains("VCOF")),
+            ),
+        );
+        for (field, value, name) in [
+            (32, entry.raw_length + 512, "VCOF raw length"),
+            (8, 5, "VCOF shuffle"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            let (e, _) = p.section_mut(KIND_VIEW_COEFFICIENTS);
+            if field == 32 {
+                e.raw_length = value;
+            } else {
+                e.shuffle = value as u32;
+            }
+            push(
+                p,
+                name,
+                Expect::error(|e| {
+                    matches!(
+                        e,
+                        FormatError::SectionLength { section, .. } | FormatError::BadCodec { section, .. }
+                            if section == "VCOF"
+                    )
+                }),
+            );
+        }
+        for (kind, codec, name) in [
+            (KIND_VIEW_COEFFICIENTS, SectionCodec::Zstd, "VCOF codec 1"),
+            (KIND_VIEW, SectionCodec::ChunkedZstd, "VDEP codec 2"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            p.section_mut(kind).0.codec = codec;
+            push(
+                p,
+                name,
+                Expect::error(
+                    |e| matches!(e, FormatError::BadCodec { section, .. } if section.starts_with('V')),
+                ),
+            );
+        }
+        let mut p = FileParts::parse(&bytes);
+        p.section_mut(KIND_VIEW).0.raw_length = 1 << 40;
+        push(p, "VDEP huge", invalid_view("largest possible"));
+
+        // A non-finite f16 view coefficient.
+        if let Coefficients::F16 { values: stored, .. } = &view.coefficients {
+            let mut raw: Vec<u8> = stored.iter().flat_map(|v| v.to_bits().to_le_bytes()).collect();
+            let at = 2 * (6 * 600 + 1);
+            raw[at..at + 2].copy_from_slice(&0x7E00u16.to_le_bytes());
+            let mut p = FileParts::parse(&bytes);
+            let n = raw.len() as u64;
+            p.replace(
+                KIND_VIEW_COEFFICIENTS,
+                SectionCodec::ChunkedZstd,
+                12,
+                chunked_payload(&raw, 12 * BRICK_VOXELS, CHUNK_BRICKS, 12),
+                n,
+            );
+            push(
+                p,
+                "NaN view coefficient",
+                Expect::error(
+                    |e| matches!(e, FormatError::NonFinite { what } if what.contains("VCOF voxel 600 component 1")),
+                ),
+            );
+        }
+
+        // VCOF chunks over 4 MiB: VDEP claims 384 f16 coefficients per voxel with 16-brick chunks.
+        let mut p = FileParts::parse(&encode_asset(&asset, &options_with(16)).unwrap().0);
+        let big = ViewDependence {
+            lobes: vec![0.25; 8 * VIEW_HARMONICS],
+            basis: vec![0.0; 48 * LT_DIM],
+            coefficients: Coefficients::F16 {
+                rank: 384,
+                values: Vec::new(),
+            },
+        };
+        let raw = vdep_bytes(8, 48, 2, &vdep_values(&big));
+        let n = raw.len() as u64;
+        p.replace(KIND_VIEW, SectionCodec::Raw, 0, raw, n);
+        let (e, _) = p.section_mut(KIND_VIEW_COEFFICIENTS);
+        e.raw_length = (asset.bricks.len() * BRICK_VOXELS * 384 * 2) as u64;
+        e.shuffle = 0;
+        push(
+            p,
+            "VCOF chunks over 4 MiB",
+            Expect::error(
+                |e| matches!(e, FormatError::CountTooLarge { what, .. } if what.contains("VCOF chunk")),
+            ),
+        );
+    }
+    out
+}
+
+/// [`options`] with `chunk_bricks` bricks per chunk.
+fn options_with(chunk_bricks: u32) -> WriteOptions {
+    WriteOptions {
+        chunk_bricks,
+        ..options()
+    }
+}
+
 /// Every case of every generator.
 pub fn all() -> Vec<Damaged> {
     let mut out = truncations();
     out.extend(bit_flips());
     out.extend(hostile_headers());
     out.extend(hostile_sections());
+    out.extend(view_byte_flips());
+    out.extend(hostile_view_sections());
     out.extend(mutations());
     out
 }
