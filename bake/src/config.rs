@@ -10,6 +10,7 @@ use nelf_scene::tracer::TraceSettings;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{BakeError, Result};
+use crate::view::ViewChoice;
 
 /// Samples per light texel the ground-truth field takes at most by default (a
 /// capture's images take 16). A baked vector needs fewer samples than a pixel: the
@@ -225,9 +226,44 @@ pub struct BakeConfig {
     /// own range over 254 steps).
     #[arg(long, default_value_t = 0.1)]
     pub quantization_share: f64,
+    /// View-dependent light transport (sheen, highlights): `auto` fits the candidates
+    /// (sh1, sh2, 3 learned lobes) and keeps the best only when it gains more than
+    /// --view-min-gain-db at the judging views (the capture's held-aside targets, else
+    /// its own views); `off`; `sh1`/`sh2` (spherical harmonics of the outgoing direction
+    /// up to degree 1 / 2); or N (1..=9) lobes learned per asset.
+    #[arg(long, default_value_t = ViewChoice::Auto)]
+    #[serde(default)]
+    pub view_dependence: ViewChoice,
+    /// `auto`: smallest PSNR gain (dB, mean over the judging views) that keeps a view part.
+    #[arg(long, default_value_t = DEFAULT_VIEW_MIN_GAIN_DB)]
+    #[serde(default = "default_view_min_gain_db")]
+    pub view_min_gain_db: f64,
+    /// Rank of the view basis (default: the smallest keeping 99 % of the fitted
+    /// residual's energy, at most --max-view-rank).
+    #[arg(long)]
+    #[serde(default)]
+    pub view_rank: Option<usize>,
+    /// Largest view-basis rank fitted.
+    #[arg(long, default_value_t = DEFAULT_MAX_VIEW_RANK)]
+    #[serde(default = "default_max_view_rank")]
+    pub max_view_rank: usize,
     /// Ground-truth path-tracer overrides.
     #[command(flatten)]
     pub trace: TraceOverrides,
+}
+
+/// Default `--view-min-gain-db`.
+pub const DEFAULT_VIEW_MIN_GAIN_DB: f64 = 0.25;
+
+fn default_view_min_gain_db() -> f64 {
+    DEFAULT_VIEW_MIN_GAIN_DB
+}
+
+/// Default `--max-view-rank`.
+pub const DEFAULT_MAX_VIEW_RANK: usize = 16;
+
+fn default_max_view_rank() -> usize {
+    DEFAULT_MAX_VIEW_RANK
 }
 
 impl Default for BakeConfig {
@@ -255,6 +291,10 @@ impl Default for BakeConfig {
             reference_snr_db: 20.0,
             encoding: EncodingChoice::U8,
             quantization_share: 0.1,
+            view_dependence: ViewChoice::Auto,
+            view_min_gain_db: DEFAULT_VIEW_MIN_GAIN_DB,
+            view_rank: None,
+            max_view_rank: DEFAULT_MAX_VIEW_RANK,
             trace: TraceOverrides::default(),
         }
     }
@@ -325,6 +365,17 @@ impl BakeConfig {
         }
         if !(self.lead_voxels.is_finite() && self.lead_voxels > 0.0 && self.lead_voxels <= 2.0) {
             return bad(format!("--lead-voxels {} must be in (0, 2]", self.lead_voxels));
+        }
+        if !(1..=LT_DIM).contains(&self.max_view_rank) {
+            return bad(format!("--max-view-rank {} must be in 1..={LT_DIM}", self.max_view_rank));
+        }
+        if let Some(k) = self.view_rank
+            && !(1..=self.max_view_rank).contains(&k)
+        {
+            return bad(format!("--view-rank {k} must be in 1..=--max-view-rank ({})", self.max_view_rank));
+        }
+        if !self.view_min_gain_db.is_finite() {
+            return bad(format!("--view-min-gain-db {} must be finite", self.view_min_gain_db));
         }
         self.march().validate()?;
         Ok(())

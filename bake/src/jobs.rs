@@ -15,6 +15,7 @@ use nelf_scene::render::render_lt_image;
 use nelf_scene::synth::{SynthConfig, camera_for, source_viewpoints};
 use nelf_scene::tracer::{LtTracer, TraceSettings};
 
+use crate::eval::{HeldAside, load_held_aside};
 use crate::capture_in::LoadedCapture;
 use crate::config::{BakeConfig, ShellPlacement};
 use crate::error::Result;
@@ -107,6 +108,10 @@ pub fn capture_field_job<'a>(
         "grid_box_m": [grid_lo.to_array(), grid_hi.to_array()],
         "source": field_provenance,
     });
+    let held = match capture.description() {
+        Some(description) => load_held_aside(description, &capture.dir)?,
+        None => HeldAside::default(),
+    };
     let job = FieldBake {
         field,
         plan: planned.plan,
@@ -114,6 +119,7 @@ pub fn capture_field_job<'a>(
         view_policy,
         reference,
         provenance,
+        held,
     };
     let prior = StageTimings {
         hull_secs: planned.hull_secs,
@@ -268,6 +274,7 @@ pub fn bake_mesh(
             lighting,
         },
         provenance,
+        held: HeldAside::default(),
     };
     let prior = StageTimings {
         hull_secs,

@@ -16,7 +16,11 @@
 //!    [`config`]. Dependencies run one way: config ← source ← jobs → pipeline.
 //! 6. **Choosing** the smallest asset that meets a PSNR target or a byte budget on
 //!    the capture's held-aside views ([`choose`], `--target-psnr`, `--max-bytes`).
-//! 7. **Judging and showing** a bake: [`eval`] scores renders against ground truth;
+//! 7. **View dependence** ([`view`], `--view-dependence`): the residual of the
+//!    transport toward many outgoing directions, fitted per voxel on lobes of low-order
+//!    spherical harmonics (fixed or learned per asset) and a small view basis; kept only
+//!    where it gains on the judging views (format 1.2).
+//! 8. **Judging and showing** a bake: [`eval`] scores renders against ground truth;
 //!    [`demo`] runs the whole pipeline on a built-in procedural head (`nelf demo`).
 
 pub mod capture_in;
@@ -33,6 +37,7 @@ pub mod pipeline;
 pub mod progress;
 pub mod rank;
 pub mod source;
+pub mod view;
 
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
 pub use choose::{ChoiceArgs, ChoiceReport, bake_capture_to_target};
@@ -48,3 +53,4 @@ pub use pipeline::{
 };
 pub use progress::Progress;
 pub use source::{GroundTruth, ShellMeshField, ShellProfile};
+pub use view::ViewChoice;

@@ -21,6 +21,8 @@ use nelf_scene::tracer::MAX_AVERAGED_DIRECTIONS;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{BakeConfig, ViewPolicyChoice};
+use crate::eval::HeldAside;
+use crate::view::{ViewChoice, ViewReport, ViewSettings, choose_view};
 use crate::error::{BakeError, Result, io_error};
 use crate::grid::{GridPlan, evaluate_density, evaluate_light_transport, light_transport_band};
 use crate::pca::{WeightedPca, fit_weighted_pca, project_coefficients};
@@ -79,6 +81,9 @@ pub struct StageTimings {
     pub pca_secs: f64,
     /// Rank choice (renders).
     pub rank_secs: f64,
+    /// View dependence: sampling many directions, fitting, judging.
+    #[serde(default)]
+    pub view_secs: f64,
     /// Encoding and writing the file.
     pub write_secs: f64,
 }
@@ -118,6 +123,9 @@ pub struct BakeReport {
     pub timings: StageTimings,
     /// File size in bytes (0 until written).
     pub file_size: u64,
+    /// The view-dependence stage (`None` when `--view-dependence off`).
+    #[serde(default)]
+    pub view: Option<ViewReport>,
 }
 
 /// A baked asset and its report.
@@ -143,6 +151,9 @@ pub struct FieldBake<'a> {
     pub reference: Reference,
     /// Provenance for the metadata (source files, field).
     pub provenance: serde_json::Value,
+    /// Held-aside views (the capture's targets) that judge the view-dependence choice;
+    /// empty when the capture has none (the reference images judge it then).
+    pub held: HeldAside,
 }
 
 impl std::fmt::Debug for FieldBake<'_> {
@@ -212,6 +223,8 @@ pub struct SampledField {
     pub lt_voxels: Vec<usize>,
     /// Their light transport, `LT_DIM` floats each.
     pub lt: Vec<f32>,
+    /// Their PCA weights (visibility in the views plus the floor).
+    pub lt_weights: Vec<f64>,
     /// The weighted PCA of `lt`.
     pub pca: WeightedPca,
     /// The data's numerical rank.
@@ -343,6 +356,7 @@ pub fn sample_field(
         reduced,
         lt_voxels,
         lt,
+        lt_weights: weights,
         pca,
         data_rank,
         top_rank,
@@ -362,7 +376,74 @@ pub fn bake_field(
     prior: StageTimings,
 ) -> Result<BakeOutput> {
     let sampled = sample_field(job, config, progress, prior)?;
-    finish_bake(job, config, progress, &sampled)
+    let mut output = finish_bake(job, config, progress, &sampled)?;
+    add_view_dependence(job, config, progress, &sampled, &mut output)?;
+    Ok(output)
+}
+
+/// The view-dependence stage ([`crate::view`]): fits the residual of the field toward
+/// many directions, judges the candidates at the held-aside views (else the reference
+/// images), attaches the chosen part to the asset and records the decision in its
+/// metadata (`view_dependence`) and the report.
+pub fn add_view_dependence(
+    job: &FieldBake<'_>,
+    config: &BakeConfig,
+    progress: &Progress,
+    sampled: &SampledField,
+    output: &mut BakeOutput,
+) -> Result<()> {
+    if config.view_dependence == ViewChoice::Off {
+        return Ok(());
+    }
+    let from_reference;
+    let judge = if job.held.is_empty() {
+        match &job.reference {
+            Reference::Images {
+                images,
+                masks,
+                lighting,
+            } => {
+                from_reference = HeldAside {
+                    names: (0..images.len()).map(|i| format!("view {i}")).collect(),
+                    cameras: job.cameras.clone(),
+                    images: images.clone(),
+                    masks: masks.clone(),
+                    envs: vec![lighting.clone(); images.len()],
+                };
+                (&from_reference, "the capture's own views")
+            }
+            Reference::AssumedSnrDb(_) => (&job.held, "none"),
+        }
+    } else {
+        (&job.held, "the capture's held-aside targets")
+    };
+    let settings = ViewSettings {
+        choice: config.view_dependence,
+        min_gain_db: config.view_min_gain_db,
+        rank: config.view_rank,
+        max_rank: config.max_view_rank,
+        step_voxels: config.step_voxels,
+    };
+    let report = choose_view(
+        &mut output.asset,
+        job.field,
+        &sampled.dense.grid,
+        &sampled.dense.density,
+        &sampled.lt_voxels,
+        &sampled.lt,
+        &sampled.lt_weights,
+        &job.cameras.iter().map(PinholeCamera::centre).collect::<Vec<_>>(),
+        &settings,
+        judge,
+        progress,
+    )?;
+    output.report.timings.view_secs = report.secs;
+    if let Some(meta) = output.asset.metadata.as_object_mut() {
+        meta.insert("view_dependence".into(), serde_json::to_value(&report).unwrap_or_default());
+    }
+    output.report.view = Some(report);
+    output.asset.validate()?;
+    Ok(())
 }
 
 /// The rank choice and the asset at the chosen rank, from a sampled field.
@@ -506,6 +587,7 @@ pub fn finish_bake(
         candidates: candidates.clone(),
         timings,
         file_size: 0,
+        view: None,
     };
     let metadata = serde_json::json!({
         "generator": "nelf bake",

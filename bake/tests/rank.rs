@@ -95,6 +95,7 @@ fn exactly_rank_three_field_bakes_with_k_three() {
         view_policy: ViewPolicy::TowardPoint(cameras[0].centre().as_vec3()),
         reference: Reference::AssumedSnrDb(40.0),
         provenance: serde_json::json!({ "test": "rank three" }),
+        held: nelf_bake::eval::HeldAside::default(),
     };
     let config = BakeConfig {
         render_size: 48,

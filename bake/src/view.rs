@@ -1,0 +1,753 @@
+//! View-dependent light transport (format 1.2): fitting
+//! `T(x, ω) ≈ T̄(x) + Σ_j Y_j(ω) Σ_i d_ji(x) V_i` to a field's transport toward many
+//! outgoing directions, and choosing the lobes `Y_j` per scene.
+//!
+//! `T̄` is the bake's view-independent vector (the view policy's mean over the directions
+//! toward the capture's cameras), stored as today by the PCA part, so a reader that
+//! ignores the view part still renders the asset a view-independent bake would have.
+//! The view part models the **residual** `R(x, ω) = T(x, ω) − T̄(x)`:
+//!
+//! 1. **Samples.** Every band voxel's transport toward `D` fixed world directions (a
+//!    Fibonacci sphere, [`VIEW_DIRECTIONS`]), from
+//!    [`nelf_scene::field::FieldSource::evaluate_directions`]. A direction counts with
+//!    weight `max(0, n·ω)`, `n` the outward normal of the density (`−∇σ`, central
+//!    differences of the trilinear grid): the directions the voxel can be seen from.
+//! 2. **Harmonics fit.** Per voxel, weighted least squares of `R` on the nine real
+//!    spherical harmonics of degrees 0–2 (`view_harmonics`; the constant corrects `T̄`
+//!    for the directions the voxel is seen from, which need not be the cameras'), with a
+//!    small ridge (`λ = 10⁻³ · tr G / J`) so that directions never seen stay near zero.
+//! 3. **View basis.** On an evenly strided subsample of the band ([`BASIS_SAMPLE`]
+//!    voxels) the fitted harmonic vectors are pooled, weighted by how much the voxel
+//!    shows in the capture's views, and their uncentred principal directions become the
+//!    basis `V` (rank ≤ `--max-view-rank`). Then every voxel's residual is projected on
+//!    `V` first and fitted second (the fit is linear, so the order does not matter), and
+//!    only the per-voxel normal equations (`G`, 9 × 9, and `h`, 9 × `K_v`) are kept: any
+//!    choice of lobes is then an exact weighted least-squares fit without new samples.
+//! 4. **Lobes** (`--view-dependence`): `sh1` (the four harmonics of degrees 0–1), `sh2`
+//!    (all nine), or `N` lobes learned per asset: the top `N` eigenvectors of the
+//!    visibility-weighted second moment of the fitted harmonic coefficients (SNeRG's idea
+//!    of a small per-asset decoder, kept linear so relighting stays a dot product).
+//!    `auto` fits the candidates, renders each at the judging views (the capture's
+//!    held-aside targets, else its own views) and keeps the best only when it gains more
+//!    than `--view-min-gain-db` over the view-independent asset.
+
+use std::fmt;
+use std::str::FromStr;
+
+use glam::{DVec3, Vec3};
+use nalgebra::{DMatrix, SymmetricEigen};
+use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS, view_harmonics};
+use nelf_format::{CoefficientEncoding, Coefficients, ViewDependence};
+use nelf_render::BrickGrid;
+use nelf_scene::field::FieldSource;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{BakeError, Result};
+use crate::grid::voxel_position;
+use crate::progress::Progress;
+
+/// Outgoing directions sampled per voxel.
+pub const VIEW_DIRECTIONS: usize = 64;
+
+/// Band voxels the view basis is fitted on (evenly strided).
+pub const BASIS_SAMPLE: usize = 2048;
+
+/// Concentration of the direction weights around the directions toward the views'
+/// eyes: `exp(κ (c·ω − 1))`, κ = 4 (a von Mises–Fisher kernel ≈ 30° wide).
+const VIEW_KERNEL: f64 = 8.0;
+
+/// Weight every seen direction keeps however far from the views (relative to a
+/// direction right at one).
+const VIEW_WEIGHT_FLOOR: f64 = 0.02;
+
+/// Points per field call.
+const BATCH: usize = 512;
+
+/// Ridge of the per-voxel fit, relative to the mean diagonal of its normal matrix.
+const RIDGE: f64 = 1e-3;
+
+/// Numbers in one voxel's normal matrix `G`.
+const G_LEN: usize = VIEW_HARMONICS * VIEW_HARMONICS;
+
+/// `--view-dependence`: whether and how the bake keeps view-dependent light transport.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(into = "String", try_from = "String")]
+pub enum ViewChoice {
+    /// No view part (a 1.1 file).
+    Off,
+    /// Fit the candidates, keep the best if it gains more than the threshold.
+    #[default]
+    Auto,
+    /// The four harmonics of degrees 0 and 1.
+    Sh1,
+    /// All nine harmonics of degrees 0 to 2.
+    Sh2,
+    /// This many lobes (1..=9) learned per asset from the degree-0–2 fit.
+    Learned(u8),
+}
+
+impl FromStr for ViewChoice {
+    type Err = String;
+
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "off" => Ok(Self::Off),
+            "auto" => Ok(Self::Auto),
+            "sh1" => Ok(Self::Sh1),
+            "sh2" => Ok(Self::Sh2),
+            _ => match s.parse::<u8>() {
+                Ok(n) if (1..=VIEW_HARMONICS as u8).contains(&n) => Ok(Self::Learned(n)),
+                _ => Err(format!(
+                    "'{s}' is not a view dependence: auto, off, sh1, sh2, or a number of learned lobes 1..=9"
+                )),
+            },
+        }
+    }
+}
+
+impl fmt::Display for ViewChoice {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Off => f.write_str("off"),
+            Self::Auto => f.write_str("auto"),
+            Self::Sh1 => f.write_str("sh1"),
+            Self::Sh2 => f.write_str("sh2"),
+            Self::Learned(n) => write!(f, "{n}"),
+        }
+    }
+}
+
+impl From<ViewChoice> for String {
+    fn from(v: ViewChoice) -> Self {
+        v.to_string()
+    }
+}
+
+impl TryFrom<String> for ViewChoice {
+    type Error = String;
+
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+/// The fixed outgoing directions (a Fibonacci sphere of [`VIEW_DIRECTIONS`] points).
+/// Sampling only a cap around the capture's views was measured no better (glossy tiny
+/// head, held-aside targets: +0.64 dB against +0.88 dB for three learned lobes).
+pub fn sample_directions() -> Vec<Vec3> {
+    let n = VIEW_DIRECTIONS as f64;
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    (0..VIEW_DIRECTIONS)
+        .map(|i| {
+            let y = 1.0 - 2.0 * (i as f64 + 0.5) / n;
+            let r = (1.0 - y * y).max(0.0).sqrt();
+            let phi = golden * i as f64;
+            DVec3::new(r * phi.cos(), y, r * phi.sin()).as_vec3()
+        })
+        .collect()
+}
+
+/// Outward unit normal `−∇σ/|∇σ|` of the trilinear density at `p` (zero where flat).
+fn density_normal(grid: &BrickGrid, density: &[f32], p: DVec3) -> DVec3 {
+    let h = 0.5 * grid.geometry().voxel_size_m;
+    let mut corners = [(0usize, 0.0f32); 8];
+    let mut sample = |q: DVec3| -> f64 {
+        let n = grid.trilinear(q, &mut corners);
+        corners[..n].iter().map(|&(v, w)| f64::from(w * density[v])).sum()
+    };
+    let gradient = DVec3::new(
+        sample(p + DVec3::X * h) - sample(p - DVec3::X * h),
+        sample(p + DVec3::Y * h) - sample(p - DVec3::Y * h),
+        sample(p + DVec3::Z * h) - sample(p - DVec3::Z * h),
+    );
+    (-gradient).normalize_or_zero()
+}
+
+/// One voxel's weighted normal equations over the harmonics: `G = Σ_d w_d y_d y_dᵀ`
+/// (9 × 9, row-major) and `h = Σ_d w_d y_d r_dᵀ` (9 × `dim`, row-major) for residuals
+/// `r_d` of `dim` numbers.
+fn normal_equations(weights: &[f64], harmonics: &[[f32; VIEW_HARMONICS]], residuals: &[f64], dim: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut g = vec![0.0f64; VIEW_HARMONICS * VIEW_HARMONICS];
+    let mut h = vec![0.0f64; VIEW_HARMONICS * dim];
+    for (d, (&w, y)) in weights.iter().zip(harmonics).enumerate() {
+        if w <= 0.0 {
+            continue;
+        }
+        let r = &residuals[d * dim..(d + 1) * dim];
+        for a in 0..VIEW_HARMONICS {
+            let wy = w * f64::from(y[a]);
+            for b in 0..VIEW_HARMONICS {
+                g[a * VIEW_HARMONICS + b] += wy * f64::from(y[b]);
+            }
+            for (o, &x) in h[a * dim..(a + 1) * dim].iter_mut().zip(r) {
+                *o += wy * x;
+            }
+        }
+    }
+    (g, h)
+}
+
+/// Solves the ridge-regularised fit for lobes `lobes` (`J × 9`, row-major):
+/// `(A G Aᵀ + λI) b = A h`, returning `b` (`J × dim`); zero when the voxel is never seen.
+fn solve_lobes(g: &[f64], h: &[f64], dim: usize, lobes: &[f64]) -> Vec<f64> {
+    let j = lobes.len() / VIEW_HARMONICS;
+    let a = DMatrix::from_row_slice(j, VIEW_HARMONICS, lobes);
+    let g = DMatrix::from_row_slice(VIEW_HARMONICS, VIEW_HARMONICS, g);
+    let h = DMatrix::from_row_slice(VIEW_HARMONICS, dim, h);
+    let mut lhs = &a * g * a.transpose();
+    let trace = lhs.trace();
+    if !(trace > 0.0 && trace.is_finite()) {
+        return vec![0.0; j * dim];
+    }
+    let ridge = RIDGE * trace / j as f64;
+    for i in 0..j {
+        lhs[(i, i)] += ridge;
+    }
+    let rhs = &a * h;
+    match lhs.cholesky() {
+        Some(c) => {
+            let b = c.solve(&rhs);
+            // Row-major out.
+            (0..j).flat_map(|r| (0..dim).map(move |c| (r, c))).map(|(r, c)| b[(r, c)]).collect()
+        }
+        None => vec![0.0; j * dim],
+    }
+}
+
+/// Everything the view part of any lobe choice needs, from one pass over the band.
+#[derive(Debug, Clone)]
+pub struct ViewFit {
+    /// The view basis `V` (`K_max × 384`), principal directions of the residual.
+    pub basis: Vec<f32>,
+    /// Eigenvalues of the basis (weighted second moment of the fitted harmonic vectors).
+    pub eigenvalues: Vec<f64>,
+    /// Per band voxel: `G` (81 numbers).
+    normal: Vec<f64>,
+    /// Per band voxel: `h` (9 × `K_max`).
+    projected: Vec<f64>,
+    /// Per band voxel: weight (visibility) for the learned lobes.
+    weights: Vec<f64>,
+    /// Relative RMS of the residual over the subsample (`|R| / |T̄|`, weighted).
+    pub residual_ratio: f64,
+    /// Seconds spent.
+    pub secs: f64,
+    /// Whether the residual was below [`NO_VIEW_DEPENDENCE`] on the subsample, so the
+    /// band was not fitted (the per-voxel equations are empty).
+    pub skipped: bool,
+}
+
+/// Samples and fits the residual of `field` over the band voxels `lt_voxels` (whose
+/// view-independent vectors are `lt`, `384` each, and visibility weights `weights`).
+/// `max_rank` caps the view basis.
+pub fn fit_view(
+    field: &dyn FieldSource,
+    grid: &BrickGrid,
+    density: &[f32],
+    lt_voxels: &[usize],
+    lt: &[f32],
+    weights: &[f64],
+    eyes: &[DVec3],
+    max_rank: usize,
+    progress: &Progress,
+) -> Result<ViewFit> {
+    let start = std::time::Instant::now();
+    if lt_voxels.is_empty() || lt.len() != lt_voxels.len() * LT_DIM || weights.len() != lt_voxels.len() {
+        return Err(BakeError::Settings(format!(
+            "view fit: {} band voxels, {} transport floats, {} weights",
+            lt_voxels.len(),
+            lt.len(),
+            weights.len()
+        )));
+    }
+    let geometry = *grid.geometry();
+    let directions = sample_directions();
+    let harmonics: Vec<[f32; VIEW_HARMONICS]> = directions.iter().map(|d| view_harmonics(d.to_array())).collect();
+    let position = |v: usize| voxel_position(&geometry, grid.bricks(), v);
+    let direction_weights = |v: usize| -> Vec<f64> {
+        let x = position(v);
+        let n = density_normal(grid, density, x);
+        let toward: Vec<DVec3> = eyes.iter().map(|e| (*e - x).normalize_or_zero()).collect();
+        directions
+            .iter()
+            .map(|d| {
+                let d = d.as_dvec3();
+                let facing = if n == DVec3::ZERO { 1.0 } else { n.dot(d).max(0.0) };
+                let near: f64 = toward.iter().map(|c| (VIEW_KERNEL * (c.dot(d) - 1.0)).exp()).sum();
+                facing * (near / toward.len().max(1) as f64 + VIEW_WEIGHT_FLOOR)
+            })
+            .collect()
+    };
+    // Transport toward every direction of a batch of band entries, minus T̄, in f64.
+    let residuals = |entries: &[usize]| -> Result<Vec<f64>> {
+        let points: Vec<Vec3> = entries.iter().map(|&e| position(lt_voxels[e]).as_vec3()).collect();
+        let mut sigma = vec![0.0f32; points.len()];
+        let mut out = vec![0.0f32; points.len() * VIEW_DIRECTIONS * LT_DIM];
+        field.evaluate_directions(&points, &directions, &mut sigma, &mut out)?;
+        if let Some(i) = out.iter().position(|x| !x.is_finite()) {
+            return Err(BakeError::Pca(format!(
+                "the field returned a non-finite light-transport value toward direction {} at {}",
+                (i / LT_DIM) % VIEW_DIRECTIONS,
+                points[i / (LT_DIM * VIEW_DIRECTIONS)]
+            )));
+        }
+        Ok(out
+            .par_chunks_exact(VIEW_DIRECTIONS * LT_DIM)
+            .zip(entries.par_iter())
+            .flat_map_iter(|(t, &e)| {
+                let mean = &lt[e * LT_DIM..(e + 1) * LT_DIM];
+                t.chunks_exact(LT_DIM)
+                    .flat_map(move |td| td.iter().zip(mean).map(|(a, b)| f64::from(a - b)))
+            })
+            .collect())
+    };
+
+    // 1. The basis, from the harmonic fit of a strided subsample.
+    let n = lt_voxels.len();
+    let sample: Vec<usize> = if n <= BASIS_SAMPLE {
+        (0..n).collect()
+    } else {
+        (0..BASIS_SAMPLE).map(|i| i * n / BASIS_SAMPLE).collect()
+    };
+    let mut rows: Vec<f64> = Vec::with_capacity(sample.len() * VIEW_HARMONICS * LT_DIM);
+    let (mut residual_energy, mut mean_energy) = (0.0f64, 0.0f64);
+    let identity: Vec<f64> = (0..VIEW_HARMONICS * VIEW_HARMONICS)
+        .map(|i| if i / VIEW_HARMONICS == i % VIEW_HARMONICS { 1.0 } else { 0.0 })
+        .collect();
+    for chunk in sample.chunks(BATCH) {
+        let r = residuals(chunk)?;
+        let fitted: Vec<(Vec<f64>, f64, f64)> = chunk
+            .par_iter()
+            .enumerate()
+            .map(|(i, &e)| {
+                let w = direction_weights(lt_voxels[e]);
+                let rv = &r[i * VIEW_DIRECTIONS * LT_DIM..(i + 1) * VIEW_DIRECTIONS * LT_DIM];
+                let (g, h) = normal_equations(&w, &harmonics, rv, LT_DIM);
+                let b = solve_lobes(&g, &h, LT_DIM, &identity);
+                let wsum: f64 = w.iter().sum();
+                let res: f64 = w
+                    .iter()
+                    .enumerate()
+                    .map(|(d, wd)| wd * rv[d * LT_DIM..(d + 1) * LT_DIM].iter().map(|x| x * x).sum::<f64>())
+                    .sum::<f64>()
+                    / wsum.max(1e-30);
+                let m: f64 = lt[e * LT_DIM..(e + 1) * LT_DIM].iter().map(|&x| f64::from(x).powi(2)).sum();
+                let scale = weights[e].sqrt();
+                (b.into_iter().map(|x| x * scale).collect(), weights[e] * res, weights[e] * m)
+            })
+            .collect();
+        for (b, res, m) in fitted {
+            rows.extend(b);
+            residual_energy += res;
+            mean_energy += m;
+        }
+    }
+    let count = rows.len() / LT_DIM;
+    let x = DMatrix::from_row_slice(count, LT_DIM, &rows);
+    let moment = x.transpose() * &x;
+    let eigen = SymmetricEigen::new(moment);
+    let mut order: Vec<usize> = (0..LT_DIM).collect();
+    order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+    let k_max = max_rank.clamp(1, LT_DIM);
+    let mut basis = Vec::with_capacity(k_max * LT_DIM);
+    let mut eigenvalues = Vec::with_capacity(LT_DIM);
+    for &i in &order {
+        eigenvalues.push(eigen.eigenvalues[i].max(0.0));
+    }
+    for &i in order.iter().take(k_max) {
+        basis.extend(eigen.eigenvectors.column(i).iter().map(|&v| v as f32));
+    }
+    let basis_f64: Vec<f64> = basis.iter().map(|&v| f64::from(v)).collect();
+    let residual_ratio = (residual_energy / mean_energy.max(1e-300)).sqrt();
+    if !(residual_ratio >= NO_VIEW_DEPENDENCE) {
+        return Ok(ViewFit {
+            basis,
+            eigenvalues,
+            normal: Vec::new(),
+            projected: Vec::new(),
+            weights: Vec::new(),
+            residual_ratio,
+            secs: start.elapsed().as_secs_f64(),
+            skipped: true,
+        });
+    }
+
+    // 2. Every band voxel: project the residual on V, keep the normal equations.
+    let bar = progress.bar("view", n as u64, "voxels");
+    let mut normal = vec![0.0f64; n * VIEW_HARMONICS * VIEW_HARMONICS];
+    let mut projected = vec![0.0f64; n * VIEW_HARMONICS * k_max];
+    let entries: Vec<usize> = (0..n).collect();
+    for (c, chunk) in entries.chunks(BATCH).enumerate() {
+        let r = residuals(chunk)?;
+        let per: Vec<(Vec<f64>, Vec<f64>)> = chunk
+            .par_iter()
+            .enumerate()
+            .map(|(i, &e)| {
+                let w = direction_weights(lt_voxels[e]);
+                let rv = &r[i * VIEW_DIRECTIONS * LT_DIM..(i + 1) * VIEW_DIRECTIONS * LT_DIM];
+                let mut p = vec![0.0f64; VIEW_DIRECTIONS * k_max];
+                for (d, pd) in p.chunks_exact_mut(k_max).enumerate() {
+                    let rd = &rv[d * LT_DIM..(d + 1) * LT_DIM];
+                    for (k, o) in pd.iter_mut().enumerate() {
+                        *o = basis_f64[k * LT_DIM..(k + 1) * LT_DIM].iter().zip(rd).map(|(a, b)| a * b).sum();
+                    }
+                }
+                normal_equations(&w, &harmonics, &p, k_max)
+            })
+            .collect();
+        for (i, (g, h)) in per.into_iter().enumerate() {
+            let e = c * BATCH + i;
+            normal[e * G_LEN..(e + 1) * G_LEN].copy_from_slice(&g);
+            projected[e * VIEW_HARMONICS * k_max..(e + 1) * VIEW_HARMONICS * k_max].copy_from_slice(&h);
+        }
+        bar.inc(chunk.len() as u64);
+    }
+    bar.finish_and_clear();
+    Ok(ViewFit {
+        basis,
+        eigenvalues,
+        normal,
+        projected,
+        weights: weights.to_vec(),
+        residual_ratio,
+        secs: start.elapsed().as_secs_f64(),
+        skipped: false,
+    })
+}
+
+impl ViewFit {
+    /// Largest view rank available.
+    pub fn max_rank(&self) -> usize {
+        self.basis.len() / LT_DIM
+    }
+
+    /// The smallest rank keeping `energy` (0..1) of the residual's fitted energy, at most
+    /// [`Self::max_rank`].
+    pub fn rank_for_energy(&self, energy: f64) -> usize {
+        let total: f64 = self.eigenvalues.iter().sum();
+        if total <= 0.0 {
+            return 1;
+        }
+        let mut acc = 0.0;
+        for (k, l) in self.eigenvalues.iter().enumerate() {
+            acc += l;
+            if acc >= energy * total {
+                return (k + 1).min(self.max_rank());
+            }
+        }
+        self.max_rank()
+    }
+
+    /// Lobe weights (`J × 9`, row-major) for a choice (not `Off`/`Auto`): identity rows
+    /// for `sh1`/`sh2`, the top eigenvectors of the weighted second moment of the fitted
+    /// harmonic coefficients for learned lobes.
+    pub fn lobes(&self, choice: ViewChoice) -> Vec<f64> {
+        let rows = |j: usize| -> Vec<f64> {
+            (0..j * VIEW_HARMONICS)
+                .map(|i| if i / VIEW_HARMONICS == i % VIEW_HARMONICS { 1.0 } else { 0.0 })
+                .collect()
+        };
+        match choice {
+            ViewChoice::Off | ViewChoice::Auto => Vec::new(),
+            ViewChoice::Sh1 => rows(4),
+            ViewChoice::Sh2 => rows(VIEW_HARMONICS),
+            ViewChoice::Learned(j) => {
+                let identity = rows(VIEW_HARMONICS);
+                let k = self.max_rank();
+                let mut moment = DMatrix::<f64>::zeros(VIEW_HARMONICS, VIEW_HARMONICS);
+                for (e, w) in self.weights.iter().enumerate() {
+                    let g = &self.normal[e * G_LEN..(e + 1) * G_LEN];
+                    let h = &self.projected[e * VIEW_HARMONICS * k..(e + 1) * VIEW_HARMONICS * k];
+                    let b = DMatrix::from_row_slice(VIEW_HARMONICS, k, &solve_lobes(g, h, k, &identity));
+                    moment += (&b * b.transpose()) * *w;
+                }
+                let eigen = SymmetricEigen::new(moment);
+                let mut order: Vec<usize> = (0..VIEW_HARMONICS).collect();
+                order.sort_by(|&a, &b| eigen.eigenvalues[b].total_cmp(&eigen.eigenvalues[a]));
+                order
+                    .iter()
+                    .take(usize::from(j))
+                    .flat_map(|&i| eigen.eigenvectors.column(i).iter().copied().collect::<Vec<_>>())
+                    .collect()
+            }
+        }
+    }
+
+    /// The view part for lobes `lobes` (`J × 9`) at view rank `rank` over a grid of
+    /// `voxels` voxels whose band is `lt_voxels` (voxels off the band get 0).
+    pub fn view_part(
+        &self,
+        lobes: &[f64],
+        rank: usize,
+        voxels: usize,
+        lt_voxels: &[usize],
+        encoding: CoefficientEncoding,
+    ) -> Result<ViewDependence> {
+        let j = lobes.len() / VIEW_HARMONICS;
+        let k_max = self.max_rank();
+        let rank = rank.clamp(1, k_max);
+        if j == 0 || j * rank > LT_DIM {
+            return Err(BakeError::Settings(format!(
+                "a view part of {j} lobes × rank {rank} is not storable (1..=9 lobes, at most {LT_DIM} values per voxel)"
+            )));
+        }
+        let per_voxel = j * rank;
+        let solved: Vec<Vec<f64>> = (0..lt_voxels.len())
+            .into_par_iter()
+            .map(|e| {
+                let g = &self.normal[e * G_LEN..(e + 1) * G_LEN];
+                let h = &self.projected[e * VIEW_HARMONICS * k_max..(e + 1) * VIEW_HARMONICS * k_max];
+                // Fit at full rank, keep the first `rank` (the basis is orthonormal).
+                solve_lobes(g, h, k_max, lobes)
+            })
+            .collect();
+        let mut values = vec![0.0f32; voxels * per_voxel];
+        for (b, &v) in solved.iter().zip(lt_voxels) {
+            for l in 0..j {
+                for i in 0..rank {
+                    values[v * per_voxel + l * rank + i] = b[l * k_max + i] as f32;
+                }
+            }
+        }
+        let view = ViewDependence {
+            lobes: lobes.iter().map(|&x| x as f32).collect(),
+            basis: self.basis[..rank * LT_DIM].to_vec(),
+            coefficients: Coefficients::quantize(&values, per_voxel, encoding)?,
+        };
+        view.validate(voxels)?;
+        Ok(view)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn choices_parse_and_print() {
+        for s in ["auto", "off", "sh1", "sh2", "1", "3", "9"] {
+            assert_eq!(s.parse::<ViewChoice>().unwrap().to_string(), s);
+        }
+        for s in ["0", "10", "sh3", ""] {
+            assert!(s.parse::<ViewChoice>().is_err(), "{s}");
+        }
+    }
+
+    #[test]
+    fn directions_cover_the_sphere_evenly() {
+        let d = sample_directions();
+        let mean: Vec3 = d.iter().copied().sum::<Vec3>() / d.len() as f32;
+        assert!(mean.length() < 1e-3);
+        for v in &d {
+            assert!((v.length() - 1.0).abs() < 1e-5);
+        }
+    }
+
+    #[test]
+    fn lobe_fit_recovers_an_exact_harmonic() {
+        // r(ω) = 2·y_1(ω) − y_5(ω) (+ nothing else) for dim = 1, all directions weighted.
+        let dirs = sample_directions();
+        let harmonics: Vec<_> = dirs.iter().map(|d| view_harmonics(d.to_array())).collect();
+        let r: Vec<f64> = harmonics.iter().map(|y| 2.0 * f64::from(y[1]) - f64::from(y[5])).collect();
+        let w = vec![1.0; dirs.len()];
+        let (g, h) = normal_equations(&w, &harmonics, &r, 1);
+        let identity: Vec<f64> = (0..G_LEN).map(|i| if i / VIEW_HARMONICS == i % VIEW_HARMONICS { 1.0 } else { 0.0 }).collect();
+        let b = solve_lobes(&g, &h, 1, &identity);
+        assert!((b[1] - 2.0).abs() < 0.01 && (b[5] + 1.0).abs() < 0.01, "{b:?}");
+        for (i, x) in b.iter().enumerate() {
+            if i != 1 && i != 5 {
+                assert!(x.abs() < 0.01, "{b:?}");
+            }
+        }
+    }
+}
+
+/// Rays per pixel (squared) of the judging renders: the gain is a difference of two
+/// renders with the same sampling, so fewer rays than [`crate::eval::EVAL_PIXEL_GRID`]
+/// do.
+pub const JUDGE_PIXEL_GRID: u32 = 2;
+
+/// One view-part candidate as judged.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewCandidate {
+    /// `sh1`, `sh2` or the number of learned lobes.
+    pub choice: ViewChoice,
+    /// Lobes `J`.
+    pub lobes: usize,
+    /// View basis rank `K_v`.
+    pub rank: usize,
+    /// Mean PSNR at the judging views, dB (`None` without judging views).
+    pub psnr_db: Option<f64>,
+    /// Gain over the view-independent asset, dB.
+    pub gain_db: Option<f64>,
+    /// Bytes of the asset with this view part (written with default options).
+    pub bytes: u64,
+}
+
+/// What the view-dependence stage decided.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewReport {
+    /// `--view-dependence`.
+    pub requested: ViewChoice,
+    /// What the asset holds (`off` when no view part was kept).
+    pub chosen: ViewChoice,
+    /// Relative RMS of the residual `T(ω) − T̄` over the directions each voxel is seen
+    /// from, on the basis subsample.
+    pub residual_ratio: f64,
+    /// Mean PSNR of the view-independent asset at the judging views, dB.
+    pub base_psnr_db: Option<f64>,
+    /// Bytes of the view-independent asset.
+    pub base_bytes: u64,
+    /// Every candidate tried.
+    pub candidates: Vec<ViewCandidate>,
+    /// Where the judging views came from.
+    pub judged_at: String,
+    /// Seconds spent (sampling, fitting, judging).
+    pub secs: f64,
+}
+
+/// Mean PSNR of `asset` over `views` with [`JUDGE_PIXEL_GRID`]² rays per pixel.
+pub fn judge_psnr(asset: &nelf_format::Asset, views: &crate::eval::HeldAside, step_voxels: f32) -> Result<f64> {
+    use nelf_render::{MarchSettings, render_asset};
+    let settings = MarchSettings {
+        step_voxels,
+        pixel_grid: JUDGE_PIXEL_GRID,
+        ..MarchSettings::default()
+    };
+    let mut sum = 0.0;
+    for ((camera, truth), env) in views.cameras.iter().zip(&views.images).zip(&views.envs) {
+        let image = render_asset(asset, camera, env, glam::DMat3::IDENTITY, None, &settings)?;
+        sum += nelf_scene::metrics::psnr(&image.rgb, truth, f64::from(crate::eval::data_range(truth)))?;
+    }
+    Ok(sum / views.len().max(1) as f64)
+}
+
+fn encoded_bytes(asset: &nelf_format::Asset) -> Result<u64> {
+    let (bytes, _) = nelf_format::encode_asset(asset, &nelf_format::WriteOptions::default())?;
+    Ok(bytes.len() as u64)
+}
+
+/// Residual ratios below this mean the field has no view dependence (a matte surface
+/// traced with the same random streams toward every direction gives exactly 0).
+pub const NO_VIEW_DEPENDENCE: f64 = 1e-4;
+
+/// Settings of [`choose_view`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewSettings {
+    /// `--view-dependence`.
+    pub choice: ViewChoice,
+    /// `--view-min-gain-db`.
+    pub min_gain_db: f64,
+    /// `--view-rank`.
+    pub rank: Option<usize>,
+    /// `--max-view-rank`.
+    pub max_rank: usize,
+    /// March step of the judging renders, voxels.
+    pub step_voxels: f32,
+}
+
+/// Fits, judges and attaches the view part to `asset` (the bake's view-independent
+/// asset) per `settings`; `judge` are the judging views (empty: none, then `auto` keeps
+/// nothing and an explicit choice is kept unjudged).
+#[allow(clippy::too_many_arguments)]
+pub fn choose_view(
+    asset: &mut nelf_format::Asset,
+    field: &dyn FieldSource,
+    grid: &BrickGrid,
+    density: &[f32],
+    lt_voxels: &[usize],
+    lt: &[f32],
+    weights: &[f64],
+    eyes: &[DVec3],
+    settings: &ViewSettings,
+    judge: (&crate::eval::HeldAside, &str),
+    progress: &Progress,
+) -> Result<ViewReport> {
+    let start = std::time::Instant::now();
+    let (views, judged_at) = judge;
+    let fit = fit_view(field, grid, density, lt_voxels, lt, weights, eyes, settings.max_rank, progress)?;
+    let base_bytes = encoded_bytes(asset)?;
+    let mut report = ViewReport {
+        requested: settings.choice,
+        chosen: ViewChoice::Off,
+        residual_ratio: fit.residual_ratio,
+        base_psnr_db: None,
+        base_bytes,
+        candidates: Vec::new(),
+        judged_at: judged_at.to_string(),
+        secs: 0.0,
+    };
+    let explicit = !matches!(settings.choice, ViewChoice::Auto | ViewChoice::Off);
+    if settings.choice == ViewChoice::Off || (!explicit && (fit.skipped || views.is_empty())) {
+        report.secs = start.elapsed().as_secs_f64();
+        return Ok(report);
+    }
+    let choices = if explicit {
+        vec![settings.choice]
+    } else {
+        vec![ViewChoice::Sh1, ViewChoice::Learned(3), ViewChoice::Sh2]
+    };
+    let rank = settings.rank.unwrap_or_else(|| fit.rank_for_energy(0.99)).min(fit.max_rank()).max(1);
+    if !views.is_empty() {
+        report.base_psnr_db = Some(judge_psnr(asset, views, settings.step_voxels)?);
+    }
+    let encoding = asset.coefficients.encoding();
+    let voxels = asset.voxel_count();
+    let mut parts = Vec::new();
+    for choice in choices {
+        let lobes = fit.lobes(choice);
+        let part = if fit.skipped {
+            // A field without view dependence asked for one explicitly: an all-zero part.
+            ViewDependence {
+                lobes: lobes.iter().map(|&x| x as f32).collect(),
+                basis: fit.basis[..LT_DIM].to_vec(),
+                coefficients: Coefficients::quantize(&vec![0.0; voxels * lobes.len() / VIEW_HARMONICS], lobes.len() / VIEW_HARMONICS, encoding)?,
+            }
+        } else {
+            fit.view_part(&lobes, rank, voxels, lt_voxels, encoding)?
+        };
+        let mut with = asset.clone();
+        with.view = Some(part);
+        let psnr_db = if views.is_empty() {
+            None
+        } else {
+            Some(judge_psnr(&with, views, settings.step_voxels)?)
+        };
+        report.candidates.push(ViewCandidate {
+            choice,
+            lobes: with.view.as_ref().map_or(0, ViewDependence::lobe_count),
+            rank: with.view.as_ref().map_or(0, ViewDependence::rank),
+            psnr_db,
+            gain_db: psnr_db.zip(report.base_psnr_db).map(|(a, b)| a - b),
+            bytes: encoded_bytes(&with)?,
+        });
+        parts.push(with.view);
+    }
+    let pick = if explicit {
+        Some(0)
+    } else {
+        // The best gain; a candidate within 0.05 dB of it with fewer bytes wins.
+        let best = report
+            .candidates
+            .iter()
+            .filter_map(|c| c.gain_db)
+            .fold(f64::NEG_INFINITY, f64::max);
+        if best > settings.min_gain_db {
+            report
+                .candidates
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.gain_db.is_some_and(|g| g >= best - 0.05))
+                .min_by_key(|(_, c)| c.bytes)
+                .map(|(i, _)| i)
+        } else {
+            None
+        }
+    };
+    if let Some(i) = pick {
+        report.chosen = report.candidates[i].choice;
+        asset.view = parts.swap_remove(i);
+    }
+    report.secs = start.elapsed().as_secs_f64();
+    Ok(report)
+}
