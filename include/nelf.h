@@ -13,7 +13,7 @@
  * distinct `nelf_result` code with a message naming where it is. Every allocation is
  * bounded before it is made: by the actual file length (brick list, chunk tables,
  * stored bytes of a section read from a FILE), or by the format's limits (PCA model
- * <= 591 360 bytes, QPRM <= 3 KiB, VDEP <= 593 168 bytes, metadata <= 1 MiB, one decoded
+ * <= 591 360 bytes, QPRM <= 3 KiB, VDEP <= 593 236 bytes, metadata <= 1 MiB, one decoded
  * chunk <= 4 MiB and <= 32768 x its stored size).
  *
  * Numbers: reconstruction, relighting and shading follow the reference's arithmetic

@@ -10,7 +10,7 @@
 //! only after its bounds are checked against the file size, and decompressed only
 //! after its checksum matches, into a buffer of its declared decoded length, which
 //! must equal what the header's counts require (for `VCOF`, the counts of `VDEP`), be at
-//! most 4 MiB per chunk (1 MiB for metadata, 593 168 bytes for `VDEP`), and be at most
+//! most 4 MiB per chunk (1 MiB for metadata, 593 236 bytes for `VDEP`), and be at most
 //! 32768 × its stored length (zstd's largest expansion). Brick coordinates are stored
 //! raw, so every count is bounded by the file size.
 //! Whole-asset decoding grows its arrays chunk by chunk, so a damaged or lying file

@@ -287,7 +287,7 @@ fn random_access_gives_view_coefficients_and_parameters() {
 
 #[test]
 fn view_transport_follows_the_spec_formula() {
-    // T(x, ω) = m + Σ_k c_k B_k + Σ_j Y_j(ω) Σ_i d_ji V_i, Y_j(ω) = Σ_l lobes[j·8 + l] y_l(ω).
+    // T(x, ω) = m + Σ_k c_k B_k + Σ_j Y_j(ω) Σ_i d_ji V_i, Y_j(ω) = Σ_l lobes[j·9 + l] y_l(ω).
     let asset = with_view(
         small_asset(CoefficientEncoding::F16, 3, 2),
         2,
