@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use nelf_format::synthetic::SyntheticField;
+use nelf_format::synthetic::{SyntheticField, synthetic_view};
 use nelf_format::{CoefficientEncoding, FormatError, WriteOptions, encode_asset};
 
 fn main() -> Result<(), FormatError> {
@@ -21,7 +21,11 @@ fn main() -> Result<(), FormatError> {
         (CoefficientEncoding::F16, 1, 3, true),
     ];
     for (i, (encoding, rank, chunk_bricks, shuffle)) in cases.into_iter().enumerate() {
-        let asset = field.asset(rank, encoding)?;
+        let mut asset = field.asset(rank, encoding)?;
+        if i >= 2 {
+            // Format 1.2: a view-dependent part (VDEP, VCOF) in the last two seeds.
+            asset.view = Some(synthetic_view(&asset, 2, 2, encoding, 1)?);
+        }
         let options = WriteOptions {
             zstd_level: 3,
             chunk_bricks,
