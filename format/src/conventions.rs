@@ -365,19 +365,20 @@ fn project_splat(env: &LatLong, env_from_light: DMat3) -> Vec<[f32; 3]> {
 }
 
 /// Number of outgoing-direction functions a view-dependent asset's lobes are built from:
-/// the real spherical harmonics of degrees 1 and 2 ([`view_harmonics`]).
-pub const VIEW_HARMONICS: usize = 8;
+/// the real spherical harmonics of degrees 0, 1 and 2 ([`view_harmonics`]).
+pub const VIEW_HARMONICS: usize = 9;
 
-/// The real spherical harmonics of degrees 1 and 2 at the unit outgoing direction `ω`
-/// (world frame, from the point toward the viewer), orthonormal over the sphere
-/// (`∫ y_a y_b dω = δ_ab`; the constant `y_0` is left out: the view-independent part
-/// of `T` is the PCA part). With `ω = (x, y, z)`:
+/// The real spherical harmonics of degrees 0–2 at the outgoing direction `ω` (world
+/// frame, from the point toward the viewer), orthonormal over the sphere
+/// (`∫ y_a y_b dω = δ_ab`). The constant `y_0` lets a lobe correct the view-independent
+/// part for the directions a voxel is seen from. With `ω = (x, y, z)` normalised first:
 ///
-/// `y = (a·y, a·z, a·x, b·xy, b·yz, c·(3z² − 1), b·xz, b/2·(x² − y²))`,
-/// `a = √(3/4π)`, `b = √(15/4π)`, `c = √(5/16π)` (the usual order `m = −l … l` with the
-/// physics convention's z axis; SPEC.md §6 `VDEP`). `ω` need not be unit: it is
-/// normalised first (a zero vector gives zeros).
+/// `y = (c₀, a·y, a·z, a·x, b·xy, b·yz, c·(3z² − 1), b·xz, b/2·(x² − y²))`,
+/// `c₀ = 1/(2√π)`, `a = √(3/4π)`, `b = √(15/4π)`, `c = √(5/16π)` (degree by degree, the
+/// usual order `m = −l … l` with the physics convention's z axis; SPEC.md §6 `VDEP`).
+/// A zero or non-finite `ω` gives zeros.
 pub fn view_harmonics(omega: [f32; 3]) -> [f32; VIEW_HARMONICS] {
+    const C0: f32 = 0.282_094_8; // 1/(2√π)
     const A: f32 = 0.488_602_5; // √(3/4π)
     const B: f32 = 1.092_548_4; // √(15/4π)
     const C: f32 = 0.315_391_57; // √(5/16π)
@@ -387,6 +388,7 @@ pub fn view_harmonics(omega: [f32; 3]) -> [f32; VIEW_HARMONICS] {
     }
     let [x, y, z] = omega.map(|v| v / len);
     [
+        C0,
         A * y,
         A * z,
         A * x,
