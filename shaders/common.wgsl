@@ -79,8 +79,8 @@ fn voxel_local(voxel: u32) -> vec3<i32> {
     return vec3<i32>(vec3<u32>(voxel & 7u, (voxel >> 3u) & 7u, (voxel >> 6u) & 7u));
 }
 
-// The atlas texels that hold voxel `local` ∈ [0, 8)³ of the brick in cell `cell`, written
-// to `texels`; returns how many (1 to 8). They are its own slot's texel and the apron
+// The atlas texels that hold voxel `local` ∈ [0, 8)³ of the present brick in cell `cell`
+// (slot `own_slot`, its index), written to `texels`; returns how many (1 to 8). They are its own slot's texel and the apron
 // texel (local − 8d) of the slot of each neighbouring cell `cell + d`, d ∈ {−1, 0, 1}³,
 // that the voxel borders (d_a = −1 where l_a = 0, +1 where l_a = 7) and that has a slot
 // (a present brick or a halo cell, viewer/src/atlas.rs). So a texel (slot s, local
@@ -94,6 +94,7 @@ fn voxel_texels(
     indirection: texture_3d<u32>,
     grid_bricks: vec3<i32>,
     packing: SlotPacking,
+    own_slot: u32,
     cell: vec3<i32>,
     local: vec3<i32>,
     texels: ptr<function, array<vec3<i32>, 8>>,
@@ -105,7 +106,11 @@ fn voxel_texels(
         for (var dy = low.y; dy <= high.y; dy++) {
             for (var dx = low.x; dx <= high.x; dx++) {
                 let d = vec3<i32>(dx, dy, dz);
-                let entry = brick_entry(indirection, cell + d, grid_bricks);
+                // The brick's own slot is its index; neighbours' come from the grid.
+                var entry = own_slot + 1u;
+                if any(d != vec3<i32>(0)) {
+                    entry = brick_entry(indirection, cell + d, grid_bricks);
+                }
                 if has_slot(entry) {
                     (*texels)[count] = slot_coords(slot_of(entry), packing) * SLOT + local - d * BRICK + vec3<i32>(1);
                     count++;

@@ -113,6 +113,7 @@ fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
         indirection,
         params.grid_bricks.xyz,
         SlotPacking(params.atlas.x, params.atlas.y),
+        v / 512u,
         brick_cell(brick_cells[v / 512u]),
         voxel_local(v),
         &texels,

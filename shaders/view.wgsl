@@ -54,16 +54,19 @@ fn view(@builtin(global_invocation_id) gid: vec3<u32>) {
     let base_rg = voxel_lobes[v];
     let base_b_sigma = voxel_lobes[voxels + v];
     var rgb = vec3<f32>(half_of(base_rg, 0u), half_of(base_rg, 1u), half_of(base_b_sigma, 0u));
-    var halves: array<f32, MAX_LOBE_HALVES>;
-    for (var q = 0u; q < (3u * lobes + 1u) / 2u; q++) {
-        let pair = voxel_lobes[(2u + q) * voxels + v];
-        halves[2u * q] = half_of(pair, 0u);
-        halves[2u * q + 1u] = half_of(pair, 1u);
-    }
     for (var j = 0u; j < lobes; j++) {
         let weight = dot(params.lobes[3u * j], y[0]) + dot(params.lobes[3u * j + 1u], y[1])
             + dot(params.lobes[3u * j + 2u], y[2]);
-        rgb += weight * vec3<f32>(halves[3u * j], halves[3u * j + 1u], halves[3u * j + 2u]);
+        // Lobe j's colour: halves 4 + 3j + c, in words 2 + (3j + c) / 2.
+        let h = 3u * j;
+        let first = voxel_lobes[(2u + h / 2u) * voxels + v];
+        let second = voxel_lobes[(3u + h / 2u) * voxels + v];
+        let colour = select(
+            vec3<f32>(half_of(first, 0u), half_of(first, 1u), half_of(second, 0u)),
+            vec3<f32>(half_of(first, 1u), half_of(second, 0u), half_of(second, 1u)),
+            (h & 1u) == 1u,
+        );
+        rgb += weight * colour;
     }
     let value = vec4<f32>(rgb, half_of(base_b_sigma, 1u));
     var texels: array<vec3<i32>, 8>;
@@ -71,6 +74,7 @@ fn view(@builtin(global_invocation_id) gid: vec3<u32>) {
         indirection,
         params.grid_bricks.xyz,
         SlotPacking(params.atlas.x, params.atlas.y),
+        v / 512u,
         cell,
         local,
         &texels,

@@ -3,9 +3,10 @@
 //! * The GPU image equals the CPU reference renderer's (`nelf_render::render_asset`) for
 //!   the same asset — written and read back through the file format — camera and
 //!   lighting: PSNR ≥ 45 dB, for 8-bit and f16 coefficients, all and truncated ranks.
-//! * A view-dependent asset (format 1.2) too, from two eyes on opposite sides, for 8-bit
-//!   and f16 view coefficients; its image differs from the view-independent asset's and
-//!   from the one with the view direction reversed by far more than the GPU's error.
+//! * A view-dependent asset (format 1.2, also through a file) too, from two eyes on
+//!   opposite sides, for 8-bit and f16 view coefficients; its image differs from the
+//!   view-independent asset's and from the one with the view direction reversed by far
+//!   more than the GPU's error.
 //! * Relighting after an environment rotation equals a fresh relight with the rotated map.
 //! * A damaged or invalid asset is an error value, and the renderer keeps working.
 
@@ -28,12 +29,16 @@ fn renderer() -> GpuRenderer {
 
 /// A synthetic head written to a file and read back (what the viewer would load).
 fn asset_through_file(voxels: usize, rank: usize, encoding: CoefficientEncoding, seed: u64) -> Asset {
-    let asset = SyntheticField::new(voxels, seed).asset(rank, encoding).unwrap();
+    through_file(&SyntheticField::new(voxels, seed).asset(rank, encoding).unwrap())
+}
+
+/// `asset` written to a file and read back.
+fn through_file(asset: &Asset) -> Asset {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("head.nelf");
-    write_asset(&path, &asset, &WriteOptions::default()).unwrap();
+    write_asset(&path, asset, &WriteOptions::default()).unwrap();
     let back = read_asset(&path).unwrap();
-    assert_eq!(back, asset);
+    assert_eq!(&back, asset);
     back
 }
 
@@ -280,8 +285,8 @@ fn gpu_matches_cpu_for_view_dependent_assets() {
         render_asset(asset, cam, &env, rotation, None, &MarchSettings::default()).unwrap()
     };
     for encoding in [CoefficientEncoding::U8Affine, CoefficientEncoding::F16] {
-        let flat = SyntheticField::new(40_000, 5).asset(6, encoding).unwrap();
-        let asset = with_view(&flat, encoding, 3);
+        let flat = asset_through_file(40_000, 6, encoding, 5);
+        let asset = through_file(&with_view(&flat, encoding, 3));
         // The view-independent asset first: the renderer then switches to the view path.
         gpu.load_asset(&flat).unwrap();
         assert_eq!(gpu.asset_info().unwrap().view, None);
