@@ -42,7 +42,7 @@ use crate::config::{BakeConfig, EncodingChoice};
 use crate::error::{BakeError, Result};
 use crate::eval::{EVAL_PIXEL_GRID, HeldAside, data_range, load_held_aside};
 use crate::jobs::with_capture_job;
-use crate::pipeline::{BakeOutput, SampledField, finish_bake, sample_field};
+use crate::pipeline::{BakeOutput, SampledField, add_view_dependence, finish_bake, sample_field};
 use crate::progress::Progress;
 use crate::rank::{candidate_ranks, light_texels};
 use crate::source::GroundTruth;
@@ -417,7 +417,23 @@ pub fn bake_capture_to_target(
                     encoding: c.encoding,
                     ..config_r.clone()
                 };
-                let output = finish_bake(job, &config_c, progress, &sampled)?;
+                let mut output = finish_bake(job, &config_c, progress, &sampled)?;
+                // The view part (`--view-dependence`), judged at the same held-aside views;
+                // dropped again when it breaks the byte budget.
+                add_view_dependence(job, &config_c, progress, &sampled, &mut output)?;
+                if let Some(max) = args.max_bytes
+                    && output.asset.view.is_some()
+                    && encoded_bytes(&output.asset)? > max
+                {
+                    output.asset.view = None;
+                    if let Some(v) = output.report.view.as_mut() {
+                        v.chosen = crate::view::ViewChoice::Off;
+                        v.chosen_index = None;
+                    }
+                    if let Some(meta) = output.asset.metadata.as_object_mut() {
+                        meta.insert("view_dependence".into(), serde_json::json!({ "dropped": "over --max-bytes" }));
+                    }
+                }
                 let verified = held_aside_psnr(&output.asset, &held, config.step_voxels)?;
                 if args.target_psnr.is_none_or(|t| verified >= t) {
                     return Ok(Some((output, i, verified)));

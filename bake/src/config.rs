@@ -227,7 +227,8 @@ pub struct BakeConfig {
     #[arg(long, default_value_t = 0.1)]
     pub quantization_share: f64,
     /// View-dependent light transport (sheen, highlights): `auto` fits the candidates
-    /// (sh1, sh2, 3 learned lobes) and keeps the best only when it gains more than
+    /// (3 learned lobes at view ranks 4, 8, 16; sh1 and sh2 at 8) and keeps the best
+    /// (the smallest within 0.1 dB of it) only when it gains more than
     /// --view-min-gain-db at the judging views (the capture's held-aside targets, else
     /// its own views); `off`; `sh1`/`sh2` (spherical harmonics of the outgoing direction
     /// up to degree 1 / 2); or N (1..=9) lobes learned per asset.
@@ -238,8 +239,8 @@ pub struct BakeConfig {
     #[arg(long, default_value_t = DEFAULT_VIEW_MIN_GAIN_DB)]
     #[serde(default = "default_view_min_gain_db")]
     pub view_min_gain_db: f64,
-    /// Rank of the view basis (default: the smallest keeping 99 % of the fitted
-    /// residual's energy, at most --max-view-rank).
+    /// Rank of the view basis (default: `auto` tries 4, 8 and --max-view-rank for three
+    /// learned lobes and 8 for sh1 and sh2; an explicit choice takes 8).
     #[arg(long)]
     #[serde(default)]
     pub view_rank: Option<usize>,

@@ -439,7 +439,13 @@ pub fn add_view_dependence(
     )?;
     output.report.timings.view_secs = report.secs;
     if let Some(meta) = output.asset.metadata.as_object_mut() {
-        meta.insert("view_dependence".into(), serde_json::to_value(&report).unwrap_or_default());
+        // Timings stay out of the file (they go to the .bake.json), so bakes repeat
+        // byte for byte.
+        let mut recorded = serde_json::to_value(&report).unwrap_or_default();
+        if let Some(fields) = recorded.as_object_mut() {
+            fields.remove("secs");
+        }
+        meta.insert("view_dependence".into(), recorded);
     }
     output.report.view = Some(report);
     output.asset.validate()?;

@@ -275,8 +275,28 @@ fn finish(output: &mut BakeOutput, config: &BakeConfig, args: &OutputArgs) -> an
         if r.met_target { "" } else { ", target NOT met" },
         -10.0 * r.reference_relative_error.log10()
     );
+    if let Some(v) = &r.view {
+        let kept = v.chosen_index.map(|i| &v.candidates[i]);
+        let gain = |c: &nelf_bake::view::ViewCandidate| c.gain_db.map_or_else(|| "not judged".into(), |g| format!("{g:+.2} dB"));
+        match kept {
+            Some(c) => println!(
+                "  view dependence {} ({}): {} lobes × view rank {}, {} at {}",
+                v.chosen, v.requested, c.lobes, c.rank, gain(c), v.judged_at
+            ),
+            None => println!(
+                "  view dependence off ({}): {}",
+                v.requested,
+                if v.candidates.is_empty() {
+                    format!("residual {:.1e} of the transport, nothing to fit or no views to judge at", v.residual_ratio)
+                } else {
+                    let best = v.candidates.iter().filter_map(|c| c.gain_db).fold(f64::NEG_INFINITY, f64::max);
+                    format!("best candidate {best:+.2} dB at {}, below the threshold", v.judged_at)
+                }
+            ),
+        }
+    }
     println!(
-        "  seconds: hull {:.2}, reference {:.2}, density {:.2}, weights {:.2}, light {:.2}, pca {:.2}, rank {:.2}, write {:.2}",
+        "  seconds: hull {:.2}, reference {:.2}, density {:.2}, weights {:.2}, light {:.2}, pca {:.2}, rank {:.2}, view {:.2}, write {:.2}",
         t.hull_secs,
         t.reference_secs,
         t.density_secs,
@@ -284,6 +304,7 @@ fn finish(output: &mut BakeOutput, config: &BakeConfig, args: &OutputArgs) -> an
         t.lt_secs,
         t.pca_secs,
         t.rank_secs,
+        t.view_secs,
         t.write_secs
     );
     println!("  settings and report: {}", sidecar_path(&args.out).display());
