@@ -3,18 +3,23 @@
 //! compare ratios taken in one run).
 //!
 //! ```text
-//! cargo run --release -p nelf-viewer --example bench -- [ASSET.nelf ...] [--reps N]
+//! cargo run --release -p nelf-viewer --example bench -- [ASSET.nelf ...] [--reps N] [--view]
 //! ```
 //!
 //! Without assets it builds a synthetic portrait-sized asset (`nelf_format::synthetic`,
-//! ≈ 300 k voxels, K = 12, 8-bit coefficients). For each asset it prints, as markdown:
+//! ≈ 300 k voxels, K = 12, 8-bit coefficients). `--view` gives every asset without one a
+//! synthetic view-dependent part (format 1.2: J = 3 lobes, `K_v` = 8, 8-bit coefficients;
+//! `nelf_format::synthetic::synthetic_view`). For each asset it prints, as markdown:
 //! GPU memory, relight-pass ms, frame ms at 512² and 1920×1080 with relighting every
 //! frame and without (the march alone over the precomputed RGBA atlas) and their ratio,
 //! jitter on and off, trilinear samples per frame and per second, and — as the ceiling
 //! of a texture march on this device — the bare dense march of PLATFORM.md (128³
 //! RGBA16F, 512² rays × 128 steps, every ray taking all its steps) measured in the same
 //! run; plus how close the GPU image is to the CPU reference (PSNR at 256²) and the CPU
-//! reference's own time for that frame.
+//! reference's own time for that frame. For a view-dependent asset also frame ms at 512²
+//! and 1080p with the camera static (the march alone) and moving every frame (view pass +
+//! march), beside the same asset without its view part, as ratios, and the view pass's
+//! own ms.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -22,6 +27,7 @@ use std::time::Instant;
 use glam::{DMat3, DVec3};
 use nelf_format::conventions::{LatLong, PinholeCamera, direction, rotation_y};
 use nelf_format::synthetic::SyntheticField;
+use nelf_format::synthetic::synthetic_view;
 use nelf_format::{Asset, CoefficientEncoding, WriteOptions, read_asset, write_asset};
 use nelf_render::{Image, MarchSettings, render_asset};
 use nelf_viewer::shaders::{DENSE_MARCH_WGSL, DenseParams, preprocess};
@@ -88,13 +94,18 @@ fn sky() -> Result<LatLong, BoxError> {
 /// A portrait framing: the asset's box seen from the front (+z), slightly from the
 /// right and above, with its bounding sphere filling the narrower field of view.
 fn portrait_camera(asset: &Asset, width: u32, height: u32) -> PinholeCamera {
+    orbit_camera(asset, width, height, 20.0)
+}
+
+/// [`portrait_camera`] from azimuth `azimuth_deg` (20° is the portrait's).
+fn orbit_camera(asset: &Asset, width: u32, height: u32, azimuth_deg: f64) -> PinholeCamera {
     let lo = DVec3::from_array(asset.grid.bbox_min_m);
     let hi = DVec3::from_array(asset.grid.bbox_max_m());
     let centre = 0.5 * (lo + hi);
     let fov_x = 30f64.to_radians();
     let fov_y = 2.0 * ((0.5 * fov_x).tan() * f64::from(height) / f64::from(width)).atan();
     let distance = 0.5 * (hi - lo).length() / (0.5 * fov_x.min(fov_y)).sin();
-    let (az, el) = (20f64.to_radians(), 10f64.to_radians());
+    let (az, el) = (azimuth_deg.to_radians(), 10f64.to_radians());
     let eye = centre + distance * DVec3::new(el.cos() * az.sin(), el.sin(), el.cos() * az.cos());
     PinholeCamera::look_at(eye, centre, DVec3::Y, width, height, fov_x)
 }
@@ -224,6 +235,104 @@ fn dense_baseline(gpu: &GpuRenderer, reps: usize) -> Result<(Timing, u64), BoxEr
     Ok((timing, u64::from(size) * u64::from(size) * u64::from(steps)))
 }
 
+/// Interleaved timings of `jobs` blocking GPU jobs (`run(i)` runs job `i`): each job runs
+/// twice to warm up, then the jobs take turns `reps` times, so that a change in the
+/// machine's load (it is shared) weighs on all of them alike.
+fn time_interleaved(
+    reps: usize,
+    jobs: usize,
+    mut run: impl FnMut(usize) -> Result<(), BoxError>,
+) -> Result<Vec<Timing>, BoxError> {
+    for job in 0..jobs {
+        run(job)?;
+        run(job)?;
+    }
+    let mut times = vec![Vec::with_capacity(reps.max(1)); jobs];
+    for _ in 0..reps.max(1) {
+        for (job, t) in times.iter_mut().enumerate() {
+            let start = Instant::now();
+            run(job)?;
+            t.push(start.elapsed().as_secs_f64() * 1e3);
+        }
+    }
+    Ok(times
+        .into_iter()
+        .map(|mut t| {
+            t.sort_by(f64::total_cmp);
+            Timing {
+                min: t[0],
+                median: t[t.len() / 2],
+            }
+        })
+        .collect())
+}
+
+/// A view-dependent asset against itself without its view part: frame ms at 512² and
+/// 1080p with the camera static (march only) and moving every frame (a new eye, so view
+/// pass and march for the view-dependent asset), their ratios, and the view pass alone.
+/// The five measurements are interleaved, on three renderers (the view-independent
+/// asset; the view-dependent one with a static camera; the same moving), so that no
+/// measurement disturbs another's state.
+fn bench_view_dependence(gpu: &mut GpuRenderer, asset: &Asset, reps: usize) -> Result<(), BoxError> {
+    let Some(view) = &asset.view else {
+        return Ok(());
+    };
+    let mut flat = asset.clone();
+    flat.view = None;
+    let env = sky()?;
+    let mut flat_gpu = GpuRenderer::new_headless()?;
+    flat_gpu.load_asset(&flat)?;
+    flat_gpu.set_lighting(&env, DMat3::IDENTITY)?;
+    let mut static_gpu = GpuRenderer::new_headless()?;
+    static_gpu.load_asset(asset)?;
+    static_gpu.set_lighting(&env, DMat3::IDENTITY)?;
+    gpu.load_asset(asset)?;
+    gpu.set_lighting(&env, DMat3::IDENTITY)?;
+    let settings = ViewSettings {
+        march: MarchSettings::default(),
+        jitter: false,
+        frame_index: 0,
+        view: MarchView::Shaded,
+        pass: MarchPass::Fragment,
+    };
+    println!(
+        "\nView dependence (J = {} lobes, K_v = {}, {:?} coefficients): frame ms (fragment march) of \
+         the asset against itself without its view part, the five measurements interleaved; moving = \
+         a new eye every frame (0.25° of orbit); ratio = view-dependent / view-independent (fastest runs)\n",
+        view.lobe_count(),
+        view.rank(),
+        view.coefficients.encoding()
+    );
+    println!(
+        "| frame | view-independent, static (ms) | view-dependent, static (ms) | ratio | view-independent, moving (ms) | view-dependent, moving (ms) | ratio | view pass alone (ms) |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
+    for (w, h) in [(512u32, 512u32), (1920, 1080)] {
+        let camera = portrait_camera(asset, w, h);
+        let mut frame = 0u32;
+        let times = time_interleaved(reps, 5, |job| {
+            frame += 1;
+            let moving = orbit_camera(asset, w, h, 20.0 + 0.25 * f64::from(frame % 40));
+            match job {
+                0 => flat_gpu.frame_blocking(&camera, &settings)?,
+                1 => static_gpu.frame_blocking(&camera, &settings)?,
+                2 => flat_gpu.frame_blocking(&moving, &settings)?,
+                3 => gpu.frame_blocking(&moving, &settings)?,
+                _ => gpu.view_pass_blocking(&moving)?,
+            }
+            Ok(())
+        })?;
+        let [flat_fixed, fixed, flat_moving, moving, view_pass] =
+            [times[0], times[1], times[2], times[3], times[4]];
+        println!(
+            "| {w}×{h} | {flat_fixed} | {fixed} | {:.2} | {flat_moving} | {moving} | {:.2} | {view_pass} |",
+            fixed.min / flat_fixed.min,
+            moving.min / flat_moving.min
+        );
+    }
+    Ok(())
+}
+
 fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) -> Result<(), BoxError> {
     let mut notes = Vec::new();
     let start = Instant::now();
@@ -234,23 +343,28 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
     let m = info.memory;
     println!("\n### {name}\n");
     println!(
-        "{} bricks + {} halo slots, {} voxels, K = {}, atlas {}×{}×{} texels; upload {upload_ms:.0} ms",
+        "{} bricks + {} halo slots, {} voxels, K = {}, {}, atlas {}×{}×{} texels; upload {upload_ms:.0} ms",
         info.bricks,
         info.halo_slots,
         info.bricks * 512,
         info.rank,
+        info.view.map_or_else(
+            || "view-independent".to_string(),
+            |v| format!("view-dependent (J = {}, K_v = {})", v.lobes, v.rank)
+        ),
         info.atlas_texels[0],
         info.atlas_texels[1],
         info.atlas_texels[2]
     );
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
     println!(
-        "GPU memory: {:.2} MiB total = atlas {:.2} + coefficients {:.2} + density {:.2} + neighbour slots {:.3} + indirection {:.3} + other {:.3}\n",
+        "GPU memory: {:.2} MiB total = atlas {:.2} + coefficients {:.2} + density {:.2} + view part {:.2} + brick cells {:.3} + indirection {:.3} + other {:.3}\n",
         mib(m.total()),
         mib(m.atlas_bytes),
         mib(m.coefficient_bytes),
         mib(m.density_bytes),
-        mib(m.neighbour_bytes),
+        mib(m.view_bytes),
+        mib(m.brick_cell_bytes),
         mib(m.indirection_bytes),
         mib(m.other_bytes)
     );
@@ -374,16 +488,19 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
         "\nGPU vs CPU reference at 256²: PSNR {:.1} dB; CPU reference (project, relight, march; rayon) {cpu_ms:.0} ms, GPU march {gpu_frame} ms",
         psnr(&want, &got)
     );
-    Ok(())
+    bench_view_dependence(gpu, asset, reps)
 }
 
 fn main() -> Result<(), BoxError> {
     let mut paths: Vec<PathBuf> = Vec::new();
     let mut reps = 9usize;
+    let mut add_view = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         if a == "--reps" {
             reps = args.next().ok_or("--reps needs a number")?.parse()?;
+        } else if a == "--view" {
+            add_view = true;
         } else {
             paths.push(PathBuf::from(a));
         }
@@ -406,8 +523,14 @@ fn main() -> Result<(), BoxError> {
         paths.push(path);
     }
     for path in &paths {
-        let asset = read_asset(path)?;
-        bench_asset(&mut gpu, &path.display().to_string(), &asset, reps)?;
+        let mut asset = read_asset(path)?;
+        let mut name = path.display().to_string();
+        if add_view && asset.view.is_none() {
+            asset.view = Some(synthetic_view(&asset, 3, 8, CoefficientEncoding::U8Affine, 7)?);
+            asset.validate()?;
+            name.push_str(" + synthetic view part (J = 3, K_v = 8)");
+        }
+        bench_asset(&mut gpu, &name, &asset, reps)?;
     }
     Ok(())
 }
