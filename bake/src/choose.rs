@@ -431,7 +431,10 @@ pub fn bake_capture_to_target(
                         v.chosen_index = None;
                     }
                     if let Some(meta) = output.asset.metadata.as_object_mut() {
-                        meta.insert("view_dependence".into(), serde_json::json!({ "dropped": "over --max-bytes" }));
+                        meta.insert(
+                            "view_dependence".into(),
+                            serde_json::json!({ "dropped": "over --max-bytes" }),
+                        );
                     }
                 }
                 let verified = held_aside_psnr(&output.asset, &held, config.step_voxels)?;

@@ -368,15 +368,24 @@ impl BakeConfig {
             return bad(format!("--lead-voxels {} must be in (0, 2]", self.lead_voxels));
         }
         if !(1..=LT_DIM).contains(&self.max_view_rank) {
-            return bad(format!("--max-view-rank {} must be in 1..={LT_DIM}", self.max_view_rank));
+            return bad(format!(
+                "--max-view-rank {} must be in 1..={LT_DIM}",
+                self.max_view_rank
+            ));
         }
         if let Some(k) = self.view_rank
             && !(1..=self.max_view_rank).contains(&k)
         {
-            return bad(format!("--view-rank {k} must be in 1..=--max-view-rank ({})", self.max_view_rank));
+            return bad(format!(
+                "--view-rank {k} must be in 1..=--max-view-rank ({})",
+                self.max_view_rank
+            ));
         }
         if !self.view_min_gain_db.is_finite() {
-            return bad(format!("--view-min-gain-db {} must be finite", self.view_min_gain_db));
+            return bad(format!(
+                "--view-min-gain-db {} must be finite",
+                self.view_min_gain_db
+            ));
         }
         self.march().validate()?;
         Ok(())

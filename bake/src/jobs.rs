@@ -15,10 +15,10 @@ use nelf_scene::render::render_lt_image;
 use nelf_scene::synth::{SynthConfig, camera_for, source_viewpoints};
 use nelf_scene::tracer::{LtTracer, TraceSettings};
 
-use crate::eval::{HeldAside, load_held_aside};
 use crate::capture_in::LoadedCapture;
 use crate::config::{BakeConfig, ShellPlacement};
 use crate::error::Result;
+use crate::eval::{HeldAside, load_held_aside};
 use crate::grid::{
     GridPlan, geometry_for_box, occupied_box, plan_all_bricks, plan_from_hull, voxel_size_for,
 };

@@ -21,9 +21,8 @@ use nelf_scene::tracer::MAX_AVERAGED_DIRECTIONS;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{BakeConfig, ViewPolicyChoice};
-use crate::eval::HeldAside;
-use crate::view::{ViewChoice, ViewReport, ViewSettings, choose_view};
 use crate::error::{BakeError, Result, io_error};
+use crate::eval::HeldAside;
 use crate::grid::{GridPlan, evaluate_density, evaluate_light_transport, light_transport_band};
 use crate::pca::{WeightedPca, fit_weighted_pca, project_coefficients};
 use crate::progress::Progress;
@@ -32,6 +31,7 @@ use crate::rank::{
     light_texels, reduced_camera, reference_renders, relative_error_vs_images, test_environments,
     unquantized_radiance,
 };
+use crate::view::{ViewChoice, ViewReport, ViewSettings, choose_view};
 
 /// The one 8-bit step floor for every component
 /// (`Coefficients::quantize_with_min_step`): uniform rounding with step `δ` adds

@@ -25,8 +25,9 @@
 //!    choice of lobes is then an exact weighted least-squares fit without new samples.
 //! 4. **Lobes** (`--view-dependence`): `sh1` (the four harmonics of degrees 0–1), `sh2`
 //!    (all nine), or `N` lobes learned per asset: the top `N` eigenvectors of the
-//!    visibility-weighted second moment of the fitted harmonic coefficients (SNeRG's idea
-//!    of a small per-asset decoder, kept linear so relighting stays a dot product).
+//!    visibility-weighted second moment of the fitted harmonic coefficients (a small
+//!    per-asset decoder as in Hedman et al. 2021, "Baking neural radiance fields", kept linear so relighting
+//!    stays a dot product).
 //!    `auto` fits the candidates, renders each at the judging views (the capture's
 //!    held-aside targets, else its own views) and keeps the best only when it gains more
 //!    than `--view-min-gain-db` over the view-independent asset.
@@ -167,7 +168,12 @@ fn density_normal(grid: &BrickGrid, density: &[f32], p: DVec3) -> DVec3 {
 /// One voxel's weighted normal equations over the harmonics: `G = Σ_d w_d y_d y_dᵀ`
 /// (9 × 9, row-major) and `h = Σ_d w_d y_d r_dᵀ` (9 × `dim`, row-major) for residuals
 /// `r_d` of `dim` numbers.
-fn normal_equations(weights: &[f64], harmonics: &[[f32; VIEW_HARMONICS]], residuals: &[f64], dim: usize) -> (Vec<f64>, Vec<f64>) {
+fn normal_equations(
+    weights: &[f64],
+    harmonics: &[[f32; VIEW_HARMONICS]],
+    residuals: &[f64],
+    dim: usize,
+) -> (Vec<f64>, Vec<f64>) {
     let mut g = vec![0.0f64; VIEW_HARMONICS * VIEW_HARMONICS];
     let mut h = vec![0.0f64; VIEW_HARMONICS * dim];
     for (d, (&w, y)) in weights.iter().zip(harmonics).enumerate() {
@@ -209,7 +215,10 @@ fn solve_lobes(g: &[f64], h: &[f64], dim: usize, lobes: &[f64]) -> Vec<f64> {
         Some(c) => {
             let b = c.solve(&rhs);
             // Row-major out.
-            (0..j).flat_map(|r| (0..dim).map(move |c| (r, c))).map(|(r, c)| b[(r, c)]).collect()
+            (0..j)
+                .flat_map(|r| (0..dim).map(move |c| (r, c)))
+                .map(|(r, c)| b[(r, c)])
+                .collect()
         }
         None => vec![0.0; j * dim],
     }
@@ -240,6 +249,7 @@ pub struct ViewFit {
 /// Samples and fits the residual of `field` over the band voxels `lt_voxels` (whose
 /// view-independent vectors are `lt`, `384` each, and visibility weights `weights`).
 /// `max_rank` caps the view basis.
+#[allow(clippy::too_many_arguments)] // the band's five arrays, where and how to sample
 pub fn fit_view(
     field: &dyn FieldSource,
     grid: &BrickGrid,
@@ -262,7 +272,8 @@ pub fn fit_view(
     }
     let geometry = *grid.geometry();
     let directions = sample_directions();
-    let harmonics: Vec<[f32; VIEW_HARMONICS]> = directions.iter().map(|d| view_harmonics(d.to_array())).collect();
+    let harmonics: Vec<[f32; VIEW_HARMONICS]> =
+        directions.iter().map(|d| view_harmonics(d.to_array())).collect();
     let position = |v: usize| voxel_position(&geometry, grid.bricks(), v);
     let direction_weights = |v: usize| -> Vec<f64> {
         let x = position(v);
@@ -273,14 +284,20 @@ pub fn fit_view(
             .map(|d| {
                 let d = d.as_dvec3();
                 let facing = if n == DVec3::ZERO { 1.0 } else { n.dot(d).max(0.0) };
-                let near: f64 = toward.iter().map(|c| (VIEW_KERNEL * (c.dot(d) - 1.0)).exp()).sum();
+                let near: f64 = toward
+                    .iter()
+                    .map(|c| (VIEW_KERNEL * (c.dot(d) - 1.0)).exp())
+                    .sum();
                 facing * (near / toward.len().max(1) as f64 + VIEW_WEIGHT_FLOOR)
             })
             .collect()
     };
     // Transport toward every direction of a batch of band entries, minus T̄, in f64.
     let residuals = |entries: &[usize]| -> Result<Vec<f64>> {
-        let points: Vec<Vec3> = entries.iter().map(|&e| position(lt_voxels[e]).as_vec3()).collect();
+        let points: Vec<Vec3> = entries
+            .iter()
+            .map(|&e| position(lt_voxels[e]).as_vec3())
+            .collect();
         let mut sigma = vec![0.0f32; points.len()];
         let mut out = vec![0.0f32; points.len() * VIEW_DIRECTIONS * LT_DIM];
         field.evaluate_directions(&points, &directions, &mut sigma, &mut out)?;
@@ -312,9 +329,33 @@ pub fn fit_view(
     let mut rows: Vec<f64> = Vec::with_capacity(sample.len() * VIEW_HARMONICS * LT_DIM);
     let (mut residual_energy, mut mean_energy) = (0.0f64, 0.0f64);
     let identity: Vec<f64> = (0..VIEW_HARMONICS * VIEW_HARMONICS)
-        .map(|i| if i / VIEW_HARMONICS == i % VIEW_HARMONICS { 1.0 } else { 0.0 })
+        .map(|i| {
+            if i / VIEW_HARMONICS == i % VIEW_HARMONICS {
+                1.0
+            } else {
+                0.0
+            }
+        })
         .collect();
-    for chunk in sample.chunks(BATCH) {
+    for (c, chunk) in sample.chunks(BATCH).enumerate() {
+        let quiet = NO_VIEW_DEPENDENCE * NO_VIEW_DEPENDENCE * mean_energy;
+        if c == 1 && (residual_energy.is_nan() || residual_energy < quiet) {
+            // No view dependence in the first batch (a matte field gives exactly 0):
+            // the rest is not sampled.
+            let k_max = max_rank.clamp(1, LT_DIM);
+            return Ok(ViewFit {
+                basis: (0..k_max * LT_DIM)
+                    .map(|i| if i / LT_DIM == i % LT_DIM { 1.0 } else { 0.0 })
+                    .collect(),
+                eigenvalues: vec![0.0; LT_DIM],
+                normal: Vec::new(),
+                projected: Vec::new(),
+                weights: Vec::new(),
+                residual_ratio: (residual_energy / mean_energy.max(1e-300)).sqrt(),
+                secs: start.elapsed().as_secs_f64(),
+                skipped: true,
+            });
+        }
         let r = residuals(chunk)?;
         let fitted: Vec<(Vec<f64>, f64, f64)> = chunk
             .par_iter()
@@ -328,12 +369,24 @@ pub fn fit_view(
                 let res: f64 = w
                     .iter()
                     .enumerate()
-                    .map(|(d, wd)| wd * rv[d * LT_DIM..(d + 1) * LT_DIM].iter().map(|x| x * x).sum::<f64>())
+                    .map(|(d, wd)| {
+                        wd * rv[d * LT_DIM..(d + 1) * LT_DIM]
+                            .iter()
+                            .map(|x| x * x)
+                            .sum::<f64>()
+                    })
                     .sum::<f64>()
                     / wsum.max(1e-30);
-                let m: f64 = lt[e * LT_DIM..(e + 1) * LT_DIM].iter().map(|&x| f64::from(x).powi(2)).sum();
+                let m: f64 = lt[e * LT_DIM..(e + 1) * LT_DIM]
+                    .iter()
+                    .map(|&x| f64::from(x).powi(2))
+                    .sum();
                 let scale = weights[e].sqrt();
-                (b.into_iter().map(|x| x * scale).collect(), weights[e] * res, weights[e] * m)
+                (
+                    b.into_iter().map(|x| x * scale).collect(),
+                    weights[e] * res,
+                    weights[e] * m,
+                )
             })
             .collect();
         for (b, res, m) in fitted {
@@ -359,7 +412,7 @@ pub fn fit_view(
     }
     let basis_f64: Vec<f64> = basis.iter().map(|&v| f64::from(v)).collect();
     let residual_ratio = (residual_energy / mean_energy.max(1e-300)).sqrt();
-    if !(residual_ratio >= NO_VIEW_DEPENDENCE) {
+    if residual_ratio.is_nan() || residual_ratio < NO_VIEW_DEPENDENCE {
         return Ok(ViewFit {
             basis,
             eigenvalues,
@@ -389,7 +442,11 @@ pub fn fit_view(
                 for (d, pd) in p.chunks_exact_mut(k_max).enumerate() {
                     let rd = &rv[d * LT_DIM..(d + 1) * LT_DIM];
                     for (k, o) in pd.iter_mut().enumerate() {
-                        *o = basis_f64[k * LT_DIM..(k + 1) * LT_DIM].iter().zip(rd).map(|(a, b)| a * b).sum();
+                        *o = basis_f64[k * LT_DIM..(k + 1) * LT_DIM]
+                            .iter()
+                            .zip(rd)
+                            .map(|(a, b)| a * b)
+                            .sum();
                     }
                 }
                 normal_equations(&w, &harmonics, &p, k_max)
@@ -427,7 +484,13 @@ impl ViewFit {
     pub fn lobes(&self, choice: ViewChoice) -> Vec<f64> {
         let rows = |j: usize| -> Vec<f64> {
             (0..j * VIEW_HARMONICS)
-                .map(|i| if i / VIEW_HARMONICS == i % VIEW_HARMONICS { 1.0 } else { 0.0 })
+                .map(|i| {
+                    if i / VIEW_HARMONICS == i % VIEW_HARMONICS {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                })
                 .collect()
         };
         match choice {
@@ -531,10 +594,21 @@ mod tests {
         // r(ω) = 2·y_1(ω) − y_5(ω) (+ nothing else) for dim = 1, all directions weighted.
         let dirs = sample_directions();
         let harmonics: Vec<_> = dirs.iter().map(|d| view_harmonics(d.to_array())).collect();
-        let r: Vec<f64> = harmonics.iter().map(|y| 2.0 * f64::from(y[1]) - f64::from(y[5])).collect();
+        let r: Vec<f64> = harmonics
+            .iter()
+            .map(|y| 2.0 * f64::from(y[1]) - f64::from(y[5]))
+            .collect();
         let w = vec![1.0; dirs.len()];
         let (g, h) = normal_equations(&w, &harmonics, &r, 1);
-        let identity: Vec<f64> = (0..G_LEN).map(|i| if i / VIEW_HARMONICS == i % VIEW_HARMONICS { 1.0 } else { 0.0 }).collect();
+        let identity: Vec<f64> = (0..G_LEN)
+            .map(|i| {
+                if i / VIEW_HARMONICS == i % VIEW_HARMONICS {
+                    1.0
+                } else {
+                    0.0
+                }
+            })
+            .collect();
         let b = solve_lobes(&g, &h, 1, &identity);
         assert!((b[1] - 2.0).abs() < 0.01 && (b[5] + 1.0).abs() < 0.01, "{b:?}");
         for (i, x) in b.iter().enumerate() {
@@ -592,7 +666,11 @@ pub struct ViewReport {
 }
 
 /// Mean PSNR of `asset` over `views` with [`JUDGE_PIXEL_GRID`]² rays per pixel.
-pub fn judge_psnr(asset: &nelf_format::Asset, views: &crate::eval::HeldAside, step_voxels: f32) -> Result<f64> {
+pub fn judge_psnr(
+    asset: &nelf_format::Asset,
+    views: &crate::eval::HeldAside,
+    step_voxels: f32,
+) -> Result<f64> {
     use nelf_render::{MarchSettings, render_asset};
     let settings = MarchSettings {
         step_voxels,
@@ -657,7 +735,17 @@ pub fn choose_view(
 ) -> Result<ViewReport> {
     let start = std::time::Instant::now();
     let (views, judged_at) = judge;
-    let fit = fit_view(field, grid, density, lt_voxels, lt, weights, eyes, settings.max_rank, progress)?;
+    let fit = fit_view(
+        field,
+        grid,
+        density,
+        lt_voxels,
+        lt,
+        weights,
+        eyes,
+        settings.max_rank,
+        progress,
+    )?;
     let base_bytes = encoded_bytes(asset)?;
     let mut report = ViewReport {
         requested: settings.choice,
@@ -678,7 +766,10 @@ pub fn choose_view(
     let max_rank = fit.max_rank();
     let default_rank = DEFAULT_VIEW_RANK.min(max_rank);
     let choices: Vec<(ViewChoice, usize)> = if explicit {
-        vec![(settings.choice, settings.rank.unwrap_or(default_rank).min(max_rank))]
+        vec![(
+            settings.choice,
+            settings.rank.unwrap_or(default_rank).min(max_rank),
+        )]
     } else if let Some(rank) = settings.rank {
         [ViewChoice::Sh1, ViewChoice::Learned(3), ViewChoice::Sh2]
             .into_iter()
@@ -708,7 +799,11 @@ pub fn choose_view(
             ViewDependence {
                 lobes: lobes.iter().map(|&x| x as f32).collect(),
                 basis: fit.basis[..LT_DIM].to_vec(),
-                coefficients: Coefficients::quantize(&vec![0.0; voxels * lobes.len() / VIEW_HARMONICS], lobes.len() / VIEW_HARMONICS, encoding)?,
+                coefficients: Coefficients::quantize(
+                    &vec![0.0; voxels * lobes.len() / VIEW_HARMONICS],
+                    lobes.len() / VIEW_HARMONICS,
+                    encoding,
+                )?,
             }
         } else {
             fit.view_part(&lobes, rank, voxels, lt_voxels, encoding)?

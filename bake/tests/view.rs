@@ -47,12 +47,14 @@ impl LobeField {
     }
 
     fn b(x: Vec3) -> f32 {
-        let h = mix64(mix64(u64::from(x.x.to_bits()) | u64::from(x.y.to_bits()) << 32) ^ u64::from(x.z.to_bits()));
+        let h = mix64(
+            mix64(u64::from(x.x.to_bits()) | u64::from(x.y.to_bits()) << 32) ^ u64::from(x.z.to_bits()),
+        );
         (h >> 40) as f32 / (1u64 << 24) as f32 * 2.0 - 1.0
     }
 
     fn lobe(omega: Vec3) -> f32 {
-        let c = (1.0 + omega.normalize().dot(axis())) / 2.0;
+        let c = f32::midpoint(1.0, omega.normalize().dot(axis()));
         c * c
     }
 
@@ -99,9 +101,18 @@ impl FieldSource for LobeField {
 /// near the surface and directions seen from outside (`n·ω ≥ 0.2`) within 35° of the
 /// direction toward one of the `eyes` (the fit is weighted toward the views), relative
 /// to the largest view-dependent term `max |g U|`.
-fn worst_relative_error(field: &LobeField, asset: &nelf_format::Asset, eyes: &[Vec3], with_view: bool) -> (f32, usize) {
+fn worst_relative_error(
+    field: &LobeField,
+    asset: &nelf_format::Asset,
+    eyes: &[Vec3],
+    with_view: bool,
+) -> (f32, usize) {
     let near_cos = 35f32.to_radians().cos();
-    let scale = field.u[0].iter().zip(&field.u[1]).map(|(a, b)| a + b).fold(0.0f32, f32::max);
+    let scale = field.u[0]
+        .iter()
+        .zip(&field.u[1])
+        .map(|(a, b)| a + b)
+        .fold(0.0f32, f32::max);
     let directions = nelf_bake::view::sample_directions();
     let (mut worst, mut checked) = (0.0f32, 0);
     let mut want = vec![0.0f32; LT_DIM];
@@ -172,7 +183,9 @@ fn a_known_lobe_is_reproduced() {
     let eyes: Vec<Vec3> = cameras.iter().map(|c| c.centre().as_vec3()).collect();
     let (off, checked) = worst_relative_error(&field, &out.asset, &eyes, false);
     let (on, _) = worst_relative_error(&field, &out.asset, &eyes, true);
-    eprintln!("worst relative error: view-independent {off:.4}, view-dependent {on:.4} over {checked} checks");
+    eprintln!(
+        "worst relative error: view-independent {off:.4}, view-dependent {on:.4} over {checked} checks"
+    );
     assert!(checked > 1000, "{checked}");
     // Measured: view-independent 0.40, view-dependent 0.053 (8-bit coefficients in both
     // parts and the fit's ridge bound it).
@@ -201,7 +214,11 @@ fn auto_keeps_nothing_for_a_matte_head() {
     eprintln!("{report:?}");
     assert!(out.asset.view.is_none());
     assert_eq!(report.chosen, ViewChoice::Off);
-    assert!(report.residual_ratio < nelf_bake::view::NO_VIEW_DEPENDENCE, "{}", report.residual_ratio);
+    assert!(
+        report.residual_ratio < nelf_bake::view::NO_VIEW_DEPENDENCE,
+        "{}",
+        report.residual_ratio
+    );
     assert!(report.candidates.is_empty(), "a matte field needs no candidates");
 }
 
@@ -223,9 +240,15 @@ fn sheen_gains() {
     for w in [0.04f32, 0.3] {
         let out = bake_tiny(w);
         let r = out.report.view.as_ref().unwrap();
-        eprintln!("weight {w}: base {:?} ratio {:.3} secs {:.1}", r.base_psnr_db, r.residual_ratio, r.secs);
+        eprintln!(
+            "weight {w}: base {:?} ratio {:.3} secs {:.1}",
+            r.base_psnr_db, r.residual_ratio, r.secs
+        );
         for c in &r.candidates {
-            eprintln!("   {} J{} K{} gain {:?} bytes {}", c.choice, c.lobes, c.rank, c.gain_db, c.bytes);
+            eprintln!(
+                "   {} J{} K{} gain {:?} bytes {}",
+                c.choice, c.lobes, c.rank, c.gain_db, c.bytes
+            );
         }
     }
 }
@@ -251,15 +274,29 @@ fn per_voxel_fit_at_target_directions() {
         let asset = &out.asset;
         {
             let dirs = nelf_bake::view::sample_directions();
-            let x = asset.voxel_position_m((0..asset.voxel_count()).find(|&v| asset.density_at(v) > 0.0 && asset.reconstruct_lt(v)[0] != asset.pca.mean[0]).unwrap()).as_vec3();
+            let x = asset
+                .voxel_position_m(
+                    (0..asset.voxel_count())
+                        .find(|&v| {
+                            asset.density_at(v) > 0.0 && asset.reconstruct_lt(v)[0] != asset.pca.mean[0]
+                        })
+                        .unwrap(),
+                )
+                .as_vec3();
             let mut many = vec![0.0f32; dirs.len() * LT_DIM];
             let mut d = [0.0f32];
-            job.field.evaluate_directions(&[x], &dirs, &mut d, &mut many).unwrap();
+            job.field
+                .evaluate_directions(&[x], &dirs, &mut d, &mut many)
+                .unwrap();
             let mut worst = 0.0f32;
             let mut one = vec![0.0f32; LT_DIM];
             for (i, dir) in dirs.iter().enumerate() {
-                job.field.evaluate(&[x], &ViewPolicy::Direction(*dir), &mut d, &mut one).unwrap();
-                for (a, b) in one.iter().zip(&many[i * LT_DIM..(i + 1) * LT_DIM]) { worst = worst.max((a - b).abs()); }
+                job.field
+                    .evaluate(&[x], &ViewPolicy::Direction(*dir), &mut d, &mut one)
+                    .unwrap();
+                for (a, b) in one.iter().zip(&many[i * LT_DIM..(i + 1) * LT_DIM]) {
+                    worst = worst.max((a - b).abs());
+                }
             }
             eprintln!("evaluate_directions vs evaluate: worst {worst}");
         }
@@ -275,17 +312,33 @@ fn per_voxel_fit_at_target_directions() {
                 }
                 let x = asset.voxel_position_m(v).as_vec3();
                 let base = asset.reconstruct_lt(v);
-                if base.iter().all(|&b| b == asset.pca.mean[0]) { continue; }
-                job.field.evaluate(&[x], &ViewPolicy::TowardPoint(eye.as_vec3()), &mut d, &mut want).unwrap();
+                if base.iter().all(|&b| b == asset.pca.mean[0]) {
+                    continue;
+                }
+                job.field
+                    .evaluate(&[x], &ViewPolicy::TowardPoint(eye.as_vec3()), &mut d, &mut want)
+                    .unwrap();
                 let mut got = base.to_vec();
                 let mut c = vec![0.0f32; view.coefficients.rank()];
                 view.coefficients.voxel_f32(v, &mut c);
                 view.add_to(&c, (eye.as_vec3() - x).to_array(), &mut got);
-                e_off += base.iter().zip(&want).map(|(a, b)| f64::from(a - b).powi(2)).sum::<f64>();
-                e_on += got.iter().zip(&want).map(|(a, b)| f64::from(a - b).powi(2)).sum::<f64>();
+                e_off += base
+                    .iter()
+                    .zip(&want)
+                    .map(|(a, b)| f64::from(a - b).powi(2))
+                    .sum::<f64>();
+                e_on += got
+                    .iter()
+                    .zip(&want)
+                    .map(|(a, b)| f64::from(a - b).powi(2))
+                    .sum::<f64>();
                 n += 1;
             }
-            eprintln!("eye {eye:?}: rms off {:.5} on {:.5} ({n} voxels)", (e_off / n as f64).sqrt(), (e_on / n as f64).sqrt());
+            eprintln!(
+                "eye {eye:?}: rms off {:.5} on {:.5} ({n} voxels)",
+                (e_off / n as f64).sqrt(),
+                (e_on / n as f64).sqrt()
+            );
         }
         Ok(())
     })

@@ -50,7 +50,10 @@ pub fn project_view_light(
 }
 
 /// [`project_view_light`] for an 8 × 16 map already in the asset's light frame.
-pub fn project_view_light_texels(view: &ViewDependence, light: &LatLong) -> Result<Vec<[f32; 3]>, RenderError> {
+pub fn project_view_light_texels(
+    view: &ViewDependence,
+    light: &LatLong,
+) -> Result<Vec<[f32; 3]>, RenderError> {
     // The view basis has no mean: project it as a PCA model with a zero mean.
     let as_pca = PcaModel {
         mean: vec![0.0; nelf_format::conventions::LT_DIM],
@@ -108,7 +111,11 @@ pub fn radiance_seen_from(asset: &Asset, base: &[[f32; 3]], lobes: &[[f32; 3]], 
             for (i, rgb) in chunk.iter_mut().enumerate() {
                 let v = task * VOXELS_PER_TASK + i;
                 let omega = (eye - asset.voxel_position_m(v)).as_vec3().to_array();
-                for (y, c) in view.lobe_values(omega).iter().zip(&lobes[v * count..(v + 1) * count]) {
+                for (y, c) in view
+                    .lobe_values(omega)
+                    .iter()
+                    .zip(&lobes[v * count..(v + 1) * count])
+                {
                     for ch in 0..3 {
                         rgb[ch] += y * c[ch];
                     }

@@ -277,20 +277,38 @@ fn finish(output: &mut BakeOutput, config: &BakeConfig, args: &OutputArgs) -> an
     );
     if let Some(v) = &r.view {
         let kept = v.chosen_index.map(|i| &v.candidates[i]);
-        let gain = |c: &nelf_bake::view::ViewCandidate| c.gain_db.map_or_else(|| "not judged".into(), |g| format!("{g:+.2} dB"));
+        let gain = |c: &nelf_bake::view::ViewCandidate| {
+            c.gain_db
+                .map_or_else(|| "not judged".into(), |g| format!("{g:+.2} dB"))
+        };
         match kept {
             Some(c) => println!(
                 "  view dependence {} ({}): {} lobes × view rank {}, {} at {}",
-                v.chosen, v.requested, c.lobes, c.rank, gain(c), v.judged_at
+                v.chosen,
+                v.requested,
+                c.lobes,
+                c.rank,
+                gain(c),
+                v.judged_at
             ),
             None => println!(
                 "  view dependence off ({}): {}",
                 v.requested,
                 if v.candidates.is_empty() {
-                    format!("residual {:.1e} of the transport, nothing to fit or no views to judge at", v.residual_ratio)
+                    format!(
+                        "residual {:.1e} of the transport, nothing to fit or no views to judge at",
+                        v.residual_ratio
+                    )
                 } else {
-                    let best = v.candidates.iter().filter_map(|c| c.gain_db).fold(f64::NEG_INFINITY, f64::max);
-                    format!("best candidate {best:+.2} dB at {}, below the threshold", v.judged_at)
+                    let best = v
+                        .candidates
+                        .iter()
+                        .filter_map(|c| c.gain_db)
+                        .fold(f64::NEG_INFINITY, f64::max);
+                    format!(
+                        "best candidate {best:+.2} dB at {}, below the threshold",
+                        v.judged_at
+                    )
                 }
             ),
         }

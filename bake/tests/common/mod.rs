@@ -81,7 +81,11 @@ pub fn in_analytic_hull(cameras: &[PinholeCamera], p: DVec3) -> bool {
 /// 64² views, `targets` held-aside targets under other lightings (direct light
 /// only, one sample per texel: seconds).
 pub fn tiny_capture(dir: &std::path::Path, targets: usize) {
-    tiny_capture_with_sheen(dir, targets, nelf_scene::synth::SynthConfig::default().specular_weight);
+    tiny_capture_with_sheen(
+        dir,
+        targets,
+        nelf_scene::synth::SynthConfig::default().specular_weight,
+    );
 }
 
 /// [`tiny_capture`] with the glossy lobe's share of the reflected energy set to
