@@ -7,8 +7,8 @@
 // * Indirection grid: one u32 per brick cell: a present brick's or a halo cell's slot,
 //   or a far cell's distance to the nearest present brick (see `FAR_FLAG`).
 // * Writing a voxel into the atlas: the texels (own slot and neighbours' aprons) that
-//   hold it, shared by the relight and view passes.
-// * f16 bits to f32, the view harmonics of format 1.2 and the per-voxel lobe buffer layout
+//   hold it, from its brick's neighbour block; shared by the relight and view passes.
+// * f16 ↔ f32 by hand, the view harmonics of format 1.2 and the per-voxel lobe buffer layout
 //   the relight pass writes for the view pass.
 // * Full-screen triangle, ray–box slab test, hashing for jitter, ACES (Narkowicz 2015 fit) tone mapping,
 //   and the sRGB transfer function (IEC 61966-2-1).
@@ -79,46 +79,65 @@ fn voxel_local(voxel: u32) -> vec3<i32> {
     return vec3<i32>(vec3<u32>(voxel & 7u, (voxel >> 3u) & 7u, (voxel >> 6u) & 7u));
 }
 
-// The atlas texels that hold voxel `local` ∈ [0, 8)³ of the present brick in cell `cell`
-// (slot `own_slot`, its index), written to `texels`; returns how many (1 to 8). They are its own slot's texel and the apron
-// texel (local − 8d) of the slot of each neighbouring cell `cell + d`, d ∈ {−1, 0, 1}³,
-// that the voxel borders (d_a = −1 where l_a = 0, +1 where l_a = 7) and that has a slot
-// (a present brick or a halo cell, viewer/src/atlas.rs). So a texel (slot s, local
-// m ∈ [−1, 8]³) holds the voxel at global voxel coordinates 8·cell(s) + m — its own
-// brick's inside, a neighbour's in the apron, and 0 where that brick is missing (never
-// written: wgpu creates textures zeroed; the CPU reference counts missing voxels as 0) —
-// so hardware trilinear filtering inside a slot equals the reference's trilinear across
-// brick borders. The caller stores its value at each (a storage texture cannot be passed
-// to a function in every language the shaders are exported to).
-fn voxel_texels(
-    indirection: texture_3d<u32>,
-    grid_bricks: vec3<i32>,
+// Neighbour blocks (viewer/src/atlas.rs, `neighbour_blocks`, builds them): per present
+// brick and octant o of its voxels (bit a set: local_a ≥ 4), the atlas slots of the 2×2×2
+// cells `cell + d` a voxel of that octant can border, d_a = e_a · s_a for entry
+// e = e_x + 2 e_y + 4 e_z (e_a ∈ {0, 1}, s_a = +1 in the upper half, −1 in the lower;
+// entry 0 is the brick's own slot), or NO_SLOT where that cell has none; two vec4<u32>
+// per octant (entries 0–3, 4–7), octant-major per brick: vec4 index (8 b + o) · 2 + h.
+const NO_SLOT: u32 = 0xffffffffu;
+
+// The octant of local voxel coordinates (its index among a brick's 8 neighbour blocks).
+fn voxel_octant(local: vec3<i32>) -> u32 {
+    let upper = vec3<u32>(local >= vec3<i32>(BRICK / 2));
+    return upper.x | (upper.y << 1u) | (upper.z << 2u);
+}
+
+// Writing a voxel of a present brick into the atlas (the relight and view passes): the
+// texels that hold voxel `local` ∈ [0, 8)³ are its own slot's and the apron texel
+// (local − 8d) of the slot of each neighbouring cell `cell + d` that the voxel borders
+// (d_a = −1 where l_a = 0, +1 where l_a = 7) and that has a slot (a present brick or a
+// halo cell, viewer/src/atlas.rs). So a texel (slot s, local m ∈ [−1, 8]³) holds the
+// voxel at global voxel coordinates 8·cell(s) + m — its own brick's inside, a
+// neighbour's in the apron, and 0 where that brick is missing (never written: wgpu
+// creates textures zeroed; the CPU reference counts missing voxels as 0) — so hardware
+// trilinear filtering inside a slot equals the reference's trilinear across brick
+// borders. A pass writes `value` with
+//
+//   let border = voxel_border(local);
+//   for (var ez = 0u; ez <= border.z; ez++) {
+//       for (var ey = 0u; ey <= border.y; ey++) {
+//           for (var ex = 0u; ex <= border.x; ex++) {
+//               let texel = voxel_texel(block_low, block_high, packing, local, vec3<u32>(ex, ey, ez));
+//               if texel.w != 0 { textureStore(atlas, texel.xyz, value); }
+//           }
+//       }
+//   }
+//
+// (`block_low`/`block_high`: entries 0–3 and 4–7 of the voxel's neighbour block). The
+// store stays in the pass: a storage texture cannot be a function argument in GLSL, which
+// the shaders are exported to, and gathering the texels in an array for the caller made
+// the relight pass ≈ 10 % slower on lavapipe.
+
+// 1 on the axes where voxel `local` borders the neighbouring cell of its octant.
+fn voxel_border(local: vec3<i32>) -> vec3<u32> {
+    return vec3<u32>((local == vec3<i32>(0)) | (local == vec3<i32>(BRICK - 1)));
+}
+
+// The texel (xyz) holding voxel `local` in the slot of entry e = e_x + 2e_y + 4e_z of its
+// neighbour block (e_a ≤ voxel_border(local)_a); w = 0 where that cell has no slot.
+fn voxel_texel(
+    block_low: vec4<u32>,
+    block_high: vec4<u32>,
     packing: SlotPacking,
-    own_slot: u32,
-    cell: vec3<i32>,
     local: vec3<i32>,
-    texels: ptr<function, array<vec3<i32>, 8>>,
-) -> u32 {
-    let low = select(vec3<i32>(0), vec3<i32>(-1), local == vec3<i32>(0));
-    let high = select(vec3<i32>(0), vec3<i32>(1), local == vec3<i32>(BRICK - 1));
-    var count = 0u;
-    for (var dz = low.z; dz <= high.z; dz++) {
-        for (var dy = low.y; dy <= high.y; dy++) {
-            for (var dx = low.x; dx <= high.x; dx++) {
-                let d = vec3<i32>(dx, dy, dz);
-                // The brick's own slot is its index; neighbours' come from the grid.
-                var entry = own_slot + 1u;
-                if any(d != vec3<i32>(0)) {
-                    entry = brick_entry(indirection, cell + d, grid_bricks);
-                }
-                if has_slot(entry) {
-                    (*texels)[count] = slot_coords(slot_of(entry), packing) * SLOT + local - d * BRICK + vec3<i32>(1);
-                    count++;
-                }
-            }
-        }
-    }
-    return count;
+    e: vec3<u32>,
+) -> vec4<i32> {
+    let entry = e.x | (e.y << 1u) | (e.z << 2u);
+    let slot = select(block_high, block_low, entry < 4u)[entry & 3u];
+    let side = select(vec3<i32>(-1), vec3<i32>(1), local >= vec3<i32>(BRICK / 2));
+    let d = vec3<i32>(e) * side;
+    return vec4<i32>(slot_coords(slot, packing) * SLOT + local - d * BRICK + vec3<i32>(1), i32(slot != NO_SLOT));
 }
 
 // IEEE binary16 bits (low 16 bits of `bits`) to f32, exactly, for finite values (the
@@ -207,10 +226,8 @@ fn lobe_buffer_words(lobes: u32) -> u32 {
     return 2u + (3u * lobes + 1u) / 2u;
 }
 
-// Largest lobe count (nelf_format::conventions::VIEW_HARMONICS, 9) and the lobe colours'
-// halves it takes, rounded up to whole words.
+// Largest lobe count (nelf_format::conventions::VIEW_HARMONICS, 9).
 const MAX_LOBES: u32 = 9u;
-const MAX_LOBE_HALVES: u32 = 28u;
 
 // Full-screen triangle: vertex `index` (0, 1, 2) has uv (0, 0), (2, 0), (0, 2); uv (0, 0)
 // is the top-left of the viewport and (1, 1) its bottom-right.

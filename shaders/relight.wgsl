@@ -9,7 +9,7 @@
 //
 // `relight`: one invocation per stored voxel (brick b, local l ∈ [0, 8)³): its K-term
 // dot product, with its density, is written to every atlas texel that holds it — its own
-// slot and the aprons of the neighbouring slots (common.wgsl, `voxel_texels`). rgb =
+// slot and the aprons of the neighbouring slots (common.wgsl, `voxel_texel`). rgb =
 // radiance, a = σ (1/m). Each voxel is shaded once however many texels show it.
 //
 // `relight_lobes` (view-dependent assets, format 1.2; mirrors nelf_render::view): the
@@ -51,19 +51,19 @@ const MAX_RANK: u32 = 384u;
 @group(0) @binding(2) var<storage, read> coefficients: array<u32>;
 // Density σ (1/m) as f16, two voxels per word.
 @group(0) @binding(3) var<storage, read> density: array<u32>;
-// Brick-cell coordinates of every present brick (common.wgsl, `brick_cell`).
-@group(0) @binding(4) var<storage, read> brick_cells: array<vec2<u32>>;
+// Per present brick and octant, the atlas slots its voxels can be written to
+// (common.wgsl, `voxel_texel`).
+@group(0) @binding(4) var<storage, read> neighbour_blocks: array<vec4<u32>>;
 @group(0) @binding(5) var atlas: texture_storage_3d<rgba16float, write>;
-@group(0) @binding(6) var indirection: texture_3d<u32>;
 
 // relight_lobes only. The view lighting folded with the view dequantisation: entry
 // j < MAX_LOBES is lobe j's mean colour (rgb), entry MAX_LOBES + n the per-code colour of
 // view coefficient n = j·K_v + i (J·K_v ≤ 384): 9 + 384 entries.
-@group(0) @binding(7) var<uniform> view_light: array<vec4<f32>, 393>;
+@group(0) @binding(6) var<uniform> view_light: array<vec4<f32>, 393>;
 // View coefficients, packed as the PCA ones (word-major, 4 codes or 2 halves per word).
-@group(0) @binding(8) var<storage, read> view_coefficients: array<u32>;
+@group(0) @binding(7) var<storage, read> view_coefficients: array<u32>;
 // The per-voxel lobe buffer (common.wgsl, `lobe_buffer_words`).
-@group(0) @binding(9) var<storage, read_write> voxel_lobes: array<u32>;
+@group(0) @binding(8) var<storage, read_write> voxel_lobes: array<u32>;
 
 // Σ_k q_k · light[k] over the components used, a word (4 codes or 2 halves) at a time.
 fn shade_voxel(voxel: u32) -> vec3<f32> {
@@ -108,28 +108,22 @@ fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
         rgb = abs(rgb);
     }
     let value = vec4<f32>(rgb, voxel_density(v));
-    var texels: array<vec3<i32>, 8>;
-    let count = voxel_texels(
-        indirection,
-        params.grid_bricks.xyz,
-        SlotPacking(params.atlas.x, params.atlas.y),
-        v / 512u,
-        brick_cell(brick_cells[v / 512u]),
-        voxel_local(v),
-        &texels,
-    );
-    for (var i = 0u; i < count; i++) {
-        textureStore(atlas, texels[i], value);
+    let local = voxel_local(v);
+    let block = (v / 512u * 8u + voxel_octant(local)) * 2u;
+    let block_low = neighbour_blocks[block];
+    let block_high = neighbour_blocks[block + 1u];
+    let packing = SlotPacking(params.atlas.x, params.atlas.y);
+    let border = voxel_border(local);
+    for (var ez = 0u; ez <= border.z; ez++) {
+        for (var ey = 0u; ey <= border.y; ey++) {
+            for (var ex = 0u; ex <= border.x; ex++) {
+                let texel = voxel_texel(block_low, block_high, packing, local, vec3<u32>(ex, ey, ez));
+                if texel.w != 0 {
+                    textureStore(atlas, texel.xyz, value);
+                }
+            }
+        }
     }
-}
-
-// View coefficient n of voxel `voxel`: its 8-bit code or its f16 value.
-fn view_code(voxel: u32, n: u32) -> f32 {
-    let voxels = params.dispatch.x;
-    if params.view.w == 1u {
-        return f32((view_coefficients[(n / 4u) * voxels + voxel] >> (8u * (n & 3u))) & 0xffu);
-    }
-    return half_of(view_coefficients[(n / 2u) * voxels + voxel], n);
 }
 
 @compute @workgroup_size(64, 1, 1)
@@ -141,23 +135,38 @@ fn relight_lobes(@builtin(global_invocation_id) gid: vec3<u32>) {
     let voxels = params.dispatch.x;
     let lobes = min(params.view.x, MAX_LOBES);
     let rank = params.view.y;
+    let bytes = params.view.w == 1u;
+    let per_word = select(2u, 4u, bytes);
     let rgb = shade_voxel(v);
     let sigma_bits = (density[v >> 1u] >> (16u * (v & 1u))) & 0xffffu;
     voxel_lobes[v] = pack_halves(rgb.x, rgb.y);
     voxel_lobes[voxels + v] = f32_to_half(rgb.z) | (sigma_bits << 16u);
-    // c_j = lobe_mean_j + Σ_i q_ji · view_light[MAX_LOBES + j·K_v + i], i ascending.
-    var halves: array<f32, MAX_LOBE_HALVES>;
+    // Lobe colours c_j = lobe_mean_j + Σ_i q_ji · view_light[MAX_LOBES + j·K_v + i], i
+    // ascending; their halves 3j + c go out a word (two halves) at a time.
+    var half_index = 0u;
+    var pending = 0u;
     for (var j = 0u; j < lobes; j++) {
         var c = view_light[j].xyz;
+        var word = 0u;
         for (var i = 0u; i < rank; i++) {
             let n = j * rank + i;
-            c += view_code(v, n) * view_light[MAX_LOBES + n].xyz;
+            if i == 0u || n % per_word == 0u {
+                word = view_coefficients[(n / per_word) * voxels + v];
+            }
+            let code = select(half_of(word, n), f32((word >> (8u * (n & 3u))) & 0xffu), bytes);
+            c += code * view_light[MAX_LOBES + n].xyz;
         }
-        halves[3u * j] = c.x;
-        halves[3u * j + 1u] = c.y;
-        halves[3u * j + 2u] = c.z;
+        for (var ch = 0u; ch < 3u; ch++) {
+            let half = f32_to_half(c[ch]);
+            if (half_index & 1u) == 0u {
+                pending = half;
+            } else {
+                voxel_lobes[(2u + half_index / 2u) * voxels + v] = pending | (half << 16u);
+            }
+            half_index++;
+        }
     }
-    for (var q = 0u; q < (3u * lobes + 1u) / 2u; q++) {
-        voxel_lobes[(2u + q) * voxels + v] = pack_halves(halves[2u * q], halves[2u * q + 1u]);
+    if (half_index & 1u) == 1u {
+        voxel_lobes[(2u + half_index / 2u) * voxels + v] = pending;
     }
 }

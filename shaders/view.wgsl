@@ -10,7 +10,7 @@
 // the relight pass wrote once per lighting change (common.wgsl, `lobe_buffer_words`).
 // The direction is taken per voxel, not per sample, so the march is unchanged: the
 // result is written with σ into every atlas texel that holds the voxel (its slot and the
-// neighbours' aprons, common.wgsl `voxel_texels`), as the relight pass does for a
+// neighbours' aprons, common.wgsl `voxel_texel`), as the relight pass does for a
 // view-independent asset. Positions are lattice coordinates (voxel centres at
 // 8·cell + local), which give world directions: the lattice is the world scaled and
 // shifted.
@@ -21,8 +21,6 @@
 struct ViewParams {
     // x_bits, y_bits of the slot packing; lobes J; stored voxels.
     atlas: vec4<u32>,
-    // Grid extent in bricks (xyz); w: unused.
-    grid_bricks: vec4<i32>,
     // The eye in lattice coordinates (p − bbox_min)/voxel − 0.5 (xyz); w: unused.
     eye_u: vec4<f32>,
     // x: invocations per row of the dispatch (workgroups along x · 64); yzw: unused.
@@ -37,7 +35,9 @@ struct ViewParams {
 @group(0) @binding(1) var<storage, read> voxel_lobes: array<u32>;
 // Brick-cell coordinates of every present brick (common.wgsl, `brick_cell`).
 @group(0) @binding(2) var<storage, read> brick_cells: array<vec2<u32>>;
-@group(0) @binding(3) var indirection: texture_3d<u32>;
+// Per present brick and octant, the atlas slots its voxels can be written to
+// (common.wgsl, `voxel_texel`).
+@group(0) @binding(3) var<storage, read> neighbour_blocks: array<vec4<u32>>;
 @group(0) @binding(4) var atlas: texture_storage_3d<rgba16float, write>;
 
 @compute @workgroup_size(64, 1, 1)
@@ -69,17 +69,19 @@ fn view(@builtin(global_invocation_id) gid: vec3<u32>) {
         rgb += weight * colour;
     }
     let value = vec4<f32>(rgb, half_of(base_b_sigma, 1u));
-    var texels: array<vec3<i32>, 8>;
-    let count = voxel_texels(
-        indirection,
-        params.grid_bricks.xyz,
-        SlotPacking(params.atlas.x, params.atlas.y),
-        v / 512u,
-        cell,
-        local,
-        &texels,
-    );
-    for (var i = 0u; i < count; i++) {
-        textureStore(atlas, texels[i], value);
+    let block = (v / 512u * 8u + voxel_octant(local)) * 2u;
+    let block_low = neighbour_blocks[block];
+    let block_high = neighbour_blocks[block + 1u];
+    let packing = SlotPacking(params.atlas.x, params.atlas.y);
+    let border = voxel_border(local);
+    for (var ez = 0u; ez <= border.z; ez++) {
+        for (var ey = 0u; ey <= border.y; ey++) {
+            for (var ex = 0u; ex <= border.x; ex++) {
+                let texel = voxel_texel(block_low, block_high, packing, local, vec3<u32>(ex, ey, ez));
+                if texel.w != 0 {
+                    textureStore(atlas, texel.xyz, value);
+                }
+            }
+        }
     }
 }

@@ -358,13 +358,13 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
     );
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
     println!(
-        "GPU memory: {:.2} MiB total = atlas {:.2} + coefficients {:.2} + density {:.2} + view part {:.2} + brick cells {:.3} + indirection {:.3} + other {:.3}\n",
+        "GPU memory: {:.2} MiB total = atlas {:.2} + coefficients {:.2} + density {:.2} + view part {:.2} + neighbour blocks {:.3} + indirection {:.3} + other {:.3}\n",
         mib(m.total()),
         mib(m.atlas_bytes),
         mib(m.coefficient_bytes),
         mib(m.density_bytes),
         mib(m.view_bytes),
-        mib(m.brick_cell_bytes),
+        mib(m.neighbour_bytes),
         mib(m.indirection_bytes),
         mib(m.other_bytes)
     );

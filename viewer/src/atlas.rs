@@ -238,10 +238,47 @@ pub fn indirection_grid(grid_bricks: [u32; 3], bricks: &[[u16; 3]]) -> Result<In
     Ok(Indirection { entries, slot_cells })
 }
 
-/// Brick-cell coordinates of the present bricks (file order) as the relight and view
-/// passes read them (`brick_cell` in `common.wgsl`): `[x | y << 16, z]`. With the
-/// indirection grid they give the slots that hold each voxel (its own and the
-/// neighbours' aprons) and each voxel's centre.
+/// Marker of "no slot" in [`neighbour_blocks`].
+pub const NO_SLOT: u32 = u32::MAX;
+
+/// Where the relight and view passes write each voxel (its own slot and the aprons of the
+/// neighbours it borders; `voxel_texel` in `common.wgsl`): for every present brick `b`
+/// (file order) and octant `o` of its voxels (bit `a` set: local coordinate `a` ≥ 4), the
+/// atlas slots of the 2×2×2 cells `b + d` a voxel of that octant can border, entry
+/// `e = e_x + 2e_y + 4e_z` holding cell `d_a = e_a·s_a` (`s_a` = +1 in the upper half, −1 in
+/// the lower; entry 0 is the brick's own slot), [`NO_SLOT`] for far cells and cells
+/// outside the grid. `8 × bricks` blocks, brick-major.
+pub fn neighbour_blocks(
+    indirection: &Indirection,
+    grid_bricks: [u32; 3],
+    bricks: &[[u16; 3]],
+) -> Vec<[u32; 8]> {
+    let [nx, ny, _] = grid_bricks.map(|n| n as usize);
+    let mut out = Vec::with_capacity(bricks.len() * 8);
+    for b in bricks {
+        for octant in 0..8usize {
+            let side: [i64; 3] = std::array::from_fn(|a| if octant >> a & 1 == 1 { 1 } else { -1 });
+            out.push(std::array::from_fn(|e| {
+                let c: [i64; 3] = std::array::from_fn(|a| i64::from(b[a]) + (e >> a & 1) as i64 * side[a]);
+                if (0..3).all(|a| c[a] >= 0 && c[a] < i64::from(grid_bricks[a])) {
+                    let entry =
+                        indirection.entries[c[0] as usize + nx * (c[1] as usize + ny * c[2] as usize)];
+                    if entry & FAR_FLAG != 0 {
+                        NO_SLOT
+                    } else {
+                        (entry & SLOT_BITS) - 1
+                    }
+                } else {
+                    NO_SLOT
+                }
+            }));
+        }
+    }
+    out
+}
+
+/// Brick-cell coordinates of the present bricks (file order) as the view pass reads them
+/// (`brick_cell` in `common.wgsl`): `[x | y << 16, z]`, for each voxel's centre.
 pub fn pack_brick_cells(bricks: &[[u16; 3]]) -> Vec<[u32; 2]> {
     bricks
         .iter()
@@ -469,10 +506,11 @@ pub struct GpuMemory {
     pub density_bytes: u64,
     /// Indirection grid.
     pub indirection_bytes: u64,
-    /// Brick-cell coordinates (8 bytes per brick).
-    pub brick_cell_bytes: u64,
+    /// Where the relight and view passes write each brick's voxels (8 blocks of 8 slots
+    /// per brick).
+    pub neighbour_bytes: u64,
     /// A view-dependent asset's view part: its packed coefficients, the per-voxel lobe
-    /// buffer and their uniforms (0 for a view-independent asset).
+    /// buffer, brick-cell coordinates and uniforms (0 for a view-independent asset).
     pub view_bytes: u64,
     /// Uniforms and the lighting buffer.
     pub other_bytes: u64,
@@ -485,7 +523,7 @@ impl GpuMemory {
             + self.coefficient_bytes
             + self.density_bytes
             + self.indirection_bytes
-            + self.brick_cell_bytes
+            + self.neighbour_bytes
             + self.view_bytes
             + self.other_bytes
     }
@@ -586,22 +624,30 @@ mod tests {
         assert!(none.entries.iter().all(|&e| e == FAR_FLAG | !FAR_FLAG));
         assert!(indirection_grid([65536, 65536, 2], &[]).is_err());
         assert!(indirection_grid([2, 2, 2], &[[5, 0, 0]]).is_err());
-        // Every cell around an inner brick has a slot (the view and relight passes write
-        // the brick's border voxels into their aprons), at that cell.
-        for brick in &bricks {
-            for d in 0..27i32 {
-                let offset = [d % 3, (d / 3) % 3, d / 9].map(|o| o - 1);
-                let cell: [i32; 3] = std::array::from_fn(|a| i32::from(brick[a]) + offset[a]);
-                let entry = ind.entries[(cell[0] + 7 * (cell[1] + 5 * cell[2])) as usize];
-                assert_eq!(
-                    entry & FAR_FLAG,
-                    0,
-                    "every neighbour of an inner brick is a halo cell"
-                );
-                let slot = (entry & SLOT_BITS) - 1;
-                assert_eq!(ind.slot_cells[slot as usize], cell.map(|c| c as u32));
+        // Neighbour blocks point at the cells around each brick, octant by octant.
+        let blocks = neighbour_blocks(&ind, grid, &bricks);
+        assert_eq!(blocks.len(), 2 * 8);
+        for (b, brick) in bricks.iter().enumerate() {
+            for octant in 0..8 {
+                let block = blocks[b * 8 + octant];
+                assert_eq!(block[0], b as u32);
+                for (e, &slot) in block.iter().enumerate() {
+                    let cell: [i32; 3] = std::array::from_fn(|a| {
+                        let side = if octant >> a & 1 == 1 { 1 } else { -1 };
+                        i32::from(brick[a]) + (e >> a & 1) as i32 * side
+                    });
+                    assert_ne!(slot, NO_SLOT, "every neighbour of an inner brick is a halo cell");
+                    assert_eq!(ind.slot_cells[slot as usize], cell.map(|c| c as u32));
+                }
             }
         }
+        let edge = indirection_grid([2, 1, 1], &[[0, 0, 0]]).unwrap();
+        let blocks = neighbour_blocks(&edge, [2, 1, 1], &[[0, 0, 0]]);
+        // Upper-x octants (1, 3, 5, 7) reach the halo cell at x = 1 (entry 1); every other
+        // cell but the brick's own (entry 0) is outside the grid.
+        assert_eq!(blocks[1][..2], [0, 1]);
+        assert!(blocks[1][2..].iter().all(|&s| s == NO_SLOT));
+        assert_eq!(blocks.iter().flatten().filter(|&&s| s != NO_SLOT).count(), 8 + 4);
         let cells = pack_brick_cells(&[[1, 2, 3], [65535, 40000, 7]]);
         assert_eq!(cells, [[1 | 2 << 16, 3], [65535 | 40000 << 16, 7]]);
     }

@@ -50,8 +50,6 @@ pub struct RelightParams {
 pub struct ViewParams {
     /// Slot packing `x_bits`, `y_bits`; lobes `J`; stored voxels.
     pub atlas: [u32; 4],
-    /// Grid extent in bricks, unused.
-    pub grid_bricks: [i32; 4],
     /// The eye in lattice coordinates `(p − bbox_min)/voxel − 0.5`, unused.
     pub eye_u: [f32; 4],
     /// Invocations per row of the dispatch, unused ×3.
@@ -180,7 +178,7 @@ mod tests {
             [atlas, grid_bricks, words, light_mean, dispatch, view]
         );
         let view = module("view.wgsl", VIEW_WGSL);
-        assert_mirror!(view, ViewParams, [atlas, grid_bricks, eye_u, dispatch, lobes]);
+        assert_mirror!(view, ViewParams, [atlas, eye_u, dispatch, lobes]);
         let march = module("march.wgsl", MARCH_WGSL);
         assert_mirror!(
             march,
@@ -234,7 +232,7 @@ mod tests {
             assert!(text.contains("#import \"common.wgsl\""), "{name}");
             for helper in [
                 "fn pcg_hash",
-                "fn voxel_texels",
+                "fn voxel_texel",
                 "fn view_harmonics",
                 "fn half_to_f32",
             ] {

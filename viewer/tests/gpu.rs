@@ -285,7 +285,11 @@ fn gpu_matches_cpu_for_view_dependent_assets() {
         render_asset(asset, cam, &env, rotation, None, &MarchSettings::default()).unwrap()
     };
     for encoding in [CoefficientEncoding::U8Affine, CoefficientEncoding::F16] {
-        let flat = asset_through_file(40_000, 6, encoding, 5);
+        let mut flat = asset_through_file(40_000, 6, encoding, 5);
+        if encoding == CoefficientEncoding::F16 {
+            // Missing bricks: the view pass writes aprons and halo slots as the relight does.
+            flat = without_bricks(&flat, |b| (b[0] + b[1] + 2 * b[2]) % 3 == 0);
+        }
         let asset = through_file(&with_view(&flat, encoding, 3));
         // The view-independent asset first: the renderer then switches to the view path.
         gpu.load_asset(&flat).unwrap();

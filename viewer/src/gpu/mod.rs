@@ -43,8 +43,8 @@ pub use self::march::{MarchPass, MarchView, ViewSettings};
 use self::relight::RelightPipeline;
 use self::view::{GpuView, ViewBindings, ViewPipelines, lobe_buffer_words};
 use crate::atlas::{
-    AtlasLayout, Dequantization, GpuMemory, RelightView, indirection_grid, pack_brick_cells,
-    pack_coefficients, pack_density,
+    AtlasLayout, Dequantization, GpuMemory, RelightView, indirection_grid, neighbour_blocks,
+    pack_brick_cells, pack_coefficients, pack_density,
 };
 use crate::error::ViewerError;
 use crate::shaders::{Counters, DisplayParams, MarchParams, RelightParams};
@@ -302,7 +302,7 @@ impl GpuRenderer {
         let layout = AtlasLayout::for_bricks(indirection.slot_cells.len(), limits.max_texture_dimension_3d)?;
         let coefficients = pack_coefficients(&asset.coefficients);
         let density = pack_density(&asset.density);
-        let brick_cells = pack_brick_cells(&asset.bricks);
+        let neighbours = neighbour_blocks(&indirection, grid_bricks, &asset.bricks);
         let view_coefficients = asset.view.as_ref().map(|v| pack_coefficients(&v.coefficients));
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let voxel_count = asset.voxel_count();
@@ -312,7 +312,7 @@ impl GpuRenderer {
         for (what, bytes) in [
             ("coefficients", coefficients.words.len() as u64 * 4),
             ("densities", density.len() as u64 * 4),
-            ("brick cells", brick_cells.len() as u64 * 8),
+            ("neighbour blocks", neighbours.len() as u64 * 32),
             (
                 "view coefficients",
                 view_coefficients.as_ref().map_or(0, |p| p.words.len() as u64 * 4),
@@ -342,7 +342,7 @@ impl GpuRenderer {
         };
         let coefficient_buffer = storage("coefficients", bytemuck::cast_slice(&coefficients.words));
         let density_buffer = storage("density", bytemuck::cast_slice(&density));
-        let brick_cell_buffer = storage("brick cells", bytemuck::cast_slice(&brick_cells));
+        let neighbour_buffer = storage("neighbour blocks", bytemuck::cast_slice(&neighbours));
         let rank = asset.rank();
         let light = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("light"),
@@ -401,10 +401,9 @@ impl GpuRenderer {
                 &light,
                 &coefficient_buffer,
                 &density_buffer,
-                &brick_cell_buffer,
+                &neighbour_buffer,
             ],
             &atlas_view,
-            &indirection_view,
         );
         let view = match (&asset.view, &view_coefficients) {
             (Some(v), Some(packed)) => {
@@ -412,14 +411,14 @@ impl GpuRenderer {
                     self.pipelines.view = Some(ViewPipelines::new(&self.device)?);
                 }
                 let pipelines = self.pipelines.view.as_ref().ok_or(ViewerError::NoAsset)?;
-                let mut view = GpuView::upload(&self.device, v, packed, voxel_count, storage);
+                let brick_cells = pack_brick_cells(&asset.bricks);
+                let mut view = GpuView::upload(&self.device, v, packed, &brick_cells, voxel_count, storage);
                 view.bind(
                     &self.device,
                     pipelines,
                     &ViewBindings {
                         relight: [&relight_params, &light, &coefficient_buffer, &density_buffer],
-                        brick_cells: &brick_cell_buffer,
-                        indirection: &indirection_view,
+                        neighbour_blocks: &neighbour_buffer,
                         atlas: &atlas_view,
                     },
                 );
@@ -432,7 +431,7 @@ impl GpuRenderer {
             coefficient_bytes: coefficient_buffer.size(),
             density_bytes: density_buffer.size(),
             indirection_bytes: indirection.entries.len() as u64 * 4,
-            brick_cell_bytes: brick_cell_buffer.size(),
+            neighbour_bytes: neighbour_buffer.size(),
             view_bytes: view.as_ref().map_or(0, GpuView::bytes),
             other_bytes: light.size() + relight_params.size(),
         };

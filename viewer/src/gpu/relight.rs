@@ -12,8 +12,8 @@
 //!
 //! (`q_k` the stored codes), written with its density σ as `[r, g, b, σ]` into the
 //! RGBA16F brick atlas — the voxel's own slot and the aprons of the neighbouring slots
-//! ([`crate::atlas`]), found through the indirection grid from the brick's cell. Shading
-//! is linear, so marching the relit atlas equals shading every sample.
+//! ([`crate::atlas`], `neighbour_blocks`). Shading is linear, so marching the relit atlas
+//! equals shading every sample.
 //!
 //! A view-dependent asset runs the `relight_lobes` entry instead (see [`super::view`]):
 //! the same dot product plus the lobe colours, into the lobe buffer the view pass reads.
@@ -21,9 +21,7 @@
 use nelf_format::conventions::LT_DIM;
 
 use super::GpuRenderer;
-use super::common::{
-    compute_pipeline, shader_module, storage_entry, storage_texture_entry, texture_entry, uniform_entry,
-};
+use super::common::{compute_pipeline, shader_module, storage_entry, storage_texture_entry, uniform_entry};
 use super::view::{VIEW_LIGHT_ENTRIES, voxel_dispatch};
 use crate::atlas::{MAX_LOBES, RelightView, fold_light, fold_view_light};
 use crate::error::ViewerError;
@@ -48,7 +46,6 @@ impl RelightPipeline {
                 storage_entry(3, true, S::COMPUTE),
                 storage_entry(4, true, S::COMPUTE),
                 storage_texture_entry(5, wgpu::TextureFormat::Rgba16Float, D::D3),
-                texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
             ],
         });
         let module = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
@@ -57,21 +54,19 @@ impl RelightPipeline {
     }
 
     /// The bind group of an asset: `buffers` = (relight params, light, coefficients,
-    /// densities, brick cells), bindings 0 to 4, the atlas the pass writes and the
-    /// indirection grid.
+    /// densities, neighbour blocks), bindings 0 to 4, and the atlas the pass writes.
     pub(super) fn bind_group(
         &self,
         device: &wgpu::Device,
         buffers: [&wgpu::Buffer; 5],
         atlas_view: &wgpu::TextureView,
-        indirection_view: &wgpu::TextureView,
     ) -> wgpu::BindGroup {
         let [
             relight_params,
             light,
             coefficient_buffer,
             density_buffer,
-            brick_cell_buffer,
+            neighbour_buffer,
         ] = buffers;
         device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("relight"),
@@ -95,15 +90,11 @@ impl RelightPipeline {
                 },
                 wgpu::BindGroupEntry {
                     binding: 4,
-                    resource: brick_cell_buffer.as_entire_binding(),
+                    resource: neighbour_buffer.as_entire_binding(),
                 },
                 wgpu::BindGroupEntry {
                     binding: 5,
                     resource: wgpu::BindingResource::TextureView(atlas_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: wgpu::BindingResource::TextureView(indirection_view),
                 },
             ],
         })

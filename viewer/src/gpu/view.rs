@@ -21,8 +21,8 @@
 //!
 //! The lobe buffer holds f16 rather than f32: the atlas it feeds is f16 anyway (so the
 //! result differs from an f32 buffer by a few f16 ulps of the terms, far inside the
-//! GPU = CPU tolerance), it halves the bytes the per-camera pass reads (the pass does
-//! ≈ 10 flops per byte it reads) and it keeps the buffer within one storage binding
+//! GPU = CPU tolerance), it halves the bytes the per-camera pass reads and it keeps the
+//! buffer within one storage binding
 //! (WebGPU's default 128 MiB) for 2.1 M voxels at `J = 9` and 4.8 M at `J = 3`, against
 //! 1.1 M and 2.6 M in f32. Halves are converted by hand (`f32_to_half`, `half_to_f32` in
 //! `common.wgsl`), so no f16 shader capability is needed.
@@ -34,9 +34,7 @@ use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS};
 use nelf_format::{Coefficients, ViewDependence};
 
 use super::GpuRenderer;
-use super::common::{
-    compute_pipeline, shader_module, storage_entry, storage_texture_entry, texture_entry, uniform_entry,
-};
+use super::common::{compute_pipeline, shader_module, storage_entry, storage_texture_entry, uniform_entry};
 use crate::atlas::{Dequantization, MAX_LOBES, PackedCoefficients};
 use crate::error::ViewerError;
 use crate::shaders::{RELIGHT_WGSL, VIEW_WGSL, ViewParams};
@@ -68,9 +66,9 @@ impl ViewPipelines {
                 uniform_entry(1, S::COMPUTE),
                 storage_entry(2, true, S::COMPUTE),
                 storage_entry(3, true, S::COMPUTE),
-                uniform_entry(7, S::COMPUTE),
-                storage_entry(8, true, S::COMPUTE),
-                storage_entry(9, false, S::COMPUTE),
+                uniform_entry(6, S::COMPUTE),
+                storage_entry(7, true, S::COMPUTE),
+                storage_entry(8, false, S::COMPUTE),
             ],
         });
         let relight = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
@@ -81,7 +79,7 @@ impl ViewPipelines {
                 uniform_entry(0, S::COMPUTE),
                 storage_entry(1, true, S::COMPUTE),
                 storage_entry(2, true, S::COMPUTE),
-                texture_entry(3, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
+                storage_entry(3, true, S::COMPUTE),
                 storage_texture_entry(4, wgpu::TextureFormat::Rgba16Float, D::D3),
             ],
         });
@@ -101,10 +99,8 @@ impl ViewPipelines {
 pub(super) struct ViewBindings<'a> {
     /// The relight pass's uniform, lighting, coefficients and densities (bindings 0–3).
     pub relight: [&'a wgpu::Buffer; 4],
-    /// Brick-cell coordinates.
-    pub brick_cells: &'a wgpu::Buffer,
-    /// The indirection grid.
-    pub indirection: &'a wgpu::TextureView,
+    /// Where each voxel is written (`crate::atlas::neighbour_blocks`).
+    pub neighbour_blocks: &'a wgpu::Buffer,
     /// The atlas the view pass fills.
     pub atlas: &'a wgpu::TextureView,
 }
@@ -123,6 +119,8 @@ pub(super) struct GpuView {
     pub view_params: wgpu::Buffer,
     pub coefficients: wgpu::Buffer,
     pub voxel_lobes: wgpu::Buffer,
+    /// Brick-cell coordinates (`crate::atlas::pack_brick_cells`), for voxel centres.
+    pub brick_cells: wgpu::Buffer,
     pub lobes_bind_group: Option<wgpu::BindGroup>,
     pub view_bind_group: Option<wgpu::BindGroup>,
 }
@@ -134,6 +132,7 @@ impl GpuView {
         device: &wgpu::Device,
         view: &ViewDependence,
         packed: &PackedCoefficients,
+        brick_cells: &[[u32; 2]],
         voxels: usize,
         storage: impl Fn(&str, &[u8]) -> wgpu::Buffer,
     ) -> Self {
@@ -178,6 +177,7 @@ impl GpuView {
             view_params: uniform("view params", size_of::<ViewParams>()),
             coefficients: storage("view coefficients", bytemuck::cast_slice(&packed.words)),
             voxel_lobes,
+            brick_cells: storage("brick cells", bytemuck::cast_slice(brick_cells)),
             lobes_bind_group: None,
             view_bind_group: None,
         }
@@ -185,7 +185,11 @@ impl GpuView {
 
     /// Bytes of GPU memory the view part takes.
     pub(super) fn bytes(&self) -> u64 {
-        self.view_light.size() + self.view_params.size() + self.coefficients.size() + self.voxel_lobes.size()
+        self.view_light.size()
+            + self.view_params.size()
+            + self.coefficients.size()
+            + self.voxel_lobes.size()
+            + self.brick_cells.size()
     }
 
     /// Creates the bind groups of `relight_lobes` and of the view pass.
@@ -199,9 +203,9 @@ impl GpuView {
                 buffer(1, light),
                 buffer(2, coefficients),
                 buffer(3, density),
-                buffer(7, &self.view_light),
-                buffer(8, &self.coefficients),
-                buffer(9, &self.voxel_lobes),
+                buffer(6, &self.view_light),
+                buffer(7, &self.coefficients),
+                buffer(8, &self.voxel_lobes),
             ],
         }));
         self.view_bind_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -210,11 +214,8 @@ impl GpuView {
             entries: &[
                 buffer(0, &self.view_params),
                 buffer(1, &self.voxel_lobes),
-                buffer(2, b.brick_cells),
-                wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(b.indirection),
-                },
+                buffer(2, &self.brick_cells),
+                buffer(3, b.neighbour_blocks),
                 wgpu::BindGroupEntry {
                     binding: 4,
                     resource: wgpu::BindingResource::TextureView(b.atlas),
@@ -243,7 +244,6 @@ impl GpuRenderer {
         }
         let pipelines = self.pipelines.view.as_ref().ok_or(ViewerError::NoAsset)?;
         let bind_group = view.view_bind_group.as_ref().ok_or(ViewerError::NoAsset)?;
-        let g = asset.grid.grid_bricks;
         let (groups, per_row) = voxel_dispatch(asset.voxel_count);
         let params = ViewParams {
             atlas: [
@@ -252,7 +252,6 @@ impl GpuRenderer {
                 view.model.lobe_count().min(MAX_LOBES) as u32,
                 asset.voxel_count as u32,
             ],
-            grid_bricks: [g[0] as i32, g[1] as i32, g[2] as i32, 0],
             eye_u: [eye_u[0], eye_u[1], eye_u[2], 0.0],
             dispatch: [per_row, 0, 0, 0],
             lobes: view.lobe_weights,
