@@ -13,7 +13,7 @@
 //! A view-dependent asset (format 1.2) adds one small per-voxel pass between the two,
 //! run only when the camera's eye or the lighting changed: the relight pass then writes
 //! each voxel's radiance and lobe colours to a buffer and the view pass adds the lobes
-//! toward the eye into the atlas ([`view`]); the march is the same. A view-independent
+//! toward the eye into the atlas (`gpu/view.rs`); the march is the same. A view-independent
 //! asset takes exactly the path above.
 //!
 //! One module per pass, as the shaders are (`shaders/*.wgsl`): `relight` (relight.wgsl),
@@ -286,7 +286,7 @@ impl GpuRenderer {
     /// Uploads `asset` (validated first; an invalid one is an error and leaves the
     /// previous asset in place): coefficients, densities, brick list, indirection grid,
     /// and an atlas the relight pass fills; for a view-dependent asset also its view
-    /// coefficients and a per-voxel lobe buffer ([`view`]). Lighting, if set, is
+    /// coefficients and a per-voxel lobe buffer (`gpu/view.rs`). Lighting, if set, is
     /// re-projected onto the new basis.
     pub fn load_asset(&mut self, asset: &Asset) -> Result<AssetInfo, ViewerError> {
         asset.validate()?;

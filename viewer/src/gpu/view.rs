@@ -95,7 +95,7 @@ impl ViewPipelines {
 }
 
 /// The buffers of a view-dependent asset's relight and view passes that
-/// [`ViewPipelines::bind_groups`] binds.
+/// [`GpuView::bind`] binds.
 pub(super) struct ViewBindings<'a> {
     /// The relight pass's uniform, lighting, coefficients and densities (bindings 0–3).
     pub relight: [&'a wgpu::Buffer; 4],
