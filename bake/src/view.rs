@@ -149,6 +149,13 @@ pub fn sample_directions() -> Vec<Vec3> {
         .collect()
 }
 
+/// The first `rows` rows of the identity of size `width` (row-major).
+fn identity_rows(rows: usize, width: usize) -> Vec<f64> {
+    (0..rows * width)
+        .map(|i| if i / width == i % width { 1.0 } else { 0.0 })
+        .collect()
+}
+
 /// Outward unit normal `−∇σ/|∇σ|` of the trilinear density at `p` (zero where flat).
 fn density_normal(grid: &BrickGrid, density: &[f32], p: DVec3) -> DVec3 {
     let h = 0.5 * grid.geometry().voxel_size_m;
@@ -328,15 +335,7 @@ pub fn fit_view(
     };
     let mut rows: Vec<f64> = Vec::with_capacity(sample.len() * VIEW_HARMONICS * LT_DIM);
     let (mut residual_energy, mut mean_energy) = (0.0f64, 0.0f64);
-    let identity: Vec<f64> = (0..VIEW_HARMONICS * VIEW_HARMONICS)
-        .map(|i| {
-            if i / VIEW_HARMONICS == i % VIEW_HARMONICS {
-                1.0
-            } else {
-                0.0
-            }
-        })
-        .collect();
+    let identity = identity_rows(VIEW_HARMONICS, VIEW_HARMONICS);
     for (c, chunk) in sample.chunks(BATCH).enumerate() {
         let quiet = NO_VIEW_DEPENDENCE * NO_VIEW_DEPENDENCE * mean_energy;
         if c == 1 && (residual_energy.is_nan() || residual_energy < quiet) {
@@ -344,8 +343,9 @@ pub fn fit_view(
             // the rest is not sampled.
             let k_max = max_rank.clamp(1, LT_DIM);
             return Ok(ViewFit {
-                basis: (0..k_max * LT_DIM)
-                    .map(|i| if i / LT_DIM == i % LT_DIM { 1.0 } else { 0.0 })
+                basis: identity_rows(k_max, LT_DIM)
+                    .into_iter()
+                    .map(|x| x as f32)
                     .collect(),
                 eigenvalues: vec![0.0; LT_DIM],
                 normal: Vec::new(),
@@ -482,17 +482,7 @@ impl ViewFit {
     /// for `sh1`/`sh2`, the top eigenvectors of the weighted second moment of the fitted
     /// harmonic coefficients for learned lobes.
     pub fn lobes(&self, choice: ViewChoice) -> Vec<f64> {
-        let rows = |j: usize| -> Vec<f64> {
-            (0..j * VIEW_HARMONICS)
-                .map(|i| {
-                    if i / VIEW_HARMONICS == i % VIEW_HARMONICS {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                })
-                .collect()
-        };
+        let rows = |j: usize| identity_rows(j, VIEW_HARMONICS);
         match choice {
             ViewChoice::Off | ViewChoice::Auto => Vec::new(),
             ViewChoice::Sh1 => rows(4),
@@ -600,16 +590,7 @@ mod tests {
             .collect();
         let w = vec![1.0; dirs.len()];
         let (g, h) = normal_equations(&w, &harmonics, &r, 1);
-        let identity: Vec<f64> = (0..G_LEN)
-            .map(|i| {
-                if i / VIEW_HARMONICS == i % VIEW_HARMONICS {
-                    1.0
-                } else {
-                    0.0
-                }
-            })
-            .collect();
-        let b = solve_lobes(&g, &h, 1, &identity);
+        let b = solve_lobes(&g, &h, 1, &identity_rows(VIEW_HARMONICS, VIEW_HARMONICS));
         assert!((b[1] - 2.0).abs() < 0.01 && (b[5] + 1.0).abs() < 0.01, "{b:?}");
         for (i, x) in b.iter().enumerate() {
             if i != 1 && i != 5 {
