@@ -567,7 +567,8 @@ impl LtTracer {
         }
     }
 
-    /// `out += weight ⊙ T(sp)` with the given sample counts and remaining bounces.
+    /// `out += weight ⊙ T(sp)` with the given sample counts and remaining bounces:
+    /// [`Self::accumulate_joint`] for one vector (whose stream has no other to part from).
     #[allow(clippy::too_many_arguments)]
     fn accumulate(
         &self,
@@ -580,83 +581,17 @@ impl LtTracer {
         rng: &mut TraceRng,
         out: &mut [f32; LT_DIM],
     ) {
-        let origin = sp.position + self.epsilon * sp.geometric_normal;
-        let (n_s, n_g) = (sp.shading_normal, sp.geometric_normal);
-        let (rows, cols) = strata(texel_samples);
-        let inv_count = 1.0 / texel_samples as f32;
-        for (k, patch) in self.texels.iter().enumerate() {
-            if n_s.dot(patch.centre) < -patch.sin_radius {
-                continue;
-            }
-            let mut diffuse_sum = 0.0f32;
-            let mut spec_sum = 0.0f32;
-            for a in 0..rows {
-                for b in 0..cols {
-                    let (xi_u, xi_phi): (f64, f64) = (rng.random(), rng.random());
-                    let u = patch.cos_top
-                        + (patch.cos_bottom - patch.cos_top) * (f64::from(a) + xi_u) / f64::from(rows);
-                    let phi =
-                        patch.phi0 + (patch.phi1 - patch.phi0) * (f64::from(b) + xi_phi) / f64::from(cols);
-                    let omega = self.world_from_light * direction(u.clamp(-1.0, 1.0).acos(), phi).as_vec3();
-                    let cos_s = n_s.dot(omega);
-                    if cos_s <= 0.0 || n_g.dot(omega) <= 0.0 {
-                        continue;
-                    }
-                    if self.bvh.any_hit(origin, omega, 0.0, f32::INFINITY) {
-                        continue;
-                    }
-                    diffuse_sum += cos_s;
-                    spec_sum += lobe.specular(omega) * cos_s;
-                }
-            }
-            if diffuse_sum == 0.0 {
-                continue;
-            }
-            let scale = patch.solid_angle * inv_count;
-            for c in 0..3 {
-                out[c * ENV_TEXELS + k] += weight[c] * scale * (lobe.diffuse[c] * diffuse_sum + spec_sum);
-            }
-        }
-        if bounces_left == 0 || indirect_samples == 0 {
-            return;
-        }
-        let (rows, cols) = strata(indirect_samples);
-        let frame = Frame::new(n_s);
-        let inv_count = 1.0 / indirect_samples as f32;
-        for a in 0..rows {
-            for b in 0..cols {
-                let xi1 = (a as f32 + rng.random::<f32>()) / rows as f32;
-                let xi2 = (b as f32 + rng.random::<f32>()) / cols as f32;
-                let omega = frame.to_world(cosine_hemisphere(xi1, xi2));
-                if n_g.dot(omega) <= 0.0 {
-                    continue;
-                }
-                let Some(hit) = self.bvh.closest_hit(origin, omega, 0.0, f32::INFINITY) else {
-                    continue;
-                };
-                // Cosine-weighted pdf cos/π: the sample weight is π f.
-                let f_pi = std::f32::consts::PI * lobe.specular(omega);
-                let next_weight: [f32; 3] = std::array::from_fn(|c| {
-                    weight[c] * inv_count * (std::f32::consts::PI * lobe.diffuse[c] + f_pi)
-                });
-                if next_weight.iter().all(|&w| w <= 0.0) {
-                    continue;
-                }
-                let next = self.surface_at_hit(&hit, omega);
-                let mut reflections = [Vec3::ZERO; 1];
-                let next_lobe = self.lobe(&next, &[-omega], &mut reflections);
-                self.accumulate(
-                    &next,
-                    &next_lobe,
-                    self.settings.bounce_texel_samples,
-                    1,
-                    bounces_left - 1,
-                    next_weight,
-                    rng,
-                    out,
-                );
-            }
-        }
+        let one = self.accumulate_joint(
+            sp,
+            std::slice::from_ref(lobe),
+            texel_samples,
+            indirect_samples,
+            bounces_left,
+            &[weight],
+            rng,
+            out,
+        );
+        debug_assert!(one.is_ok(), "a single vector's stream cannot part");
     }
 
     /// [`Self::accumulate`] for several vectors at once that differ only in their
