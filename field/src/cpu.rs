@@ -24,9 +24,11 @@ pub fn set_fused_kernels(enabled: bool) {
     FUSED_KERNELS.store(enabled, Ordering::Relaxed);
 }
 
-/// Whether `t` goes through the fused kernels (a CPU tensor, kernels enabled).
+/// Whether `t` goes through the fused kernels: a CPU tensor, kernels enabled, and no
+/// gradient to carry (the kernels work on raw buffers, outside candle's graph; layers
+/// also check their own parameters, see [`crate::layers`]).
 pub fn fused_for(t: &Tensor) -> bool {
-    t.device().is_cpu() && FUSED_KERNELS.load(Ordering::Relaxed)
+    t.device().is_cpu() && FUSED_KERNELS.load(Ordering::Relaxed) && !t.track_op()
 }
 
 /// Elements per parallel work item of element-wise kernels.

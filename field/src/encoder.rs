@@ -14,13 +14,13 @@ use candle_core::{Module, Tensor};
 use candle_nn::VarBuilder;
 
 use crate::error::NetError;
-use crate::layers::{GroupNormLayer, NormActConv, ResConvBlock, softplus};
+use crate::layers::{GroupNormLayer, NormActConv, ResConvBlock, softplus, upsample2_bilinear};
+use crate::model::Architecture;
 
-/// Channels of the encoder stages.
-const ENCODER_CHANNELS: [usize; 5] = [3, 32, 64, 128, 256];
 /// Channels of the light head: 4 maps × 8 × 16 texels.
 pub const LIGHT_FEATURE_CHANNELS: usize = 512;
-/// Channels of the source feature map (coarse half then fine half).
+/// Channels of the official source feature map (coarse half then fine half); other
+/// widths: [`Architecture::feature_channels`].
 pub const SOURCE_FEATURE_CHANNELS: usize = 64;
 
 /// Every intermediate of one encoder pass, named as in the parity fixtures
@@ -54,27 +54,27 @@ pub struct ImageEncoder {
 }
 
 impl ImageEncoder {
-    /// Loads the encoder from `vb` (the `image_encoder` prefix).
-    pub fn new(vb: &VarBuilder) -> Result<Self, NetError> {
+    /// Loads the encoder of widths `arch` from `vb` (the `image_encoder` prefix).
+    pub fn new(vb: &VarBuilder, arch: &Architecture) -> Result<Self, NetError> {
+        let [c0, c1, c2, c3] = arch.encoder_channels;
+        let stages = [3, c0, c1, c2, c3];
         let resblocks = (0..4)
-            .map(|i| {
-                ResConvBlock::new(
-                    ENCODER_CHANNELS[i],
-                    ENCODER_CHANNELS[i + 1],
-                    &vb.pp("resblocks").pp(i),
-                )
-            })
+            .map(|i| ResConvBlock::new(stages[i], stages[i + 1], &vb.pp("resblocks").pp(i)))
             .collect::<Result<Vec<_>, _>>()?;
-        let lightpred = NormActConv::new(256, LIGHT_FEATURE_CHANNELS, 3, 1, &vb.pp("lightpred"))?;
+        let lightpred = NormActConv::new(c3, LIGHT_FEATURE_CHANNELS, 3, 1, &vb.pp("lightpred"))?;
         let lightpred_final =
             GroupNormLayer::new(LIGHT_FEATURE_CHANNELS, &vb.pp("lightpred_final").pp("norm"))?;
-        let up = [(256, 128), (128, 64), (64, 32)];
+        let up = [(c3, c2), (c2, c1), (c1, c0)];
         let upconvs = up
             .iter()
             .enumerate()
             .map(|(i, &(a, b))| NormActConv::new(a, b, 3, 1, &vb.pp("upconvs").pp(i)))
             .collect::<Result<Vec<_>, _>>()?;
-        let cat = [(256, 128, 3), (128, 64, 3), (64, SOURCE_FEATURE_CHANNELS, 1)];
+        let cat = [
+            (2 * c2, c2, 3),
+            (2 * c1, c1, 3),
+            (2 * c0, arch.feature_channels(), 1),
+        ];
         let catconvs = cat
             .iter()
             .enumerate()
@@ -110,7 +110,7 @@ impl ImageEncoder {
         let mut upconvs = Vec::with_capacity(3);
         let mut catconvs = Vec::with_capacity(3);
         for i in 0..3 {
-            let up = x.upsample_bilinear2d_with_scale(2.0, 2.0, false)?;
+            let up = upsample2_bilinear(&x)?;
             let u = self.upconvs[i].forward(&up)?;
             x = self.catconvs[i].forward(&Tensor::cat(&[&u, &enc[2 - i]], 1)?)?;
             upconvs.push(u);

@@ -40,6 +40,36 @@ pub fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
     x.relu()? + tail
 }
 
+/// Bilinear ×2 up-sampling of `(B, C, H, W)` (PyTorch's `align_corners = False`):
+/// output `2i` is `¾·x[i] + ¼·x[i−1]`, output `2i+1` is `¾·x[i] + ¼·x[i+1]`, the
+/// neighbour index clamped to the edge. candle's own kernel has no backward pass, so
+/// tensors that carry gradients take this composition of differentiable ops.
+pub fn upsample2_bilinear(x: &Tensor) -> candle_core::Result<Tensor> {
+    if !x.track_op() {
+        return x.upsample_bilinear2d_with_scale(2.0, 2.0, false);
+    }
+    let x = upsample2_along(x, 3)?;
+    upsample2_along(&x, 2)
+}
+
+/// [`upsample2_bilinear`] along one dimension `dim` of a rank-4 tensor.
+fn upsample2_along(x: &Tensor, dim: usize) -> candle_core::Result<Tensor> {
+    let n = x.dim(dim)?;
+    let (before, after) = if n > 1 {
+        (
+            Tensor::cat(&[&x.narrow(dim, 0, 1)?, &x.narrow(dim, 0, n - 1)?], dim)?,
+            Tensor::cat(&[&x.narrow(dim, 1, n - 1)?, &x.narrow(dim, n - 1, 1)?], dim)?,
+        )
+    } else {
+        (x.clone(), x.clone())
+    };
+    let even = ((x * 0.75)? + (before * 0.25)?)?;
+    let odd = ((x * 0.75)? + (after * 0.25)?)?;
+    let mut dims = x.dims().to_vec();
+    dims[dim] *= 2;
+    Tensor::stack(&[&even, &odd], dim + 1)?.reshape(dims)
+}
+
 /// Host copy of a 1-D parameter.
 fn host(t: &Tensor) -> Result<Vec<f32>, NetError> {
     Ok(t.flatten_all()?.to_vec1::<f32>()?)
@@ -71,7 +101,7 @@ impl PRelu {
 
 impl Module for PRelu {
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        if cpu::fused_for(x) && x.rank() == 2 {
+        if cpu::fused_for(x) && x.rank() == 2 && !self.weight.track_op() {
             return cpu::bias_prelu_rows(x, None, Some(&self.slopes), None);
         }
         let mut shape = vec![1usize; x.rank()];
@@ -86,6 +116,9 @@ impl Module for PRelu {
 /// A fully connected layer (`weight` `[out, in]`, optional `bias`) on `(rows, in)`.
 #[derive(Debug, Clone)]
 pub struct Dense {
+    /// `[out, in]`, as loaded: a trainable variable is read live from here.
+    weight: Tensor,
+    /// `Wᵀ`, contiguous, for inference (a copy: stale once a variable is updated).
     weight_t: Tensor,
     bias: Option<Tensor>,
     bias_host: Option<Vec<f32>>,
@@ -102,6 +135,7 @@ impl Dense {
         };
         Ok(Self {
             weight_t: weight.t()?.contiguous()?,
+            weight,
             bias_host: bias.as_ref().map(host).transpose()?,
             bias,
         })
@@ -114,6 +148,21 @@ impl Dense {
         slopes: Option<&PRelu>,
         residual: Option<&Tensor>,
     ) -> candle_core::Result<Tensor> {
+        if self.weight.track_op() {
+            // Training: the live parameters, through differentiable ops only.
+            let y = x.matmul(&self.weight.t()?)?;
+            let mut y = match &self.bias {
+                Some(b) => y.broadcast_add(b)?,
+                None => y,
+            };
+            if let Some(act) = slopes {
+                y = act.forward(&y)?;
+            }
+            return match residual {
+                Some(r) => y + r,
+                None => Ok(y),
+            };
+        }
         let y = x.matmul(&self.weight_t)?;
         if cpu::fused_for(&y) {
             return cpu::bias_prelu_rows(&y, self.bias_host.as_deref(), slopes.map(PRelu::slopes), residual);
@@ -258,6 +307,8 @@ impl Module for ResMlp {
 #[derive(Debug, Clone)]
 pub struct GroupNormLayer {
     norm: GroupNorm,
+    /// `weight` as loaded (a trainable variable is read live by `norm`).
+    weight: Tensor,
     groups: usize,
     gamma: Vec<f32>,
     beta: Vec<f32>,
@@ -271,17 +322,20 @@ impl GroupNormLayer {
     pub fn new(channels: usize, vb: &VarBuilder) -> Result<Self, NetError> {
         let groups = channels.min(32);
         let norm = candle_nn::group_norm(groups, channels, GROUP_NORM_EPS, vb.clone())?;
+        let weight = vb.get(channels, "weight")?;
         Ok(Self {
             norm,
             groups,
-            gamma: host(&vb.get(channels, "weight")?)?,
+            gamma: host(&weight)?,
+            weight,
             beta: host(&vb.get(channels, "bias")?)?,
         })
     }
 
     /// Normalises `x` `(B, C, H, W)`, then applies `act` if given.
     pub fn forward_act(&self, x: &Tensor, act: Option<&PRelu>) -> candle_core::Result<Tensor> {
-        if cpu::fused_for(x) {
+        let trainable = self.weight.track_op() || act.is_some_and(|a| a.weight.track_op());
+        if cpu::fused_for(x) && !trainable {
             return cpu::group_norm_prelu(
                 x,
                 self.groups,
@@ -346,7 +400,7 @@ impl ConvLayer {
 
 impl Module for ConvLayer {
     fn forward(&self, x: &Tensor) -> candle_core::Result<Tensor> {
-        if cpu::fused_for(x) {
+        if cpu::fused_for(x) && !self.conv.weight().track_op() {
             return cpu::conv2d(
                 x,
                 &self.weight_flat,
@@ -438,6 +492,32 @@ mod tests {
                 "x={x}: {g} vs {want}"
             );
         }
+    }
+
+    #[test]
+    fn differentiable_upsampling_matches_candles_kernel() {
+        let values: Vec<f32> = (0..2 * 3 * 5 * 4)
+            .map(|i| ((i * 37) % 23) as f32 - 11.0)
+            .collect();
+        let plain = Tensor::from_vec(values, (2, 3, 5, 4), &Device::Cpu).unwrap();
+        let var = candle_core::Var::from_tensor(&plain).unwrap();
+        let want = plain.upsample_bilinear2d_with_scale(2.0, 2.0, false).unwrap();
+        let got = upsample2_bilinear(var.as_tensor()).unwrap();
+        assert_eq!(got.dims(), &[2, 3, 10, 8]);
+        let diff = (got.clone() - want)
+            .unwrap()
+            .abs()
+            .unwrap()
+            .max_all()
+            .unwrap()
+            .to_scalar::<f32>()
+            .unwrap();
+        assert!(diff < 1e-5, "max difference {diff}");
+        // Each input value spreads weights summing to 4 (¾ + ¼ per axis, twice).
+        let grads = got.sum_all().unwrap().backward().unwrap();
+        let g = grads.get(var.as_tensor()).unwrap();
+        let total = g.sum_all().unwrap().to_scalar::<f32>().unwrap();
+        assert!((total - 4.0 * 120.0).abs() < 1e-3, "gradient total {total}");
     }
 
     #[test]

@@ -29,6 +29,6 @@ pub mod views;
 
 pub use capture::NetCapture;
 pub use error::NetError;
-pub use model::{Model, NelfConfig, default_device, device_name, read_safetensors_bytes};
+pub use model::{Architecture, Model, NelfConfig, default_device, device_name, read_safetensors_bytes};
 pub use source::NelfField;
 pub use views::{EncodedViews, SourceViews, Stage};

@@ -12,7 +12,7 @@ use candle_nn::VarBuilder;
 use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
 use rayon::prelude::*;
 
-use crate::encoder::{EncoderOutput, ImageEncoder, SOURCE_FEATURE_CHANNELS};
+use crate::encoder::{EncoderOutput, ImageEncoder};
 use crate::error::NetError;
 use crate::light::{aggregate_light, net_solid_angles};
 use crate::nelfnet::{NelfNet, NelfNetTrace, PointInputs};
@@ -50,6 +50,88 @@ pub fn read_safetensors_bytes(path: &Path) -> Result<Vec<u8>, NetError> {
     Ok(out)
 }
 
+/// The widths of the network: the official ones by default (checkpoint-compatible);
+/// smaller ones train faster. Every other width (the direction MLP's 16, the density
+/// MLP's 32, the blend MLP's 32 and 16, the light head's 512 = 4 maps × 128 texels) is
+/// fixed. Read from a weights file's tensor shapes by [`Architecture::from_tensors`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Architecture {
+    /// Channels of the four encoder stages (official 32, 64, 128, 256), each at most
+    /// 32 or a multiple of 32 (`GroupNorm` takes `min(32, C)` groups).
+    pub encoder_channels: [usize; 4],
+    /// Latent channels per stage (official 32): the source feature has twice as many,
+    /// the first half for the coarse network, the second for the fine one.
+    pub latent_channels: usize,
+    /// Width of the geometry feature (official 64).
+    pub geometry_features: usize,
+    /// Hidden width of the light-transport MLP (official 128).
+    pub lt_hidden: usize,
+}
+
+impl Default for Architecture {
+    fn default() -> Self {
+        Self::OFFICIAL
+    }
+}
+
+impl Architecture {
+    /// The official widths.
+    pub const OFFICIAL: Self = Self {
+        encoder_channels: [32, 64, 128, 256],
+        latent_channels: 32,
+        geometry_features: 64,
+        lt_hidden: 128,
+    };
+
+    /// Channels of the source feature map (both stages' latents).
+    pub fn feature_channels(&self) -> usize {
+        2 * self.latent_channels
+    }
+
+    /// Checks that every width is positive and that `GroupNorm` can split the
+    /// encoder's channels (`min(32, C)` groups must divide `C`).
+    pub fn validate(&self) -> Result<(), NetError> {
+        let groups_ok = |c: usize| c > 0 && c % c.min(32) == 0;
+        let widths = [self.latent_channels, self.geometry_features, self.lt_hidden];
+        if !self.encoder_channels.iter().all(|&c| groups_ok(c))
+            || !groups_ok(self.feature_channels())
+            || widths.contains(&0)
+        {
+            return Err(NetError::input(format!("unusable network widths {self:?}")));
+        }
+        Ok(())
+    }
+
+    /// The widths of a set of weights, read from the shapes of the tensors that
+    /// carry them (official key names).
+    pub fn from_tensors(tensors: &std::collections::HashMap<String, Tensor>) -> Result<Self, NetError> {
+        let rows = |key: &str| -> Result<usize, NetError> {
+            let t = tensors
+                .get(key)
+                .ok_or_else(|| NetError::input(format!("no tensor `{key}`")))?;
+            Ok(t.dims().first().copied().unwrap_or(0))
+        };
+        let mut encoder_channels = [0usize; 4];
+        for (i, c) in encoder_channels.iter_mut().enumerate() {
+            *c = rows(&format!("image_encoder.resblocks.{i}.shortcut.weight"))?;
+        }
+        let feature = rows("image_encoder.catconvs.2.conv.weight")?;
+        if feature % 2 != 0 {
+            return Err(NetError::input(format!(
+                "the source feature has {feature} channels, not two equal halves"
+            )));
+        }
+        let arch = Self {
+            encoder_channels,
+            latent_channels: feature / 2,
+            geometry_features: rows("coarse_appearance_encoder.geometry_mlp.input_layer.weight")?,
+            lt_hidden: rows("coarse_appearance_encoder.lt_mlp.input_layer.weight")?,
+        };
+        arch.validate()?;
+        Ok(arch)
+    }
+}
+
 /// Model arguments (official `config_nelf_ft` values by default).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct NelfConfig {
@@ -62,6 +144,8 @@ pub struct NelfConfig {
     pub head_radius_mm: f32,
     /// Points per network batch (bounds memory: about 20 KB per point and view).
     pub batch_points: usize,
+    /// The network's widths ([`Model::load`] reads them from the weights).
+    pub architecture: Architecture,
 }
 
 impl Default for NelfConfig {
@@ -71,6 +155,7 @@ impl Default for NelfConfig {
             fine_samples: 128,
             head_radius_mm: 200.0,
             batch_points: 2048,
+            architecture: Architecture::OFFICIAL,
         }
     }
 }
@@ -133,15 +218,16 @@ impl Model {
             || config.batch_points == 0
             || !config.head_radius_mm.is_finite()
             || config.head_radius_mm <= 0.0
+            || config.architecture.validate().is_err()
         {
             return Err(NetError::input(format!(
                 "unusable model configuration {config:?}"
             )));
         }
         Ok(Self {
-            encoder: ImageEncoder::new(&vb.pp("image_encoder"))?,
-            coarse: NelfNet::new(&vb.pp("coarse_appearance_encoder"))?,
-            fine: NelfNet::new(&vb.pp("fine_appearance_encoder"))?,
+            encoder: ImageEncoder::new(&vb.pp("image_encoder"), &config.architecture)?,
+            coarse: NelfNet::new(&vb.pp("coarse_appearance_encoder"), &config.architecture)?,
+            fine: NelfNet::new(&vb.pp("fine_appearance_encoder"), &config.architecture)?,
             config,
             device: vb.device().clone(),
         })
@@ -149,13 +235,24 @@ impl Model {
 
     /// Loads the weights from a safetensors file (official key names; f32, or any
     /// float type, converted) onto `device`. The file may be zstd-compressed
-    /// (`*.safetensors.zst`, see [`read_safetensors_bytes`]).
+    /// (`*.safetensors.zst`, see [`read_safetensors_bytes`]). The widths come from the
+    /// file (`config.architecture` is replaced by [`Architecture::from_tensors`]).
     pub fn load(path: impl AsRef<Path>, config: NelfConfig, device: &Device) -> Result<Self, NetError> {
         let path = path.as_ref();
         let bytes = read_safetensors_bytes(path)?;
-        let vb = VarBuilder::from_buffered_safetensors(bytes, DType::F32, device)
+        let tensors = candle_core::safetensors::load_buffer(&bytes, device)
             .map_err(|e| NetError::file(path, format!("not a safetensors file: {e}")))?;
-        Self::new(&vb, config).map_err(|e| NetError::file(path, format!("not NeLF weights: {e}")))
+        let architecture = Architecture::from_tensors(&tensors)
+            .map_err(|e| NetError::file(path, format!("not NeLF weights: {e}")))?;
+        let vb = VarBuilder::from_tensors(tensors, DType::F32, device);
+        Self::new(
+            &vb,
+            NelfConfig {
+                architecture,
+                ..config
+            },
+        )
+        .map_err(|e| NetError::file(path, format!("not NeLF weights: {e}")))
     }
 
     /// The configuration.
@@ -194,7 +291,8 @@ impl Model {
             .permute((0, 2, 3, 1))?
             .flatten_all()?
             .to_vec1::<f32>()?;
-        debug_assert_eq!(features.len(), v * (h / 2) * (w / 2) * SOURCE_FEATURE_CHANNELS);
+        let feature_channels = self.config.architecture.feature_channels();
+        debug_assert_eq!(features.len(), v * (h / 2) * (w / 2) * feature_channels);
         let light_feature = out.light_feature.flatten_all()?.to_vec1::<f32>()?;
         let rotations: Vec<_> = views
             .cameras
@@ -219,6 +317,7 @@ impl Model {
             images: views.images.clone(),
             masks_dilated: crate::geometry::dilate_masks(&views.masks, w, h),
             features,
+            feature_channels,
             light,
         };
         Ok((encoded, out))

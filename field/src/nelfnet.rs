@@ -21,10 +21,13 @@ use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
 
 use crate::error::NetError;
 use crate::layers::{Mlp, ResMlp, softplus};
+use crate::model::Architecture;
 
-/// Latent channels per point and view (half of the source feature).
+/// Latent channels per point and view (half of the source feature), official widths;
+/// others: [`Architecture::latent_channels`].
 pub const LATENT_CHANNELS: usize = 32;
-/// Width of the geometry feature.
+/// Width of the geometry feature, official widths; others:
+/// [`Architecture::geometry_features`].
 pub const GEOMETRY_FEATURES: usize = 64;
 
 /// The inputs of one batch of points: `N` points, `V` views, all `f32` on the model's device.
@@ -137,24 +140,26 @@ pub struct NelfNet {
     density_mlp: Mlp,
     lt_mlp: ResMlp,
     blend_mlp: Mlp,
+    /// Latent channels per view.
+    latent: usize,
+    /// Width of the geometry feature.
+    geometry: usize,
 }
 
 impl NelfNet {
-    /// Loads the network from `vb` (e.g. the `fine_appearance_encoder` prefix).
-    pub fn new(vb: &VarBuilder) -> Result<Self, NetError> {
-        let f = 3 + LATENT_CHANNELS;
+    /// Loads the network of widths `arch` from `vb` (e.g. the
+    /// `fine_appearance_encoder` prefix).
+    pub fn new(vb: &VarBuilder, arch: &Architecture) -> Result<Self, NetError> {
+        let (latent, g) = (arch.latent_channels, arch.geometry_features);
+        let f = 3 + latent;
         Ok(Self {
             dirc_mlp: Mlp::new(&[6, 16, f], &vb.pp("dirc_mlp"))?,
-            geometry_mlp: ResMlp::new(
-                3 * f,
-                GEOMETRY_FEATURES,
-                GEOMETRY_FEATURES + 1,
-                2,
-                &vb.pp("geometry_mlp"),
-            )?,
-            density_mlp: Mlp::new(&[2 * GEOMETRY_FEATURES, 32, 1], &vb.pp("density_mlp"))?,
-            lt_mlp: ResMlp::new(f + 3 + GEOMETRY_FEATURES, 128, LT_DIM, 2, &vb.pp("lt_mlp"))?,
-            blend_mlp: Mlp::new(&[6 + GEOMETRY_FEATURES, 32, 16, 1], &vb.pp("blend_mlp"))?,
+            geometry_mlp: ResMlp::new(3 * f, g, g + 1, 2, &vb.pp("geometry_mlp"))?,
+            density_mlp: Mlp::new(&[2 * g, 32, 1], &vb.pp("density_mlp"))?,
+            lt_mlp: ResMlp::new(f + 3 + g, arch.lt_hidden, LT_DIM, 2, &vb.pp("lt_mlp"))?,
+            blend_mlp: Mlp::new(&[6 + g, 32, 16, 1], &vb.pp("blend_mlp"))?,
+            latent,
+            geometry: g,
         })
     }
 
@@ -166,7 +171,7 @@ impl NelfNet {
                 "the network needs at least 2 views, got {v}"
             )));
         }
-        let f = 3 + LATENT_CHANNELS;
+        let f = 3 + self.latent;
         let rows = n * v;
         let target = input.target_dirc.unsqueeze(1)?.broadcast_as((n, v, 3))?;
         let dirc_mlp_in = Tensor::cat(&[&input.source_dirc, &target], 2)?;
@@ -190,9 +195,9 @@ impl NelfNet {
         let geometry_out = self
             .geometry_mlp
             .forward(&geometry_in.reshape((rows, 3 * f))?)?
-            .reshape((n, v, GEOMETRY_FEATURES + 1))?;
-        let feature = geometry_out.narrow(2, 0, GEOMETRY_FEATURES)?;
-        let view_weight = candle_nn::ops::sigmoid(&geometry_out.narrow(2, GEOMETRY_FEATURES, 1)?)?;
+            .reshape((n, v, self.geometry + 1))?;
+        let feature = geometry_out.narrow(2, 0, self.geometry)?;
+        let view_weight = candle_nn::ops::sigmoid(&geometry_out.narrow(2, self.geometry, 1)?)?;
         let weighted = feature.broadcast_mul(&view_weight)?;
         let weight_mean = weighted.sum(1)?;
         let weight_var = ((&weighted * &feature)?.sum(1)? - weight_mean.sqr()?)?;
@@ -225,7 +230,7 @@ impl NelfNet {
         let t = self.trunk(input)?;
         let (n, v, _) = input.source_rgb.dims3()?;
         let rows = n * v;
-        let f = 3 + LATENT_CHANNELS;
+        let f = 3 + self.latent;
         let lt_in = Tensor::cat(
             &[&input.source_rgb, &input.latent, &input.source_dirc, &t.feature],
             2,
@@ -233,13 +238,13 @@ impl NelfNet {
         let lt_scale = softplus(
             &self
                 .lt_mlp
-                .forward(&lt_in.reshape((rows, f + 3 + GEOMETRY_FEATURES))?)?,
+                .forward(&lt_in.reshape((rows, f + 3 + self.geometry))?)?,
         )?
         .reshape((n, v, LT_DIM))?;
         let blend_in = Tensor::cat(&[&t.dirc_mlp_in, &t.feature], 2)?;
         let blend_logits = self
             .blend_mlp
-            .forward(&blend_in.reshape((rows, 6 + GEOMETRY_FEATURES))?)?
+            .forward(&blend_in.reshape((rows, 6 + self.geometry))?)?
             .reshape((n, v, 1))?;
         let blend_softmax = candle_nn::ops::softmax(&blend_logits, 1)?;
         Ok(NelfNetTrace {

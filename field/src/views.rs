@@ -9,11 +9,10 @@
 use candle_core::{Device, Tensor};
 use rayon::prelude::*;
 
-use crate::encoder::SOURCE_FEATURE_CHANNELS;
 use crate::error::NetError;
 use crate::geometry::{NetCamera, Taps, hull_inside, project_normalized};
 use crate::light::LightAggregation;
-use crate::nelfnet::{LATENT_CHANNELS, PointInputs};
+use crate::nelfnet::PointInputs;
 
 /// Which per-point network (and which half of the source feature) to use.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -25,11 +24,11 @@ pub enum Stage {
 }
 
 impl Stage {
-    /// First feature channel of this stage's latent.
-    pub fn feature_offset(self) -> usize {
+    /// First feature channel of this stage's latent, for `latent` channels per stage.
+    pub fn feature_offset(self, latent: usize) -> usize {
         match self {
             Self::Coarse => 0,
-            Self::Fine => LATENT_CHANNELS,
+            Self::Fine => latent,
         }
     }
 
@@ -133,9 +132,10 @@ impl HostPointInputs {
     /// Uploads to `device`.
     pub fn to_tensors(&self, device: &Device) -> Result<PointInputs, NetError> {
         let (n, v) = (self.points, self.views);
+        let latent = self.latent.len() / (n * v).max(1);
         Ok(PointInputs {
             source_rgb: Tensor::from_slice(&self.source_rgb, (n, v, 3), device)?,
-            latent: Tensor::from_slice(&self.latent, (n, v, LATENT_CHANNELS), device)?,
+            latent: Tensor::from_slice(&self.latent, (n, v, latent), device)?,
             source_dirc: Tensor::from_slice(&self.source_dirc, (n, v, 3), device)?,
             target_dirc: Tensor::from_slice(&self.target_dirc, (n, 3), device)?,
         })
@@ -154,8 +154,10 @@ pub struct EncodedViews {
     pub(crate) images: Vec<f32>,
     /// `(V, H, W)`.
     pub(crate) masks_dilated: Vec<f32>,
-    /// `(V, H/2, W/2, 64)`, channel-last.
+    /// `(V, H/2, W/2, F)`, channel-last.
     pub(crate) features: Vec<f32>,
+    /// `F`, channels of the source feature (both stages' latents).
+    pub(crate) feature_channels: usize,
     pub(crate) light: LightAggregation,
 }
 
@@ -244,34 +246,38 @@ impl EncodedViews {
         let (n, v) = (points.len(), self.views());
         let (w, h) = (self.width, self.height);
         let (fw, fh) = (w / 2, h / 2);
-        let offset = stage.feature_offset();
+        let channels = self.feature_channels;
+        let latent_channels = channels / 2;
+        let offset = stage.feature_offset(latent_channels);
         let mut source_rgb = vec![0.0f32; n * v * 3];
-        let mut latent = vec![0.0f32; n * v * LATENT_CHANNELS];
+        let mut latent = vec![0.0f32; n * v * latent_channels];
         let mut source_dirc = vec![0.0f32; n * v * 3];
         source_rgb
             .par_chunks_mut(v * 3)
-            .zip(latent.par_chunks_mut(v * LATENT_CHANNELS))
+            .zip(latent.par_chunks_mut(v * latent_channels))
             .zip(source_dirc.par_chunks_mut(v * 3))
             .zip(points.par_iter())
-            .for_each(|(((rgb, lat), dirc), x)| {
-                let mut feature = [0.0f32; SOURCE_FEATURE_CHANNELS];
-                for view in 0..v {
-                    let g = project_normalized(&self.projections[view], w, h, *x);
-                    let image = &self.images[view * w * h * 3..(view + 1) * w * h * 3];
-                    Taps::bilinear(g[0], g[1], w, h).sample_into(image, &mut rgb[view * 3..view * 3 + 3]);
-                    let plane_len = fw * fh * SOURCE_FEATURE_CHANNELS;
-                    let plane = &self.features[view * plane_len..(view + 1) * plane_len];
-                    Taps::bilinear(g[0], g[1], fw, fh).sample_into(plane, &mut feature);
-                    lat[view * LATENT_CHANNELS..(view + 1) * LATENT_CHANNELS]
-                        .copy_from_slice(&feature[offset..offset + LATENT_CHANNELS]);
-                    let c = self.centres[view];
-                    let d = [c[0] - x[0], c[1] - x[1], c[2] - x[2]];
-                    let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-12);
-                    for k in 0..3 {
-                        dirc[view * 3 + k] = d[k] / norm;
+            .for_each_init(
+                || vec![0.0f32; channels],
+                |feature, (((rgb, lat), dirc), x)| {
+                    for view in 0..v {
+                        let g = project_normalized(&self.projections[view], w, h, *x);
+                        let image = &self.images[view * w * h * 3..(view + 1) * w * h * 3];
+                        Taps::bilinear(g[0], g[1], w, h).sample_into(image, &mut rgb[view * 3..view * 3 + 3]);
+                        let plane_len = fw * fh * channels;
+                        let plane = &self.features[view * plane_len..(view + 1) * plane_len];
+                        Taps::bilinear(g[0], g[1], fw, fh).sample_into(plane, feature);
+                        lat[view * latent_channels..(view + 1) * latent_channels]
+                            .copy_from_slice(&feature[offset..offset + latent_channels]);
+                        let c = self.centres[view];
+                        let d = [c[0] - x[0], c[1] - x[1], c[2] - x[2]];
+                        let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-12);
+                        for k in 0..3 {
+                            dirc[view * 3 + k] = d[k] / norm;
+                        }
                     }
-                }
-            });
+                },
+            );
         Ok(HostPointInputs {
             points: n,
             views: v,

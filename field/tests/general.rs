@@ -12,7 +12,7 @@ use candle_nn::{VarBuilder, VarMap};
 use glam::{DVec3, Vec3};
 use nelf_field::capture::default_net_from_world;
 use nelf_field::light::{net_light_to_latlong, net_to_ours};
-use nelf_field::{Model, NelfConfig, NelfField, NetCapture, Stage};
+use nelf_field::{Architecture, Model, NelfConfig, NelfField, NetCapture, Stage};
 use nelf_format::conventions::{LT_DIM, PinholeCamera, is_rotation, shade};
 use nelf_scene::field::{FieldSource, ViewPolicy};
 use rand::{Rng, SeedableRng};
@@ -21,9 +21,14 @@ use rand_pcg::Pcg64;
 /// A model with deterministic weights: unit-ish group norms, `PReLU` slopes 0.25,
 /// uniform `±√(3/fan_in)` matrices, small biases.
 fn deterministic_model(seed: u64) -> Model {
+    deterministic_trainable_model(seed, NelfConfig::default()).0
+}
+
+/// [`deterministic_model`] of any configuration, with its variables (trainable).
+fn deterministic_trainable_model(seed: u64, config: NelfConfig) -> (Model, VarMap) {
     let varmap = VarMap::new();
     let vb = VarBuilder::from_varmap(&varmap, DType::F32, &Device::Cpu);
-    let model = Model::new(&vb, NelfConfig::default()).unwrap();
+    let model = Model::new(&vb, config).unwrap();
     let mut rng = Pcg64::seed_from_u64(seed);
     let data = varmap.data().lock().unwrap();
     let mut names: Vec<&String> = data.keys().collect();
@@ -46,7 +51,8 @@ fn deterministic_model(seed: u64) -> Model {
         var.set(&Tensor::from_vec(values, dims, &Device::Cpu).unwrap())
             .unwrap();
     }
-    model
+    drop(data);
+    (model, varmap)
 }
 
 /// `views` cameras about 1 m from `centre` (metres, +y up, view 0 on +z), `w × h`
@@ -315,4 +321,52 @@ fn field_source_contract() {
     let mut d1 = vec![0.0f32; 1];
     let mut t1 = vec![0.0f32; LT_DIM];
     assert!(field.evaluate(&[Vec3::NAN], &view, &mut d1, &mut t1).is_err());
+}
+
+/// Training reads its variables through differentiable ops; inference reads loaded
+/// tensors through the fused CPU kernels. A small architecture saved from variables
+/// and loaded back must be recognised from its shapes and give the same numbers on
+/// both paths (encoder, light estimate, per-point networks).
+#[test]
+fn trainable_and_loaded_weights_agree_and_small_widths_round_trip() {
+    let arch = Architecture {
+        encoder_channels: [16, 32, 32, 64],
+        latent_channels: 8,
+        geometry_features: 16,
+        lt_hidden: 32,
+    };
+    let config = NelfConfig {
+        architecture: arch,
+        ..NelfConfig::default()
+    };
+    let (trainable, varmap) = deterministic_trainable_model(7, config);
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("small.safetensors");
+    varmap.save(&path).unwrap();
+    let loaded = Model::load(&path, NelfConfig::default(), &Device::Cpu).unwrap();
+    assert_eq!(loaded.config().architecture, arch);
+
+    let centre = DVec3::new(0.1, 1.6, -0.2);
+    let capture = synthetic_capture(3, 64, 48, centre);
+    let a = trainable.encode(&capture.views).unwrap();
+    let b = loaded.encode(&capture.views).unwrap();
+    assert_close(
+        &a.light().source_light,
+        &b.light().source_light,
+        1e-4,
+        "source light",
+    );
+    let points: Vec<[f32; 3]> = points_near(centre, 64, 3)
+        .iter()
+        .map(|p| capture.to_net_point(p.as_dvec3()))
+        .collect();
+    let dirs = vec![[0.0f32, -1.0, 0.0]; points.len()];
+    for stage in [Stage::Coarse, Stage::Fine] {
+        let (_, ta) = trainable.run_points(&a, &points, &dirs, stage).unwrap();
+        let (_, tb) = loaded.run_points(&b, &points, &dirs, stage).unwrap();
+        let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert_close(&flat(&ta.density), &flat(&tb.density), 1e-4, "density");
+        assert_close(&flat(&ta.lt_scale), &flat(&tb.lt_scale), 1e-4, "lt");
+        assert_close(&flat(&ta.blend_softmax), &flat(&tb.blend_softmax), 1e-4, "blend");
+    }
 }
