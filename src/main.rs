@@ -33,6 +33,8 @@ enum Command {
     Export(cmd::export::ExportArgs),
     /// Open the interactive viewer (wgpu + egui): orbit, relight, rank, debug views.
     View(cmd::view::ViewArgs),
+    /// Train the NeLF network on path-traced ground truth: `data` renders a dataset of training triplets, `run` trains on it.
+    Train(cmd::train::TrainArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -47,5 +49,6 @@ fn main() -> anyhow::Result<()> {
         Command::Eval(args) => cmd::eval::run(&args),
         Command::Export(args) => cmd::export::run(&args),
         Command::View(args) => cmd::view::run(&args),
+        Command::Train(args) => cmd::train::run(&args),
     }
 }

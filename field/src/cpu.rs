@@ -12,7 +12,7 @@
 
 use std::sync::atomic::{AtomicBool, Ordering};
 
-use candle_core::{Device, Storage, Tensor};
+use candle_core::{CpuStorage, CustomOp1, Device, Layout, Shape, Storage, Tensor};
 use rayon::prelude::*;
 
 static FUSED_KERNELS: AtomicBool = AtomicBool::new(true);
@@ -29,6 +29,13 @@ pub fn set_fused_kernels(enabled: bool) {
 /// also check their own parameters, see [`crate::layers`]).
 pub fn fused_for(t: &Tensor) -> bool {
     t.device().is_cpu() && FUSED_KERNELS.load(Ordering::Relaxed) && !t.track_op()
+}
+
+/// Whether `t` carries gradients on the CPU with the fused kernels enabled: then
+/// the composites that have a hand-written backward ([`softplus_trainable`],
+/// [`channel_dots_trainable`]) replace dozens of single-threaded candle ops.
+pub fn fused_trainable(t: &Tensor) -> bool {
+    t.device().is_cpu() && FUSED_KERNELS.load(Ordering::Relaxed) && t.track_op()
 }
 
 /// Elements per parallel work item of element-wise kernels.
@@ -296,6 +303,118 @@ pub fn channel_dots(lt: &Tensor, weights: &[f32]) -> candle_core::Result<Tensor>
     Tensor::from_vec(out, (n, v, 3), &Device::Cpu)
 }
 
+/// The contiguous `f32` values of a CPU storage under `layout`.
+fn storage_slice<'a>(storage: &'a CpuStorage, layout: &Layout) -> candle_core::Result<&'a [f32]> {
+    let data = storage.as_slice::<f32>()?;
+    match layout.contiguous_offsets() {
+        Some((start, end)) => Ok(&data[start..end]),
+        None => candle_core::bail!("fused CPU kernel given a non-contiguous tensor"),
+    }
+}
+
+/// Softplus with its backward `g·sigmoid(x)` (1 above PyTorch's threshold 20).
+#[derive(Debug)]
+struct SoftplusOp;
+
+impl CustomOp1 for SoftplusOp {
+    fn name(&self) -> &'static str {
+        "nelf-softplus"
+    }
+
+    fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
+        let d = storage_slice(storage, layout)?;
+        let mut o = vec![0.0f32; d.len()];
+        o.par_chunks_mut(CHUNK)
+            .zip(d.par_chunks(CHUNK))
+            .for_each(|(o, d)| {
+                for (o, &v) in o.iter_mut().zip(d) {
+                    *o = softplus_scalar(v);
+                }
+            });
+        Ok((CpuStorage::F32(o), layout.shape().clone()))
+    }
+
+    fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
+        let x = with_data(arg, <[f32]>::to_vec)?;
+        let g = with_data(grad_res, |g| {
+            let mut o = vec![0.0f32; g.len()];
+            o.par_chunks_mut(CHUNK)
+                .zip(g.par_chunks(CHUNK).zip(x.par_chunks(CHUNK)))
+                .for_each(|(o, (g, x))| {
+                    for ((o, &g), &x) in o.iter_mut().zip(g).zip(x) {
+                        let slope = if x > 20.0 { 1.0 } else { 1.0 / (1.0 + (-x).exp()) };
+                        *o = g * slope;
+                    }
+                });
+            o
+        })?;
+        Ok(Some(Tensor::from_vec(g, arg.shape(), &Device::Cpu)?))
+    }
+}
+
+/// [`softplus`] for a tensor that carries gradients: one parallel pass forward and
+/// one backward.
+pub fn softplus_trainable(x: &Tensor) -> candle_core::Result<Tensor> {
+    x.contiguous()?.apply_op1(SoftplusOp)
+}
+
+/// [`channel_dots`] with its backward `∂lt[n, v, c·P + p] = g[n, v, c]·w[c·P + p]`.
+#[derive(Debug)]
+struct ChannelDotsOp {
+    weights: Vec<f32>,
+}
+
+impl CustomOp1 for ChannelDotsOp {
+    fn name(&self) -> &'static str {
+        "nelf-channel-dots"
+    }
+
+    fn cpu_fwd(&self, storage: &CpuStorage, layout: &Layout) -> candle_core::Result<(CpuStorage, Shape)> {
+        let (n, v, d) = layout.shape().dims3()?;
+        let data = storage_slice(storage, layout)?;
+        let texels = d / 3;
+        let w = &self.weights;
+        let mut o = vec![0.0f32; n * v * 3];
+        o.par_chunks_mut(3).zip(data.par_chunks(d)).for_each(|(o, row)| {
+            for (c, oc) in o.iter_mut().enumerate() {
+                let range = c * texels..(c + 1) * texels;
+                *oc = row[range.clone()].iter().zip(&w[range]).map(|(a, b)| a * b).sum();
+            }
+        });
+        Ok((CpuStorage::F32(o), Shape::from((n, v, 3))))
+    }
+
+    fn bwd(&self, arg: &Tensor, _res: &Tensor, grad_res: &Tensor) -> candle_core::Result<Option<Tensor>> {
+        let (n, v, d) = arg.dims3()?;
+        let texels = d / 3;
+        let w = &self.weights;
+        let g = with_data(grad_res, |g| {
+            let mut o = vec![0.0f32; n * v * d];
+            o.par_chunks_mut(d).zip(g.par_chunks(3)).for_each(|(row, g)| {
+                for (c, gc) in g.iter().enumerate() {
+                    let range = c * texels..(c + 1) * texels;
+                    for (o, wv) in row[range.clone()].iter_mut().zip(&w[range]) {
+                        *o = gc * wv;
+                    }
+                }
+            });
+            o
+        })?;
+        Ok(Some(Tensor::from_vec(g, (n, v, d), &Device::Cpu)?))
+    }
+}
+
+/// [`channel_dots`] for a `lt` that carries gradients (`weights` constant).
+pub fn channel_dots_trainable(lt: &Tensor, weights: &[f32]) -> candle_core::Result<Tensor> {
+    let (_, _, d) = lt.dims3()?;
+    if d != weights.len() || d % 3 != 0 {
+        candle_core::bail!("channel_dots: {d} values per view, {} weights", weights.len());
+    }
+    lt.contiguous()?.apply_op1(ChannelDotsOp {
+        weights: weights.to_vec(),
+    })
+}
+
 /// `T[n, c·P + p] = Σ_v per_view[n, v, c] · lt[n, v, c·P + p] · omega[p]`:
 /// `lt` `(N, V, 3·P)`, `per_view` `(N, V, 3)`, `omega` `(P)` → `(N, 3·P)`.
 pub fn blend_light_transport(lt: &Tensor, per_view: &Tensor, omega: &[f32]) -> candle_core::Result<Tensor> {
@@ -506,5 +625,51 @@ mod tests {
             .unwrap();
         assert_eq!(y[0], vec![1.0 - 14.5, 1.0 - 0.5, 1.0 - 0.5]);
         assert_eq!(y[1], vec![2.0 + 1.5, 2.0 + 19.9, 2.0 + 24.0]);
+    }
+
+    /// The trainable kernels give candle's values and gradients: softplus against
+    /// its composition of candle ops, channel dots against `broadcast_mul + sum`.
+    #[test]
+    fn trainable_kernels_match_candle_values_and_gradients() {
+        let x = candle_core::Var::from_tensor(&(ramp(&[4, 3, 6], 0.3) * 8.0).unwrap()).unwrap();
+        let w: Vec<f32> = (0..6).map(|i| 0.2 + 0.1 * i as f32).collect();
+        let weights = Tensor::from_vec(w.clone(), (1, 1, 3, 2), &Device::Cpu).unwrap();
+        let upstream = ramp(&[4, 3, 3], 1.1);
+
+        let fused = channel_dots_trainable(&softplus_trainable(x.as_tensor()).unwrap(), &w).unwrap();
+        let tail = (x.as_tensor().abs().unwrap().neg().unwrap().exp().unwrap() + 1.0)
+            .unwrap()
+            .log()
+            .unwrap();
+        let plain_softplus = (x.as_tensor().relu().unwrap() + tail).unwrap();
+        let plain = plain_softplus
+            .reshape((4, 3, 3, 2))
+            .unwrap()
+            .broadcast_mul(&weights)
+            .unwrap()
+            .sum(3)
+            .unwrap();
+        assert!(
+            max_diff(&fused, &plain) < 1e-4,
+            "values {}",
+            max_diff(&fused, &plain)
+        );
+        let g_fused = (fused * &upstream)
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .backward()
+            .unwrap();
+        let g_plain = (plain * &upstream)
+            .unwrap()
+            .sum_all()
+            .unwrap()
+            .backward()
+            .unwrap();
+        let (a, b) = (
+            g_fused.get(x.as_tensor()).unwrap(),
+            g_plain.get(x.as_tensor()).unwrap(),
+        );
+        assert!(max_diff(a, b) < 1e-4, "gradients {}", max_diff(a, b));
     }
 }

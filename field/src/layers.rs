@@ -36,6 +36,9 @@ pub fn softplus(x: &Tensor) -> candle_core::Result<Tensor> {
     if cpu::fused_for(x) {
         return cpu::softplus(x);
     }
+    if cpu::fused_trainable(x) {
+        return cpu::softplus_trainable(x);
+    }
     let tail = log1p_nonneg(&x.abs()?.neg()?.exp()?)?;
     x.relu()? + tail
 }

@@ -162,6 +162,37 @@ pub fn light_map_in_world(
     Ok(LatLong::new(width, height, texels)?)
 }
 
+/// Where each view's light maps are sampled to align them with view 0: for view
+/// `v` and view-0 texel `t`, the normalised grid point `(x, y)` (`(V, 8, 16, 2)`) and
+/// its bilinear taps (`V·128`) in view `v`'s 8 × 16 maps (module docs).
+pub fn alignment_taps(rotations: &[[[f32; 3]; 3]]) -> (Vec<f32>, Vec<Taps>) {
+    let views = rotations.len();
+    let Some(&r0) = rotations.first() else {
+        return (Vec::new(), Vec::new());
+    };
+    let mut sample_grid = vec![0.0f32; views * ENV_TEXELS * 2];
+    let mut taps = vec![Taps::NONE; views * ENV_TEXELS];
+    for (v, rv) in rotations.iter().enumerate() {
+        // M = R_v R₀ᵀ.
+        let mut m = [[0.0f32; 3]; 3];
+        for (a, row) in m.iter_mut().enumerate() {
+            for (b, val) in row.iter_mut().enumerate() {
+                *val = (0..3).map(|k| rv[a][k] * r0[b][k]).sum();
+            }
+        }
+        for t in 0..ENV_TEXELS {
+            let d = net_texel_direction(t / ENV_W, t % ENV_W);
+            let c = m.map(|row| row[0] * d[0] + row[1] * d[1] + row[2] * d[2]);
+            let x = c[0].atan2(-c[2]) / std::f32::consts::PI;
+            let y = 2.0 * (-c[1]).clamp(-1.0, 1.0).acos() / std::f32::consts::PI - 1.0;
+            sample_grid[(v * ENV_TEXELS + t) * 2] = x;
+            sample_grid[(v * ENV_TEXELS + t) * 2 + 1] = y;
+            taps[v * ENV_TEXELS + t] = Taps::bilinear(x, y, ENV_W, ENV_H);
+        }
+    }
+    (sample_grid, taps)
+}
+
 /// Everything the light aggregation computes, in the fixtures' layouts.
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightAggregation {
@@ -203,28 +234,7 @@ pub fn aggregate_light(
             }
         }
     }
-    // Sampling grid and taps per view and texel.
-    let r0 = rotations[0];
-    let mut sample_grid = vec![0.0f32; views * ENV_TEXELS * 2];
-    let mut taps = vec![Taps::NONE; views * ENV_TEXELS];
-    for (v, rv) in rotations.iter().enumerate() {
-        // M = R_v R₀ᵀ.
-        let mut m = [[0.0f32; 3]; 3];
-        for (a, row) in m.iter_mut().enumerate() {
-            for (b, val) in row.iter_mut().enumerate() {
-                *val = (0..3).map(|k| rv[a][k] * r0[b][k]).sum();
-            }
-        }
-        for t in 0..ENV_TEXELS {
-            let d = net_texel_direction(t / ENV_W, t % ENV_W);
-            let c = m.map(|row| row[0] * d[0] + row[1] * d[1] + row[2] * d[2]);
-            let x = c[0].atan2(-c[2]) / std::f32::consts::PI;
-            let y = 2.0 * (-c[1]).clamp(-1.0, 1.0).acos() / std::f32::consts::PI - 1.0;
-            sample_grid[(v * ENV_TEXELS + t) * 2] = x;
-            sample_grid[(v * ENV_TEXELS + t) * 2 + 1] = y;
-            taps[v * ENV_TEXELS + t] = Taps::bilinear(x, y, ENV_W, ENV_H);
-        }
-    }
+    let (sample_grid, taps) = alignment_taps(rotations);
     // Rotate every patch's four maps into view 0.
     let mut aligned = vec![0.0f32; feature_reshaped.len()];
     for n in 0..patches {

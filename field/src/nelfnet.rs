@@ -272,6 +272,9 @@ impl NelfNet {
         let dots = if crate::cpu::fused_for(&trace.lt_scale) {
             let weights = irradiance.flatten_all()?.to_vec1::<f32>()?;
             crate::cpu::channel_dots(&trace.lt_scale, &weights)?
+        } else if crate::cpu::fused_trainable(&trace.lt_scale) && !irradiance.track_op() {
+            let weights = irradiance.flatten_all()?.to_vec1::<f32>()?;
+            crate::cpu::channel_dots_trainable(&trace.lt_scale, &weights)?
         } else {
             let lt = trace.lt_scale.reshape((n, v, 3, ENV_TEXELS))?;
             let irradiance = irradiance.reshape((1, 1, 3, ENV_TEXELS))?;

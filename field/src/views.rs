@@ -142,6 +142,23 @@ impl HostPointInputs {
     }
 }
 
+/// What a differentiable gather needs for `N` points, `V` views: the inputs that
+/// do not depend on the network (colours, directions) and the bilinear taps of each
+/// point's projection into the feature maps, so that the latent can be gathered
+/// from a feature tensor that carries gradients (`Σ_k w_k · rows[index_k]`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FeatureTaps {
+    /// `(N, V, 3)`: source colours at the projections.
+    pub source_rgb: Vec<f32>,
+    /// `(N, V, 3)`: unit directions from each point to each source camera.
+    pub source_dirc: Vec<f32>,
+    /// `(4, N·V)`: rows of the `(V·H/2·W/2, F)` feature matrix (view-major,
+    /// channel-last), tap-major.
+    pub rows: [Vec<u32>; 4],
+    /// `(4, N·V)`: the taps' bilinear weights (0 outside the map: zero padding).
+    pub weights: [Vec<f32>; 4],
+}
+
 /// Encoded source views: what the per-point networks read.
 #[derive(Debug, Clone)]
 pub struct EncodedViews {
@@ -165,6 +182,74 @@ impl EncodedViews {
     /// Number of views.
     pub fn views(&self) -> usize {
         self.cameras.len()
+    }
+
+    /// The geometry of `views` without encoding them (no features, no light
+    /// estimate): for the hull test and [`EncodedViews::gather_taps`] while training,
+    /// where the encoder runs on a graph of its own.
+    pub fn geometry_only(views: &SourceViews) -> Result<Self, NetError> {
+        views.validate()?;
+        let (w, h) = (views.width, views.height);
+        Ok(Self {
+            width: w,
+            height: h,
+            cameras: views.cameras.clone(),
+            projections: views.cameras.iter().map(NetCamera::projection).collect(),
+            centres: views.cameras.iter().map(NetCamera::centre).collect(),
+            images: views.images.clone(),
+            masks_dilated: crate::geometry::dilate_masks(&views.masks, w, h),
+            features: Vec::new(),
+            feature_channels: 0,
+            light: LightAggregation {
+                sample_grid: Vec::new(),
+                feature_reshaped: Vec::new(),
+                aligned: Vec::new(),
+                confidence_norm: Vec::new(),
+                source_light: Vec::new(),
+            },
+        })
+    }
+
+    /// The host-side inputs of `points` (mm) and their taps into the feature maps
+    /// (half resolution), as [`EncodedViews::gather`] computes them.
+    pub fn gather_taps(&self, points: &[[f32; 3]]) -> FeatureTaps {
+        let (n, v) = (points.len(), self.views());
+        let (w, h) = (self.width, self.height);
+        let (fw, fh) = (w / 2, h / 2);
+        let mut source_rgb = vec![0.0f32; n * v * 3];
+        let mut source_dirc = vec![0.0f32; n * v * 3];
+        let mut taps = vec![Taps::NONE; n * v];
+        source_rgb
+            .par_chunks_mut(v * 3)
+            .zip(source_dirc.par_chunks_mut(v * 3))
+            .zip(taps.par_chunks_mut(v))
+            .zip(points.par_iter())
+            .for_each(|(((rgb, dirc), tap), x)| {
+                for view in 0..v {
+                    let g = project_normalized(&self.projections[view], w, h, *x);
+                    let image = &self.images[view * w * h * 3..(view + 1) * w * h * 3];
+                    Taps::bilinear(g[0], g[1], w, h).sample_into(image, &mut rgb[view * 3..view * 3 + 3]);
+                    let mut t = Taps::bilinear(g[0], g[1], fw, fh);
+                    for index in &mut t.index {
+                        *index += (view * fw * fh) as u32;
+                    }
+                    tap[view] = t;
+                    let c = self.centres[view];
+                    let d = [c[0] - x[0], c[1] - x[1], c[2] - x[2]];
+                    let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-12);
+                    for k in 0..3 {
+                        dirc[view * 3 + k] = d[k] / norm;
+                    }
+                }
+            });
+        let rows = std::array::from_fn(|k| taps.iter().map(|t| t.index[k]).collect());
+        let weights = std::array::from_fn(|k| taps.iter().map(|t| t.weight[k]).collect());
+        FeatureTaps {
+            source_rgb,
+            source_dirc,
+            rows,
+            weights,
+        }
     }
 
     /// Image size `(width, height)`.

@@ -8,7 +8,8 @@
 //! view (view 0, on +z looking at the head) within `±max_angle_deg` of azimuth and
 //! elevation, at `min_distance_m..max_distance_m`; the focal length makes the head's
 //! bounding sphere fill `fill` of the frame height. Held-aside target views sit
-//! between the source views (novel view) under a different map (novel light).
+//! between the source views (novel view) under a different map (novel light), each
+//! optionally turned about +y (`target_env_rotate_deg`).
 //!
 //! Layout written (all paths relative to the output folder):
 //! `cameras.json`, `synth_config.json` (the [`SynthConfig`] used),
@@ -135,6 +136,11 @@ pub struct SynthConfig {
     /// First seed of the procedural target lighting (target i uses seed + i).
     #[arg(long, default_value_t = 100)]
     pub target_env_seed: u64,
+    /// Turn each target's lighting about +y by this many degrees, one value per
+    /// target (repeat the option); default: none is turned.
+    #[arg(long, allow_negative_numbers = true)]
+    #[serde(default)]
+    pub target_env_rotate_deg: Vec<f32>,
     /// Interreflection bounces of the path tracer.
     #[arg(long, default_value_t = 2)]
     pub bounces: u32,
@@ -174,6 +180,7 @@ impl Default for SynthConfig {
             targets: 2,
             target_envmap: Vec::new(),
             target_env_seed: 100,
+            target_env_rotate_deg: Vec::new(),
             bounces: 2,
             texel_samples: 16,
             indirect_samples: 128,
@@ -218,6 +225,13 @@ impl SynthConfig {
             return bad(format!(
                 "{} --target-envmap files for {} targets",
                 self.target_envmap.len(),
+                self.targets
+            ));
+        }
+        if !self.target_env_rotate_deg.is_empty() && self.target_env_rotate_deg.len() != self.targets {
+            return bad(format!(
+                "{} --target-env-rotate-deg values for {} targets",
+                self.target_env_rotate_deg.len(),
                 self.targets
             ));
         }
@@ -499,7 +513,7 @@ pub fn write_synthetic_capture(
         let light = lighting(
             config.target_envmap.get(i).map(PathBuf::as_path),
             config.target_env_seed + i as u64,
-            0.0,
+            config.target_env_rotate_deg.get(i).copied().unwrap_or(0.0),
         )?;
         let env_rel = format!("lighting/{name}.exr");
         write_exr_rgb(out_dir.join(&env_rel), 16, 8, light.texels())?;

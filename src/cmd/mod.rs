@@ -8,6 +8,7 @@ pub mod export;
 pub mod inspect;
 pub mod light;
 pub mod render;
+pub mod train;
 pub mod view;
 
 /// Saves a command's settings and report as pretty JSON beside its output `out`, in

@@ -1,0 +1,117 @@
+//! Adam (Kingma & Ba 2015) over named variables with a step size per variable,
+//! whose whole state (first and second moments, step count) can be saved and
+//! restored exactly, so that a resumed run continues bit for bit:
+//!
+//! `m ← β₁m + (1−β₁)g`, `v ← β₂v + (1−β₂)g²`,
+//! `θ ← θ − α·(m / (1−β₁ᵗ)) / (√(v / (1−β₂ᵗ)) + ε)`.
+
+use std::collections::BTreeMap;
+
+use candle_core::backprop::GradStore;
+use candle_core::{Tensor, Var};
+
+use crate::error::TrainError;
+
+/// β₁ (the paper's and PyTorch's default).
+const BETA1: f64 = 0.9;
+/// β₂.
+const BETA2: f64 = 0.999;
+/// ε.
+const EPS: f64 = 1e-8;
+
+/// One optimised variable.
+#[derive(Debug)]
+struct Slot {
+    var: Var,
+    lr: f64,
+    m: Tensor,
+    v: Tensor,
+}
+
+/// Adam over named variables (sorted by name, so the update order is fixed).
+#[derive(Debug)]
+pub struct Adam {
+    slots: BTreeMap<String, Slot>,
+    steps: u64,
+}
+
+impl Adam {
+    /// Adam over `vars`, each with its step size.
+    pub fn new(vars: Vec<(String, Var, f64)>) -> Result<Self, TrainError> {
+        let mut slots = BTreeMap::new();
+        for (name, var, lr) in vars {
+            let m = var.as_tensor().zeros_like()?;
+            let v = var.as_tensor().zeros_like()?;
+            slots.insert(name, Slot { var, lr, m, v });
+        }
+        Ok(Self { slots, steps: 0 })
+    }
+
+    /// Updates taken so far.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// One update from `grads` (variables without a gradient keep their moments
+    /// decaying as if the gradient were zero, as PyTorch does not: they are skipped).
+    pub fn step(&mut self, grads: &GradStore) -> Result<(), TrainError> {
+        self.steps += 1;
+        let t = self.steps as i32;
+        let c1 = 1.0 - BETA1.powi(t);
+        let c2 = 1.0 - BETA2.powi(t);
+        for slot in self.slots.values_mut() {
+            let Some(g) = grads.get(slot.var.as_tensor()) else {
+                continue;
+            };
+            slot.m = ((&slot.m * BETA1)? + (g * (1.0 - BETA1))?)?;
+            slot.v = ((&slot.v * BETA2)? + (g.sqr()? * (1.0 - BETA2))?)?;
+            let m_hat = (&slot.m / c1)?;
+            let v_hat = (&slot.v / c2)?;
+            let delta = (m_hat / (v_hat.sqrt()? + EPS)?)?;
+            let next = (slot.var.as_tensor() - (delta * slot.lr)?)?;
+            slot.var.set(&next)?;
+        }
+        Ok(())
+    }
+
+    /// The moments as named tensors (`adam_m.NAME`, `adam_v.NAME`) for a checkpoint.
+    pub fn state_tensors(&self) -> Vec<(String, Tensor)> {
+        self.slots
+            .iter()
+            .flat_map(|(name, s)| {
+                [
+                    (format!("adam_m.{name}"), s.m.clone()),
+                    (format!("adam_v.{name}"), s.v.clone()),
+                ]
+            })
+            .collect()
+    }
+
+    /// Restores the moments and step count saved by [`Adam::state_tensors`].
+    pub fn restore(
+        &mut self,
+        tensors: &std::collections::HashMap<String, Tensor>,
+        steps: u64,
+    ) -> Result<(), TrainError> {
+        for (name, slot) in &mut self.slots {
+            for (key, target) in [
+                (format!("adam_m.{name}"), &mut slot.m),
+                (format!("adam_v.{name}"), &mut slot.v),
+            ] {
+                let t = tensors
+                    .get(&key)
+                    .ok_or_else(|| TrainError::Settings(format!("the checkpoint has no `{key}`")))?;
+                if t.dims() != target.dims() {
+                    return Err(TrainError::Settings(format!(
+                        "`{key}` is {:?} in the checkpoint, {:?} in this network",
+                        t.dims(),
+                        target.dims()
+                    )));
+                }
+                *target = t.to_device(target.device())?;
+            }
+        }
+        self.steps = steps;
+        Ok(())
+    }
+}

@@ -1,0 +1,210 @@
+//! The one configuration of a training run (`nelf train run`), saved beside its
+//! checkpoint and with its weights: the network's widths, the image and ray budget
+//! per step, the optimiser and the losses of Sun et al. 2021 (§4.3: L1 rendering,
+//! depth ÷ 200 mm, alpha, log-L1 lighting; novel-light mode 70 %, self-rotation 30 %;
+//! Adam, 10⁻⁴ for the per-point MLPs and 2·10⁻⁴ for the encoder) plus an optional
+//! 3D distillation loss on σ and T at points near the surface.
+
+use std::path::PathBuf;
+
+use nelf_field::{Architecture, NelfConfig};
+use serde::{Deserialize, Serialize};
+
+use crate::error::TrainError;
+
+/// Settings of `nelf train run`.
+#[derive(Debug, Clone, PartialEq, clap::Args, Serialize, Deserialize)]
+pub struct TrainConfig {
+    /// Dataset folder written by `nelf train data`.
+    #[arg(long, default_value = "out/train-data")]
+    pub data: PathBuf,
+    /// Run folder: checkpoint, configuration, validation log and curve.
+    #[arg(long, short = 'o', default_value = "out/train-run")]
+    pub out: PathBuf,
+    /// Network widths: `official` (checkpoint-compatible) or `small` / `tiny`
+    /// (fewer channels; see [`TrainConfig::architecture`]).
+    #[arg(long, default_value = "small")]
+    pub arch: String,
+    /// Side of the square images the network sees, pixels (a multiple of 16 that
+    /// divides the dataset's size; captures are box-filtered down to it).
+    #[arg(long, default_value_t = 64)]
+    pub image_size: usize,
+    /// Target rays per step.
+    #[arg(long, default_value_t = 256)]
+    pub rays: usize,
+    /// Coarse samples per ray.
+    #[arg(long, default_value_t = 32)]
+    pub coarse_samples: usize,
+    /// Importance samples per ray for the fine network (0: coarse network only).
+    #[arg(long, default_value_t = 32)]
+    pub fine_samples: usize,
+    /// Steps to train to (a resumed run continues up to this many).
+    #[arg(long, default_value_t = 100_000)]
+    pub steps: u64,
+    /// Stop after this many seconds of training in this invocation (0: no limit).
+    #[arg(long, default_value_t = 0.0)]
+    pub max_secs: f64,
+    /// Adam step size of the per-point networks.
+    #[arg(long, default_value_t = 1e-4)]
+    pub lr_mlp: f64,
+    /// Adam step size of the image encoder.
+    #[arg(long, default_value_t = 2e-4)]
+    pub lr_encoder: f64,
+    /// Share of steps in novel-light mode (the rest: self-rotation).
+    #[arg(long, default_value_t = 0.7)]
+    pub novel_light_share: f64,
+    /// Weight of the depth loss (|depth − true depth| / 200 mm, inside the true mask).
+    #[arg(long, default_value_t = 0.1)]
+    pub depth_weight: f64,
+    /// Weight of the alpha loss (|alpha − true alpha|).
+    #[arg(long, default_value_t = 0.1)]
+    pub alpha_weight: f64,
+    /// Weight of the log-L1 lighting loss on the source-light estimate.
+    #[arg(long, default_value_t = 0.1)]
+    pub light_weight: f64,
+    /// Weight of the 3D distillation loss (σ and T at points near the surface; 0: off).
+    #[arg(long, default_value_t = 0.0)]
+    pub distill_weight: f64,
+    /// Distillation points per step.
+    #[arg(long, default_value_t = 256)]
+    pub distill_points: usize,
+    /// Seed of the initial weights and of every random choice.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Seconds between checkpoints.
+    #[arg(long, default_value_t = 300.0)]
+    pub checkpoint_secs: f64,
+    /// Steps between validations on the held-out heads (0: never).
+    #[arg(long, default_value_t = 500)]
+    pub val_every: u64,
+    /// Held-out heads per validation (their novel-light target views).
+    #[arg(long, default_value_t = 4)]
+    pub val_heads: usize,
+}
+
+impl Default for TrainConfig {
+    fn default() -> Self {
+        Self {
+            data: PathBuf::from("out/train-data"),
+            out: PathBuf::from("out/train-run"),
+            arch: "small".into(),
+            image_size: 64,
+            rays: 256,
+            coarse_samples: 32,
+            fine_samples: 32,
+            steps: 100_000,
+            max_secs: 0.0,
+            lr_mlp: 1e-4,
+            lr_encoder: 2e-4,
+            novel_light_share: 0.7,
+            depth_weight: 0.1,
+            alpha_weight: 0.1,
+            light_weight: 0.1,
+            distill_weight: 0.0,
+            distill_points: 256,
+            seed: 0,
+            checkpoint_secs: 300.0,
+            val_every: 500,
+            val_heads: 4,
+        }
+    }
+}
+
+impl TrainConfig {
+    /// The widths `arch` names: `official` (32/64/128/256, latent 32, geometry 64,
+    /// light-transport hidden 128), `small` (16/32/64/64, 16, 32, 64) or `tiny`
+    /// (8/16/16/32, 4, 8, 16: for tests).
+    pub fn architecture(&self) -> Result<Architecture, TrainError> {
+        let arch = match self.arch.as_str() {
+            "official" => Architecture::OFFICIAL,
+            "small" => Architecture {
+                encoder_channels: [16, 32, 64, 64],
+                latent_channels: 16,
+                geometry_features: 32,
+                lt_hidden: 64,
+            },
+            "tiny" => Architecture {
+                encoder_channels: [8, 16, 16, 32],
+                latent_channels: 4,
+                geometry_features: 8,
+                lt_hidden: 16,
+            },
+            other => {
+                return Err(TrainError::Settings(format!(
+                    "--arch {other}: choose official, small or tiny"
+                )));
+            }
+        };
+        Ok(arch)
+    }
+
+    /// The model configuration of this run.
+    pub fn nelf_config(&self) -> Result<NelfConfig, TrainError> {
+        Ok(NelfConfig {
+            coarse_samples: self.coarse_samples,
+            fine_samples: self.fine_samples,
+            architecture: self.architecture()?,
+            ..NelfConfig::default()
+        })
+    }
+
+    /// Checks ranges before any work is done.
+    pub fn validate(&self) -> Result<(), TrainError> {
+        let bad = |m: String| Err(TrainError::Settings(m));
+        self.architecture()?;
+        if self.image_size == 0 || self.image_size % 16 != 0 {
+            return bad(format!(
+                "--image-size {} must be a positive multiple of 16",
+                self.image_size
+            ));
+        }
+        if self.rays == 0 || self.coarse_samples < 2 {
+            return bad(format!(
+                "--rays {} and --coarse-samples {} must be at least 1 and 2",
+                self.rays, self.coarse_samples
+            ));
+        }
+        let rates = [self.lr_mlp, self.lr_encoder];
+        if !rates.iter().all(|r| r.is_finite() && *r > 0.0) {
+            return bad(format!("step sizes {rates:?} must be positive"));
+        }
+        if !(0.0..=1.0).contains(&self.novel_light_share) {
+            return bad(format!(
+                "--novel-light-share {} must be in [0, 1]",
+                self.novel_light_share
+            ));
+        }
+        let weights = [
+            self.depth_weight,
+            self.alpha_weight,
+            self.light_weight,
+            self.distill_weight,
+        ];
+        if !weights.iter().all(|w| w.is_finite() && *w >= 0.0) {
+            return bad(format!("loss weights {weights:?} must be non-negative"));
+        }
+        if !(self.checkpoint_secs.is_finite() && self.checkpoint_secs > 0.0 && self.max_secs >= 0.0) {
+            return bad(format!(
+                "--checkpoint-secs {} must be positive and --max-secs {} non-negative",
+                self.checkpoint_secs, self.max_secs
+            ));
+        }
+        Ok(())
+    }
+
+    /// Whether `other` trains the same way (everything but the folders, the step
+    /// target and the time limit), so that a checkpoint of one resumes in the other.
+    pub fn same_training(&self, other: &Self) -> bool {
+        let strip = |c: &Self| Self {
+            data: PathBuf::new(),
+            out: PathBuf::new(),
+            steps: 0,
+            max_secs: 0.0,
+            checkpoint_secs: 0.0,
+            val_every: 0,
+            val_heads: 0,
+            ..c.clone()
+        };
+        strip(self) == strip(other)
+    }
+}

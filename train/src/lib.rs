@@ -1,0 +1,30 @@
+//! `nelf-train`: trains the NeLF network (Sun et al., EGSR 2021) on our own
+//! path-traced ground truth.
+//!
+//! * [`data`]: training triplets (five source views under one lighting, a novel view
+//!   under the same lighting rotated, a novel view under another lighting) written
+//!   once by the path tracer, cached and resumable, with held-out identities and
+//!   lightings ([`data::generate`] writes a dataset folder, [`data::Dataset`] reads
+//!   it back head by head).
+//! * [`config`]: [`TrainConfig`], the one configuration of a run (widths, budget per
+//!   step, optimiser, loss weights), saved with its checkpoints;
+//! * [`forward`]: the network's forward pass with gradients (encoder, light
+//!   estimate, differentiable feature gather, volume rendering);
+//! * [`adam`]: Adam with a state that saves and restores exactly;
+//! * [`trainer`]: the paper's losses and modes, steps, checkpoints;
+//! * [`run`]: the resumable loop with validation on held-out heads;
+//! * [`cli`]: the `nelf train` subcommands (also the `nelf_train` example binary);
+//! * [`error`]: the crate's error type, [`TrainError`].
+
+pub mod adam;
+pub mod cli;
+pub mod config;
+pub mod data;
+pub mod error;
+pub mod forward;
+pub mod run;
+pub mod trainer;
+
+pub use config::TrainConfig;
+
+pub use error::TrainError;

@@ -1,0 +1,337 @@
+//! `nelf train run`: the resumable training loop. Starts from the run folder's
+//! checkpoint when there is one (same training settings required), trains until
+//! the step target or the time limit, validates on held-out heads (novel-light
+//! views, never trained on) into `validation.csv`, and checkpoints every few minutes
+//! and at the end: `checkpoint.safetensors` + `checkpoint.json` (resume state) and
+//! `weights.safetensors` (the network alone, official key names, loadable by
+//! `nelf_field::Model::load`), each written through a temporary file.
+
+use std::io::Write as _;
+use std::path::Path;
+use std::time::Instant;
+
+use candle_core::{Device, Tensor};
+use indicatif::ProgressBar;
+use nelf_field::Stage;
+use nelf_field::render::{NetRay, importance_depths};
+use nelf_scene::mesh_io::linear_to_srgb;
+use nelf_scene::metrics::{psnr, psnr_masked};
+use serde::Serialize;
+
+use crate::adam::Adam;
+use crate::config::TrainConfig;
+use crate::data::{Dataset, TargetMode};
+use crate::error::TrainError;
+use crate::forward::{encode, irradiance, render_rays};
+use crate::trainer::{
+    CHECKPOINT_INFO, CheckpointInfo, LossParts, PreparedHead, RunPaths, Trainable, load_checkpoint,
+    prepare_heads, save_checkpoint, train_step,
+};
+
+/// Rays per validation chunk (bounds memory).
+const VAL_CHUNK_RAYS: usize = 1024;
+
+/// A validation result: the mean over held-out heads.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Validation {
+    /// Whole-image PSNR, 8-bit sRGB, dB.
+    pub psnr: f64,
+    /// PSNR inside the true mask (alpha > 0.5), 8-bit sRGB, dB.
+    pub foreground_psnr: f64,
+}
+
+/// What a run did.
+#[derive(Debug, Clone, Serialize)]
+pub struct RunReport {
+    /// Step reached.
+    pub step: u64,
+    /// Steps taken in this invocation.
+    pub steps_now: u64,
+    /// Seconds of training in this invocation.
+    pub secs_now: f64,
+    /// Seconds of training over all invocations.
+    pub train_secs: f64,
+    /// The last step's losses.
+    pub last_loss: LossParts,
+    /// The last validation, if any ran.
+    pub validation: Option<Validation>,
+}
+
+/// Renders the novel-light target of `head` (fine network, evenly spaced samples)
+/// and scores it against the truth in 8-bit sRGB.
+pub fn validate_head(
+    trainable: &Trainable,
+    head: &PreparedHead,
+    config: &TrainConfig,
+) -> Result<Validation, TrainError> {
+    let model = &trainable.model;
+    let target = head
+        .targets
+        .iter()
+        .find(|t| t.mode == TargetMode::NovelLight)
+        .or_else(|| head.targets.first())
+        .ok_or_else(|| TrainError::Settings("a head without target views".into()))?;
+    let (w, h) = (target.camera.width, target.camera.height);
+    let encoded = encode(model, &head.capture.views)?;
+    let irr = irradiance(&target.light_net, model.device())?;
+    let centre = head.capture.head_centre_net();
+    let radius = model.config().head_radius_mm;
+    let mut rendered = Vec::with_capacity(w * h);
+    let pixels: Vec<usize> = (0..w * h).collect();
+    for chunk in pixels.chunks(VAL_CHUNK_RAYS) {
+        let rays: Vec<NetRay> = chunk
+            .iter()
+            .map(|&p| {
+                NetRay::through_pixel(
+                    &target.camera,
+                    (p % w) as f64 + 0.5,
+                    (p / w) as f64 + 0.5,
+                    centre,
+                    radius,
+                )
+            })
+            .collect();
+        let s = config.coarse_samples;
+        let coarse_d: Vec<f32> = rays
+            .iter()
+            .flat_map(|ray| {
+                (0..s).map(move |k| {
+                    let z = (k as f32 + 0.5) / s as f32;
+                    ray.near * (1.0 - z) + ray.far * z
+                })
+            })
+            .collect();
+        let coarse = render_rays(
+            model,
+            &encoded,
+            &head.geometry,
+            &rays,
+            &coarse_d,
+            Stage::Coarse,
+            &irr,
+        )?;
+        let pass = if config.fine_samples > 0 {
+            let f = config.fine_samples;
+            let u: Vec<f32> = (0..f).map(|k| (k as f32 + 0.5) / f as f32).collect();
+            let jitter = vec![0.5f32; f];
+            let mut depths = Vec::with_capacity(rays.len() * (s + f));
+            for (r, ray) in rays.iter().enumerate() {
+                let mut d = importance_depths(
+                    &coarse.weights[r * s..(r + 1) * s],
+                    ray.near,
+                    ray.far,
+                    &u,
+                    &jitter,
+                );
+                d.extend_from_slice(&coarse_d[r * s..(r + 1) * s]);
+                d.sort_by(f32::total_cmp);
+                depths.extend(d);
+            }
+            render_rays(model, &encoded, &head.geometry, &rays, &depths, Stage::Fine, &irr)?
+        } else {
+            coarse
+        };
+        let rgb = pass.rgb.detach().to_vec2::<f32>()?;
+        rendered.extend(rgb.into_iter().map(|c| [c[0], c[1], c[2]]));
+    }
+    let srgb8 = |c: &[f32; 3]| c.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round());
+    let got: Vec<[f32; 3]> = rendered.iter().map(srgb8).collect();
+    let want: Vec<[f32; 3]> = target.image.iter().map(srgb8).collect();
+    let mask: Vec<f32> = target
+        .alpha
+        .iter()
+        .map(|a| if *a > 0.5 { 1.0 } else { 0.0 })
+        .collect();
+    let psnr_all = psnr(&got, &want, 255.0).map_err(|e| TrainError::Settings(e.to_string()))?;
+    let fg = psnr_masked(&got, &want, &mask, 255.0).map_err(|e| TrainError::Settings(e.to_string()))?;
+    Ok(Validation {
+        psnr: psnr_all,
+        foreground_psnr: fg,
+    })
+}
+
+/// Mean validation over `heads`.
+pub fn validate(
+    trainable: &Trainable,
+    heads: &[PreparedHead],
+    config: &TrainConfig,
+) -> Result<Option<Validation>, TrainError> {
+    if heads.is_empty() {
+        return Ok(None);
+    }
+    let (mut p, mut f) = (0.0, 0.0);
+    for head in heads {
+        let v = validate_head(trainable, head, config)?;
+        p += v.psnr;
+        f += v.foreground_psnr;
+    }
+    let n = heads.len() as f64;
+    Ok(Some(Validation {
+        psnr: p / n,
+        foreground_psnr: f / n,
+    }))
+}
+
+/// Appends a line to the validation log, writing its header first when new.
+fn log_validation(
+    path: &Path,
+    step: u64,
+    train_secs: f64,
+    loss: &LossParts,
+    v: &Validation,
+) -> Result<(), TrainError> {
+    let new = !path.exists();
+    let mut file = std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .map_err(|source| TrainError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+    let mut text = String::new();
+    if new {
+        text.push_str("step,train_secs,loss,rgb_fine,val_psnr_db,val_foreground_psnr_db\n");
+    }
+    text.push_str(
+        &[
+            step.to_string(),
+            format!("{train_secs:.1}"),
+            format!("{:.5}", loss.total),
+            format!("{:.5}", loss.rgb_fine),
+            format!("{:.3}", v.psnr),
+            format!("{:.3}", v.foreground_psnr),
+        ]
+        .join(","),
+    );
+    text.push('\n');
+    file.write_all(text.as_bytes()).map_err(|source| TrainError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Writes the network alone (official key names) for `Model::load`.
+pub fn export_weights(trainable: &Trainable, path: &Path) -> Result<(), TrainError> {
+    let tensors: std::collections::HashMap<String, Tensor> = trainable.weights()?.into_iter().collect();
+    let tmp = path.with_extension("tmp");
+    candle_core::safetensors::save(&tensors, &tmp)?;
+    std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Saves the checkpoint and the exported weights.
+fn checkpoint(
+    paths: &RunPaths,
+    trainable: &Trainable,
+    adam: &Adam,
+    info: &CheckpointInfo,
+) -> Result<(), TrainError> {
+    save_checkpoint(&paths.dir, trainable, adam, info)?;
+    export_weights(trainable, &paths.weights())
+}
+
+/// Trains per `config` (module docs).
+pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Result<RunReport, TrainError> {
+    config.validate()?;
+    let paths = RunPaths {
+        dir: config.out.clone(),
+    };
+    std::fs::create_dir_all(&paths.dir).map_err(|source| TrainError::Io {
+        path: paths.dir.clone(),
+        source,
+    })?;
+    let dataset = Dataset::open(&config.data)?;
+    let train_ids = dataset.train_ids();
+    if train_ids.is_empty() {
+        return Err(TrainError::Settings(format!(
+            "{}: no finished training heads (run `nelf train data` first)",
+            config.data.display()
+        )));
+    }
+    progress.set_message(format!("loading {} training heads", train_ids.len()));
+    let heads = prepare_heads(&dataset, &train_ids, config.image_size)?;
+    let val_ids: Vec<u32> = dataset.val_ids().into_iter().take(config.val_heads).collect();
+    let val_heads = prepare_heads(&dataset, &val_ids, config.image_size)?;
+
+    let trainable = Trainable::init(config, device)?;
+    let mut adam = trainable.optimizer(config)?;
+    let mut train_secs = 0.0;
+    let mut last_loss = LossParts::default();
+    if paths.dir.join(CHECKPOINT_INFO).exists() {
+        let info = load_checkpoint(&paths.dir, &trainable, &mut adam)?;
+        if !info.config.same_training(config) {
+            return Err(TrainError::Settings(format!(
+                "{}: the checkpoint was trained with other settings; use the same settings to resume, or another --out",
+                paths.dir.join(CHECKPOINT_INFO).display()
+            )));
+        }
+        train_secs = info.train_secs;
+        last_loss = info.last_loss;
+    }
+    let serialized = serde_json::to_vec_pretty(config).map_err(|e| TrainError::Settings(e.to_string()))?;
+    let config_path = paths.dir.join("train_config.json");
+    std::fs::write(&config_path, serialized).map_err(|source| TrainError::Io {
+        path: config_path,
+        source,
+    })?;
+
+    progress.set_length(config.steps);
+    progress.set_position(adam.steps());
+    progress.reset_eta();
+    let start = Instant::now();
+    let mut last_checkpoint = Instant::now();
+    let first_step = adam.steps();
+    let mut validation = None;
+    while adam.steps() < config.steps {
+        if config.max_secs > 0.0 && start.elapsed().as_secs_f64() >= config.max_secs {
+            break;
+        }
+        let step_start = Instant::now();
+        last_loss = train_step(&trainable, &mut adam, &heads, config)?;
+        train_secs += step_start.elapsed().as_secs_f64();
+        let step = adam.steps();
+        progress.set_position(step);
+        progress.set_message(format!(
+            "loss {:.4} (colour {:.4})",
+            last_loss.total, last_loss.rgb_fine
+        ));
+        if config.val_every > 0 && step % config.val_every == 0 {
+            if let Some(v) = validate(&trainable, &val_heads, config)? {
+                log_validation(&paths.log(), step, train_secs, &last_loss, &v)?;
+                progress.println(format!(
+                    "step {step}: validation PSNR {:.2} dB, foreground {:.2} dB",
+                    v.psnr, v.foreground_psnr
+                ));
+                validation = Some(v);
+            }
+        }
+        if last_checkpoint.elapsed().as_secs_f64() >= config.checkpoint_secs {
+            let info = CheckpointInfo {
+                step,
+                train_secs,
+                config: config.clone(),
+                last_loss,
+            };
+            checkpoint(&paths, &trainable, &adam, &info)?;
+            last_checkpoint = Instant::now();
+        }
+    }
+    let info = CheckpointInfo {
+        step: adam.steps(),
+        train_secs,
+        config: config.clone(),
+        last_loss,
+    };
+    checkpoint(&paths, &trainable, &adam, &info)?;
+    Ok(RunReport {
+        step: adam.steps(),
+        steps_now: adam.steps() - first_step,
+        secs_now: start.elapsed().as_secs_f64(),
+        train_secs,
+        last_loss,
+        validation,
+    })
+}

@@ -1,0 +1,737 @@
+//! Training steps and the resumable loop (Sun et al. 2021, §4.3).
+//!
+//! A step draws a training head and a mode (novel light with probability
+//! `novel_light_share`, else self-rotation), encodes the head's source views, renders
+//! `rays` pixels of the mode's target view through the coarse network and, with
+//! importance samples, the fine one, under the target's *true* lighting, and
+//! minimises
+//!
+//! `L = |c_c − c| + |c_f − c| + λ_d·|d − d*|/200 mm + λ_a·|a − a*| + λ_l·|log(1+L̂) − log(1+L)|`
+//!
+//! (colours L1 over rays; depth along the ray inside the true mask; alpha of the
+//! fine pass; the log-L1 lighting loss on the encoder's source-light estimate)
+//! plus, when `distill_weight > 0`, `λ_s·|σ − σ*|` at ground-truth points near the
+//! surface. Every random choice of step `k` comes from a generator seeded by
+//! `(seed, k)`, so the state of a run is its weights, its Adam moments and its step
+//! count: a checkpoint holds exactly those, and a resumed run continues bit for bit.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use candle_core::{DType, Device, Tensor, Var};
+use candle_nn::{VarBuilder, VarMap};
+use glam::DVec3;
+use nelf_field::capture::default_net_from_world;
+use nelf_field::geometry::NetCamera;
+use nelf_field::light::latlong_to_net_light;
+use nelf_field::render::{NetRay, importance_depths};
+use nelf_field::{EncodedViews, Model, NetCapture, Stage};
+use nelf_format::conventions::{LatLong, PinholeCamera, project_envmap};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+use serde::{Deserialize, Serialize};
+
+use crate::adam::Adam;
+use crate::config::TrainConfig;
+use crate::data::{Dataset, TargetMode, TrainingSample};
+use crate::error::TrainError;
+use crate::forward::{self, encode, irradiance, l1, log_l1, render_rays};
+
+/// Depth normaliser of the depth loss (the paper's 200 mm).
+const DEPTH_SCALE_MM: f64 = 200.0;
+
+/// A target view at the training resolution, in the network's units.
+#[derive(Debug, Clone)]
+pub struct PreparedTarget {
+    /// Self-rotation or novel light.
+    pub mode: TargetMode,
+    /// The camera (millimetres, network frame).
+    pub camera: NetCamera,
+    /// `(H·W)` linear RGB.
+    pub image: Vec<[f32; 3]>,
+    /// `(H·W)` coverage.
+    pub alpha: Vec<f32>,
+    /// `(H·W)` depth along the optical axis, millimetres (0: background).
+    pub depth_mm: Vec<f32>,
+    /// The target lighting, network layout `(3, 8, 16)`.
+    pub light_net: Vec<f32>,
+}
+
+/// A training head at the training resolution, ready for steps.
+#[derive(Debug, Clone)]
+pub struct PreparedHead {
+    /// The source views and frames.
+    pub capture: NetCapture,
+    /// Hull and projections of the source views.
+    pub geometry: EncodedViews,
+    /// The true source lighting, network layout.
+    pub source_light_net: Vec<f32>,
+    /// The target views.
+    pub targets: Vec<PreparedTarget>,
+    /// Ground-truth points (mm, network frame) and σ (1/mm) for distillation.
+    pub distill_points: Vec<[f32; 3]>,
+    /// σ at [`PreparedHead::distill_points`], 1/mm.
+    pub distill_sigma: Vec<f32>,
+}
+
+/// Averages `factor × factor` blocks of a row-major `width`-wide image.
+fn box_down<T: Copy>(
+    pixels: &[T],
+    width: usize,
+    factor: usize,
+    zero: T,
+    add: impl Fn(T, T) -> T,
+    scale: impl Fn(T, f32) -> T,
+) -> Vec<T> {
+    let height = pixels.len() / width.max(1);
+    let (w, h) = (width / factor, height / factor);
+    let inv = 1.0 / (factor * factor) as f32;
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = zero;
+            for dy in 0..factor {
+                for dx in 0..factor {
+                    acc = add(acc, pixels[(y * factor + dy) * width + x * factor + dx]);
+                }
+            }
+            out.push(scale(acc, inv));
+        }
+    }
+    out
+}
+
+fn down_rgb(pixels: &[[f32; 3]], width: usize, factor: usize) -> Vec<[f32; 3]> {
+    box_down(
+        pixels,
+        width,
+        factor,
+        [0.0; 3],
+        |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]],
+        |a, s| a.map(|v| v * s),
+    )
+}
+
+fn down_scalar(pixels: &[f32], width: usize, factor: usize) -> Vec<f32> {
+    box_down(pixels, width, factor, 0.0, |a, b| a + b, |a, s| a * s)
+}
+
+/// Depth down-sampled as the mean of the block's foreground depths (0 if none).
+fn down_depth(depth: &[f32], width: usize, factor: usize) -> Vec<f32> {
+    let pairs: Vec<[f32; 2]> = depth
+        .iter()
+        .map(|&d| if d > 0.0 { [d, 1.0] } else { [0.0, 0.0] })
+        .collect();
+    box_down(
+        &pairs,
+        width,
+        factor,
+        [0.0f32; 2],
+        |a, b| [a[0] + b[0], a[1] + b[1]],
+        |a, _| a,
+    )
+    .into_iter()
+    .map(|[s, n]| if n > 0.0 { s / n } else { 0.0 })
+    .collect()
+}
+
+/// `camera` seen at `1/factor` of its resolution.
+fn scaled_camera(camera: &PinholeCamera, factor: usize) -> PinholeCamera {
+    let s = 1.0 / factor as f64;
+    PinholeCamera {
+        width: camera.width / factor as u32,
+        height: camera.height / factor as u32,
+        fx: camera.fx * s,
+        fy: camera.fy * s,
+        cx: camera.cx * s,
+        cy: camera.cy * s,
+        ..*camera
+    }
+}
+
+/// A world-frame lighting map in the network's layout for `capture`'s light frame.
+fn net_light(map: &LatLong, capture: &NetCapture) -> Result<Vec<f32>, TrainError> {
+    let light = project_envmap(map, capture.world_from_light())
+        .map_err(|e| TrainError::Settings(format!("lighting: {e}")))?;
+    Ok(latlong_to_net_light(&light)?)
+}
+
+/// Prepares `sample` at `size × size` pixels (its size divided by a whole factor).
+pub fn prepare(sample: &TrainingSample, size: usize) -> Result<PreparedHead, TrainError> {
+    let full = sample.source_cameras.first().map_or(0, |c| c.width as usize);
+    if size == 0 || full % size != 0 || full / size == 0 {
+        return Err(TrainError::Settings(format!(
+            "head {}: images of {full} pixels cannot be reduced to {size} by a whole factor",
+            sample.id
+        )));
+    }
+    let factor = full / size;
+    let cameras: Vec<PinholeCamera> = sample
+        .source_cameras
+        .iter()
+        .map(|c| scaled_camera(c, factor))
+        .collect();
+    let images: Vec<Vec<[f32; 3]>> = sample
+        .source_images
+        .iter()
+        .map(|i| down_rgb(i, full, factor))
+        .collect();
+    let masks: Vec<Vec<f32>> = sample
+        .source_masks
+        .iter()
+        .map(|m| down_scalar(m, full, factor))
+        .collect();
+    let capture = NetCapture::new(
+        &cameras,
+        &images,
+        &masks,
+        sample.head_centre_m,
+        default_net_from_world(),
+    )?;
+    let geometry = EncodedViews::geometry_only(&capture.views)?;
+    let source_light_net = net_light(&sample.source_light, &capture)?;
+    let mut targets = Vec::with_capacity(sample.targets.len());
+    for t in &sample.targets {
+        let tw = t.camera.width as usize;
+        if tw % factor != 0 || t.camera.height as usize % factor != 0 {
+            return Err(TrainError::Settings(format!(
+                "head {}: a target of {}×{} cannot be reduced by {factor}",
+                sample.id, t.camera.width, t.camera.height
+            )));
+        }
+        targets.push(PreparedTarget {
+            mode: t.mode,
+            camera: capture.net_camera(&scaled_camera(&t.camera, factor)),
+            image: down_rgb(&t.image, tw, factor),
+            alpha: down_scalar(&t.alpha, tw, factor),
+            depth_mm: down_depth(&t.depth_m, tw, factor)
+                .iter()
+                .map(|d| d * 1000.0)
+                .collect(),
+            light_net: net_light(&t.light, &capture)?,
+        });
+    }
+    let distill_points = sample
+        .distill
+        .points_m
+        .iter()
+        .map(|p| capture.to_net_point(DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))))
+        .collect();
+    let distill_sigma = sample.distill.sigma_per_m.iter().map(|s| s / 1000.0).collect();
+    Ok(PreparedHead {
+        capture,
+        geometry,
+        source_light_net,
+        targets,
+        distill_points,
+        distill_sigma,
+    })
+}
+
+/// The parts of a step's loss (plain numbers, for logs).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize)]
+pub struct LossParts {
+    /// Weighted total.
+    pub total: f64,
+    /// L1 colour of the coarse pass.
+    pub rgb_coarse: f64,
+    /// L1 colour of the fine pass (the coarse one when there is none).
+    pub rgb_fine: f64,
+    /// Depth loss (÷ 200 mm).
+    pub depth: f64,
+    /// Alpha loss.
+    pub alpha: f64,
+    /// Log-L1 lighting loss.
+    pub light: f64,
+    /// Distillation loss on σ (1/mm).
+    pub distill: f64,
+}
+
+/// The generator of step `step`'s random choices.
+pub fn step_rng(seed: u64, step: u64) -> Pcg64 {
+    Pcg64::seed_from_u64(seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15))
+}
+
+/// Picks `count` pixels of a target: 80 % inside the padded box around its
+/// foreground, the rest anywhere.
+fn pick_pixels(target: &PreparedTarget, width: usize, count: usize, rng: &mut Pcg64) -> Vec<usize> {
+    let height = target.alpha.len() / width.max(1);
+    let (mut x0, mut y0, mut x1, mut y1) = (width, height, 0usize, 0usize);
+    for (i, a) in target.alpha.iter().enumerate() {
+        if *a > 0.0 {
+            let (x, y) = (i % width, i / width);
+            x0 = x0.min(x);
+            y0 = y0.min(y);
+            x1 = x1.max(x + 1);
+            y1 = y1.max(y + 1);
+        }
+    }
+    let pad = width / 16;
+    let boxed = x1 > x0 && y1 > y0;
+    let (x0, y0) = (x0.saturating_sub(pad), y0.saturating_sub(pad));
+    let (x1, y1) = ((x1 + pad).min(width), (y1 + pad).min(height));
+    (0..count)
+        .map(|_| {
+            if boxed && rng.random::<f32>() < 0.8 {
+                rng.random_range(y0..y1) * width + rng.random_range(x0..x1)
+            } else {
+                rng.random_range(0..width * height)
+            }
+        })
+        .collect()
+}
+
+/// Evenly jittered coarse depths `(R, S)` of `rays`.
+fn coarse_depths(rays: &[NetRay], samples: usize, rng: &mut Pcg64) -> Vec<f32> {
+    rays.iter()
+        .flat_map(|ray| {
+            let jitter: Vec<f32> = (0..samples).map(|_| rng.random::<f32>()).collect();
+            (0..samples)
+                .map(|k| {
+                    let z = (k as f32 + jitter[k]) / samples as f32;
+                    ray.near * (1.0 - z) + ray.far * z
+                })
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+/// The fine pass's depths: coarse ones plus `fine` importance samples, sorted.
+fn fine_depths(rays: &[NetRay], coarse: &[f32], weights: &[f32], fine: usize, rng: &mut Pcg64) -> Vec<f32> {
+    let s = coarse.len() / rays.len().max(1);
+    let mut out = Vec::with_capacity(rays.len() * (s + fine));
+    for (r, ray) in rays.iter().enumerate() {
+        let u: Vec<f32> = (0..fine).map(|_| rng.random::<f32>()).collect();
+        let jitter: Vec<f32> = (0..fine).map(|_| rng.random::<f32>()).collect();
+        let mut d = importance_depths(&weights[r * s..(r + 1) * s], ray.near, ray.far, &u, &jitter);
+        d.extend_from_slice(&coarse[r * s..(r + 1) * s]);
+        d.sort_by(f32::total_cmp);
+        out.extend(d);
+    }
+    out
+}
+
+/// The loss of one step on `head` (module docs), with the graph for its gradients.
+pub fn step_loss(
+    model: &Model,
+    head: &PreparedHead,
+    config: &TrainConfig,
+    rng: &mut Pcg64,
+) -> Result<(Tensor, LossParts), TrainError> {
+    let device = model.device();
+    let encoded = encode(model, &head.capture.views)?;
+    let want_mode = if rng.random::<f64>() < config.novel_light_share {
+        TargetMode::NovelLight
+    } else {
+        TargetMode::SelfRotation
+    };
+    let target = head
+        .targets
+        .iter()
+        .find(|t| t.mode == want_mode)
+        .or_else(|| head.targets.first())
+        .ok_or_else(|| TrainError::Settings("a head without target views".into()))?;
+    let width = target.camera.width;
+    let pixels = pick_pixels(target, width, config.rays, rng);
+    let centre = head.capture.head_centre_net();
+    let radius = model.config().head_radius_mm;
+    let rays: Vec<NetRay> = pixels
+        .iter()
+        .map(|&p| {
+            NetRay::through_pixel(
+                &target.camera,
+                (p % width) as f64 + 0.5,
+                (p / width) as f64 + 0.5,
+                centre,
+                radius,
+            )
+        })
+        .collect();
+    let irr = irradiance(&target.light_net, device)?;
+    let coarse_d = coarse_depths(&rays, config.coarse_samples, rng);
+    let coarse = render_rays(
+        model,
+        &encoded,
+        &head.geometry,
+        &rays,
+        &coarse_d,
+        Stage::Coarse,
+        &irr,
+    )?;
+    let fine = if config.fine_samples > 0 {
+        let d = fine_depths(&rays, &coarse_d, &coarse.weights, config.fine_samples, rng);
+        Some(render_rays(
+            model,
+            &encoded,
+            &head.geometry,
+            &rays,
+            &d,
+            Stage::Fine,
+            &irr,
+        )?)
+    } else {
+        None
+    };
+    let last = fine.as_ref().unwrap_or(&coarse);
+    let r = rays.len();
+    let want_rgb: Vec<f32> = pixels.iter().flat_map(|&p| target.image[p]).collect();
+    let want_rgb = Tensor::from_vec(want_rgb, (r, 3), device)?;
+    let want_alpha: Vec<f32> = pixels.iter().map(|&p| target.alpha[p]).collect();
+    // Depth along each ray from depth along the optical axis; only where the
+    // pixel is mostly foreground.
+    let axis = target.camera.rotation_f64().row(2);
+    let mut depth_mask = Vec::with_capacity(r);
+    let mut want_depth = Vec::with_capacity(r);
+    for (ray, &p) in rays.iter().zip(&pixels) {
+        let cos = axis.dot(DVec3::new(
+            f64::from(ray.dir[0]),
+            f64::from(ray.dir[1]),
+            f64::from(ray.dir[2]),
+        ));
+        let z = f64::from(target.depth_mm[p]);
+        let ok = target.alpha[p] > 0.5 && z > 0.0 && cos > 1e-3;
+        depth_mask.push(if ok { 1.0f32 } else { 0.0 });
+        want_depth.push(if ok { (z / cos) as f32 } else { 0.0 });
+    }
+    let rgb_coarse = l1(&coarse.rgb, &want_rgb)?;
+    let rgb_fine = match &fine {
+        Some(f) => l1(&f.rgb, &want_rgb)?,
+        None => rgb_coarse.clone(),
+    };
+    let alpha = l1(&last.alpha, &Tensor::from_vec(want_alpha, r, device)?)?;
+    let masked = depth_mask.iter().sum::<f32>();
+    let depth = if masked > 0.0 {
+        let mask = Tensor::from_vec(depth_mask, r, device)?;
+        let diff = ((&last.depth - Tensor::from_vec(want_depth, r, device)?)?.abs()? * mask)?;
+        ((diff.sum_all()? / f64::from(masked))? / DEPTH_SCALE_MM)?
+    } else {
+        Tensor::zeros((), DType::F32, device)?
+    };
+    let light = log_l1(
+        &encoded.source_light,
+        &Tensor::from_slice(&head.source_light_net, head.source_light_net.len(), device)?,
+    )?;
+    let mut total =
+        (((&rgb_fine + &rgb_coarse)? + (&depth * config.depth_weight)?)? + (&alpha * config.alpha_weight)?)?;
+    total = (total + (&light * config.light_weight)?)?;
+    let mut distill_value = 0.0;
+    if config.distill_weight > 0.0 && !head.distill_points.is_empty() {
+        let n = config.distill_points.min(head.distill_points.len());
+        let chosen: Vec<usize> = (0..n)
+            .map(|_| rng.random_range(0..head.distill_points.len()))
+            .collect();
+        let points: Vec<[f32; 3]> = chosen.iter().map(|&i| head.distill_points[i]).collect();
+        let towards = head.capture.views.cameras[0].centre();
+        let dirs: Vec<[f32; 3]> = points
+            .iter()
+            .map(|p| {
+                let d = [towards[0] - p[0], towards[1] - p[1], towards[2] - p[2]];
+                let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-6);
+                d.map(|v| v / norm)
+            })
+            .collect();
+        if let Some(pass) = forward::run_points(model, &encoded, &head.geometry, &points, &dirs, Stage::Fine)?
+        {
+            let want: Vec<f32> = pass
+                .inside
+                .iter()
+                .map(|&i| head.distill_sigma[chosen[i as usize]])
+                .collect();
+            let want = Tensor::from_vec(want, (pass.inside.len(), 1), device)?;
+            let loss = l1(&pass.trace.density, &want)?;
+            distill_value = f64::from(loss.to_scalar::<f32>()?);
+            total = (total + (loss * config.distill_weight)?)?;
+        }
+    }
+    let scalar = |t: &Tensor| -> Result<f64, TrainError> {
+        Ok(f64::from(t.to_dtype(DType::F32)?.to_scalar::<f32>()?))
+    };
+    let parts = LossParts {
+        total: scalar(&total)?,
+        rgb_coarse: scalar(&rgb_coarse)?,
+        rgb_fine: scalar(&rgb_fine)?,
+        depth: scalar(&depth)?,
+        alpha: scalar(&alpha)?,
+        light: scalar(&light)?,
+        distill: distill_value,
+    };
+    Ok((total, parts))
+}
+
+/// A network being trained: its variables and the model that reads them.
+pub struct Trainable {
+    /// The variables, by their official names.
+    pub varmap: VarMap,
+    /// The model over [`Trainable::varmap`].
+    pub model: Model,
+}
+
+impl std::fmt::Debug for Trainable {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Trainable")
+            .field("model", &self.model)
+            .finish_non_exhaustive()
+    }
+}
+
+impl Trainable {
+    /// A network of `config`'s widths with seeded initial weights: PyTorch's default
+    /// `U(±1/√fan_in)` for matrices and biases, unit `GroupNorm` scales, zero
+    /// shifts, `PReLU` slopes 0.25.
+    pub fn init(config: &TrainConfig, device: &Device) -> Result<Self, TrainError> {
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, device);
+        let model = Model::new(&vb, config.nelf_config()?)?;
+        let mut rng = Pcg64::seed_from_u64(config.seed ^ 0x5EED_1417);
+        let vars = sorted_vars(&varmap)?;
+        // Fan-in of each bias: its sibling weight's.
+        let fans: HashMap<String, usize> = vars
+            .iter()
+            .filter(|(n, v)| n.ends_with(".weight") && v.dims().len() >= 2)
+            .map(|(n, v)| {
+                (
+                    n.trim_end_matches(".weight").to_string(),
+                    v.dims()[1..].iter().product(),
+                )
+            })
+            .collect();
+        for (name, var) in &vars {
+            let dims = var.dims().to_vec();
+            let count: usize = dims.iter().product();
+            let (stem, leaf) = name.rsplit_once('.').unwrap_or(("", name.as_str()));
+            let norm = stem.ends_with("norm");
+            let values: Vec<f32> = if dims.len() >= 2 {
+                let fan: usize = dims[1..].iter().product();
+                let bound = 1.0 / (fan.max(1) as f32).sqrt();
+                (0..count).map(|_| rng.random_range(-bound..bound)).collect()
+            } else if norm && leaf == "weight" {
+                vec![1.0; count]
+            } else if norm && leaf == "bias" {
+                vec![0.0; count]
+            } else if leaf == "bias" {
+                let bound = 1.0 / (fans.get(stem).copied().unwrap_or(1).max(1) as f32).sqrt();
+                (0..count).map(|_| rng.random_range(-bound..bound)).collect()
+            } else {
+                vec![0.25; count]
+            };
+            var.set(&Tensor::from_vec(values, dims, device)?)?;
+        }
+        Ok(Self { varmap, model })
+    }
+
+    /// The variables with the step size of their module (encoder or MLPs).
+    pub fn optimizer(&self, config: &TrainConfig) -> Result<Adam, TrainError> {
+        let vars = sorted_vars(&self.varmap)?
+            .into_iter()
+            .map(|(name, var)| {
+                let lr = if name.starts_with("image_encoder.") {
+                    config.lr_encoder
+                } else {
+                    config.lr_mlp
+                };
+                (name, var, lr)
+            })
+            .collect();
+        Adam::new(vars)
+    }
+
+    /// The weights as named tensors (the official key names).
+    pub fn weights(&self) -> Result<Vec<(String, Tensor)>, TrainError> {
+        Ok(sorted_vars(&self.varmap)?
+            .into_iter()
+            .map(|(n, v)| (n, v.as_tensor().clone()))
+            .collect())
+    }
+
+    /// Sets the weights from named tensors (every variable must be present).
+    pub fn load_weights(&self, tensors: &HashMap<String, Tensor>, prefix: &str) -> Result<(), TrainError> {
+        for (name, var) in sorted_vars(&self.varmap)? {
+            let key = format!("{prefix}{name}");
+            let t = tensors
+                .get(&key)
+                .ok_or_else(|| TrainError::Settings(format!("the checkpoint has no `{key}`")))?;
+            if t.dims() != var.dims() {
+                return Err(TrainError::Settings(format!(
+                    "`{key}` is {:?} in the checkpoint, {:?} in this network",
+                    t.dims(),
+                    var.dims()
+                )));
+            }
+            var.set(&t.to_device(var.device())?)?;
+        }
+        Ok(())
+    }
+}
+
+/// The variables of `varmap`, sorted by name.
+fn sorted_vars(varmap: &VarMap) -> Result<Vec<(String, Var)>, TrainError> {
+    let data = varmap
+        .data()
+        .lock()
+        .map_err(|_| TrainError::Settings("the variable map's lock is poisoned".into()))?;
+    let mut vars: Vec<(String, Var)> = data.iter().map(|(n, v)| (n.clone(), v.clone())).collect();
+    vars.sort_by(|a, b| a.0.cmp(&b.0));
+    Ok(vars)
+}
+
+/// What a checkpoint records beside its tensors (`checkpoint.json`).
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct CheckpointInfo {
+    /// Steps taken.
+    pub step: u64,
+    /// Seconds of training so far, over all sessions.
+    pub train_secs: f64,
+    /// The run's configuration.
+    pub config: TrainConfig,
+    /// The last step's losses.
+    pub last_loss: LossParts,
+}
+
+/// File names inside a run folder.
+pub const CHECKPOINT_TENSORS: &str = "checkpoint.safetensors";
+/// The checkpoint's metadata.
+pub const CHECKPOINT_INFO: &str = "checkpoint.json";
+
+/// Writes `bytes` to `path` through a temporary file and a rename.
+fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
+    let tmp = path.with_extension("tmp");
+    std::fs::write(&tmp, bytes).map_err(|source| TrainError::Io {
+        path: tmp.clone(),
+        source,
+    })?;
+    std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Saves weights, Adam moments and the step to `dir` (tensors first, then the
+/// metadata that names the step: a crash between the two leaves the older
+/// metadata, which a resume then rejects as not matching, never a silent mix).
+pub fn save_checkpoint(
+    dir: &Path,
+    trainable: &Trainable,
+    adam: &Adam,
+    info: &CheckpointInfo,
+) -> Result<(), TrainError> {
+    std::fs::create_dir_all(dir).map_err(|source| TrainError::Io {
+        path: dir.to_path_buf(),
+        source,
+    })?;
+    let mut tensors: HashMap<String, Tensor> = trainable
+        .weights()?
+        .into_iter()
+        .map(|(n, t)| (format!("param.{n}"), t))
+        .collect();
+    tensors.extend(adam.state_tensors());
+    tensors.insert("step".into(), Tensor::new(&[info.step as f64], &Device::Cpu)?);
+    let path = dir.join(CHECKPOINT_TENSORS);
+    let tmp = path.with_extension("tmp");
+    candle_core::safetensors::save(&tensors, &tmp)?;
+    std::fs::rename(&tmp, &path).map_err(|source| TrainError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    let json = serde_json::to_vec_pretty(info).map_err(|e| TrainError::Settings(e.to_string()))?;
+    write_atomic(&dir.join(CHECKPOINT_INFO), &json)
+}
+
+/// Loads a checkpoint saved by [`save_checkpoint`] into `trainable` and `adam`.
+pub fn load_checkpoint(
+    dir: &Path,
+    trainable: &Trainable,
+    adam: &mut Adam,
+) -> Result<CheckpointInfo, TrainError> {
+    let info_path = dir.join(CHECKPOINT_INFO);
+    let text = std::fs::read(&info_path).map_err(|source| TrainError::Io {
+        path: info_path.clone(),
+        source,
+    })?;
+    let info: CheckpointInfo = serde_json::from_slice(&text).map_err(|e| TrainError::File {
+        path: info_path.clone(),
+        message: format!("not a checkpoint description: {e}"),
+    })?;
+    let path = dir.join(CHECKPOINT_TENSORS);
+    let tensors =
+        candle_core::safetensors::load(&path, trainable.model.device()).map_err(|e| TrainError::File {
+            path: path.clone(),
+            message: format!("not a checkpoint: {e}"),
+        })?;
+    let saved_step = tensors
+        .get("step")
+        .and_then(|t| t.to_vec1::<f64>().ok())
+        .and_then(|v| v.first().copied())
+        .ok_or_else(|| TrainError::File {
+            path: path.clone(),
+            message: "no step".into(),
+        })?;
+    if saved_step != info.step as f64 {
+        return Err(TrainError::File {
+            path,
+            message: format!(
+                "holds step {saved_step}, {} says {}",
+                info_path.display(),
+                info.step
+            ),
+        });
+    }
+    trainable
+        .load_weights(&tensors, "param.")
+        .map_err(|e| TrainError::File {
+            path: path.clone(),
+            message: e.to_string(),
+        })?;
+    adam.restore(&tensors, info.step).map_err(|e| TrainError::File {
+        path: path.clone(),
+        message: e.to_string(),
+    })?;
+    Ok(info)
+}
+
+/// One optimiser step on the head the step's generator draws.
+pub fn train_step(
+    trainable: &Trainable,
+    adam: &mut Adam,
+    heads: &[PreparedHead],
+    config: &TrainConfig,
+) -> Result<LossParts, TrainError> {
+    let mut rng = step_rng(config.seed, adam.steps());
+    if heads.is_empty() {
+        return Err(TrainError::Settings("no training heads".into()));
+    }
+    let head = &heads[rng.random_range(0..heads.len())];
+    let (loss, parts) = step_loss(&trainable.model, head, config, &mut rng)?;
+    let grads = loss.backward()?;
+    adam.step(&grads)?;
+    Ok(parts)
+}
+
+/// Loads and prepares heads `ids` of `dataset` at `size`.
+pub fn prepare_heads(dataset: &Dataset, ids: &[u32], size: usize) -> Result<Vec<PreparedHead>, TrainError> {
+    ids.iter().map(|&id| prepare(&dataset.load(id)?, size)).collect()
+}
+
+/// Where a run keeps its files.
+#[derive(Debug, Clone)]
+pub struct RunPaths {
+    /// The run folder.
+    pub dir: PathBuf,
+}
+
+impl RunPaths {
+    /// The validation log.
+    pub fn log(&self) -> PathBuf {
+        self.dir.join("validation.csv")
+    }
+
+    /// The exported weights (official key names).
+    pub fn weights(&self) -> PathBuf {
+        self.dir.join("weights.safetensors")
+    }
+}
+
+/// Elapsed seconds since `start`.
+pub fn secs_since(start: Instant) -> f64 {
+    start.elapsed().as_secs_f64()
+}

@@ -1,0 +1,350 @@
+//! The training contract on a tiny network and a synthetic head (seconds, not
+//! hours): one step lowers the loss on a fixed batch, gradients match finite
+//! differences, and a run resumed from a checkpoint equals an unbroken one bit for
+//! bit.
+
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
+use candle_core::{Device, Tensor};
+use glam::DVec3;
+use nelf_field::capture::default_net_from_world;
+use nelf_field::{EncodedViews, NetCapture};
+use nelf_format::conventions::PinholeCamera;
+use nelf_train::TrainConfig;
+use nelf_train::data::TargetMode;
+use nelf_train::trainer::{
+    CheckpointInfo, LossParts, PreparedHead, PreparedTarget, Trainable, load_checkpoint, save_checkpoint,
+    step_loss, step_rng, train_step,
+};
+
+const SIZE: u32 = 32;
+
+fn tiny_config() -> TrainConfig {
+    TrainConfig {
+        arch: "tiny".into(),
+        image_size: SIZE as usize,
+        rays: 48,
+        coarse_samples: 12,
+        fine_samples: 6,
+        lr_mlp: 1e-3,
+        lr_encoder: 1e-3,
+        distill_weight: 0.1,
+        distill_points: 32,
+        ..TrainConfig::default()
+    }
+}
+
+/// A smooth ball of colour, seen by 3 source cameras and one target camera about
+/// 1 m away, with its true lighting (a constant sky) and a few σ samples.
+fn synthetic_head() -> PreparedHead {
+    let centre = DVec3::new(0.0, 1.6, 0.0);
+    let camera = |az: f64, el: f64| {
+        let eye = centre + DVec3::new(az.sin() * el.cos(), el.sin(), az.cos() * el.cos());
+        PinholeCamera::look_at(eye, centre, DVec3::Y, SIZE, SIZE, 0.3)
+    };
+    let cameras = [camera(0.0, 0.0), camera(0.4, 0.1), camera(-0.4, -0.1)];
+    let n = (SIZE * SIZE) as usize;
+    let disc = |cam: &PinholeCamera| -> Vec<f32> {
+        let c = cam.project(centre).unwrap();
+        (0..n)
+            .map(|p| {
+                let d =
+                    ((p % SIZE as usize) as f64 + 0.5 - c.x).hypot((p / SIZE as usize) as f64 + 0.5 - c.y);
+                if d < 0.3 * f64::from(SIZE) { 1.0 } else { 0.0 }
+            })
+            .collect()
+    };
+    let image = |mask: &[f32], shift: f32| -> Vec<[f32; 3]> {
+        mask.iter()
+            .enumerate()
+            .map(|(p, m)| {
+                let x = (p % SIZE as usize) as f32 / SIZE as f32;
+                [
+                    m * (0.5 + 0.3 * (5.0 * x + shift).sin()),
+                    m * 0.4,
+                    m * (0.3 + 0.2 * x),
+                ]
+            })
+            .collect()
+    };
+    let masks: Vec<Vec<f32>> = cameras.iter().map(disc).collect();
+    let images: Vec<Vec<[f32; 3]>> = masks
+        .iter()
+        .enumerate()
+        .map(|(i, m)| image(m, i as f32))
+        .collect();
+    let capture = NetCapture::new(&cameras, &images, &masks, centre, default_net_from_world()).unwrap();
+    let geometry = EncodedViews::geometry_only(&capture.views).unwrap();
+    let target_cam = camera(0.2, 0.05);
+    let alpha = disc(&target_cam);
+    let target = PreparedTarget {
+        mode: TargetMode::NovelLight,
+        camera: capture.net_camera(&target_cam),
+        image: image(&alpha, 0.5),
+        depth_mm: alpha.iter().map(|a| a * 850.0).collect(),
+        alpha,
+        light_net: vec![0.5; 384],
+    };
+    let distill_points: Vec<[f32; 3]> = (0..64)
+        .map(|i| {
+            let t = i as f64 / 64.0;
+            capture.to_net_point(centre + DVec3::new(0.1 * (t - 0.5), 0.05 * (6.0 * t).sin(), 0.02))
+        })
+        .collect();
+    PreparedHead {
+        capture,
+        geometry,
+        source_light_net: vec![0.5; 384],
+        targets: vec![
+            PreparedTarget {
+                mode: TargetMode::SelfRotation,
+                ..target.clone()
+            },
+            target,
+        ],
+        distill_sigma: (0..64).map(|i| if i % 2 == 0 { 0.05 } else { 0.0 }).collect(),
+        distill_points,
+    }
+}
+
+fn loss_at(
+    trainable: &Trainable,
+    head: &PreparedHead,
+    config: &TrainConfig,
+    seed: u64,
+) -> (Tensor, LossParts) {
+    step_loss(&trainable.model, head, config, &mut step_rng(seed, 0)).unwrap()
+}
+
+#[test]
+fn one_step_lowers_the_loss_on_a_fixed_batch() {
+    let config = tiny_config();
+    let head = synthetic_head();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut adam = trainable.optimizer(&config).unwrap();
+    let (loss, before) = loss_at(&trainable, &head, &config, 11);
+    assert!(before.total.is_finite() && before.total > 0.0, "{before:?}");
+    assert!(
+        before.rgb_fine > 0.0 && before.light > 0.0 && before.distill > 0.0,
+        "{before:?}"
+    );
+    adam.step(&loss.backward().unwrap()).unwrap();
+    let (_, after) = loss_at(&trainable, &head, &config, 11);
+    assert!(
+        after.total < before.total,
+        "loss {} → {}",
+        before.total,
+        after.total
+    );
+}
+
+#[test]
+fn gradients_match_finite_differences() {
+    let config = tiny_config();
+    let head = synthetic_head();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let (loss, _) = loss_at(&trainable, &head, &config, 5);
+    let grads = loss.backward().unwrap();
+    let vars = trainable.varmap.data().lock().unwrap().clone();
+    // One parameter in each part: encoder (light head, decoder), per-point networks.
+    let names = [
+        "image_encoder.lightpred_final.norm.bias",
+        "image_encoder.catconvs.2.conv.bias",
+        "fine_appearance_encoder.lt_mlp.input_layer.bias",
+        "coarse_appearance_encoder.density_mlp.layers.2.bias",
+        "fine_appearance_encoder.blend_mlp.layers.0.bias",
+    ];
+    let mut checked = 0;
+    for name in names {
+        let var = &vars[name];
+        let g = grads
+            .get(var.as_tensor())
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        // The entry with the largest analytic gradient, nudged both ways.
+        let (k, &gk) = g
+            .iter()
+            .enumerate()
+            .max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))
+            .unwrap();
+        let base = var.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let h = 3e-3f32;
+        let at = |delta: f32| {
+            let mut v = base.clone();
+            v[k] += delta;
+            var.set(&Tensor::from_vec(v, var.dims(), &Device::Cpu).unwrap())
+                .unwrap();
+            let l = loss_at(&trainable, &head, &config, 5).1.total;
+            var.set(&Tensor::from_vec(base.clone(), var.dims(), &Device::Cpu).unwrap())
+                .unwrap();
+            l
+        };
+        let numeric = (at(h) - at(-h)) / (2.0 * f64::from(h));
+        let analytic = f64::from(gk);
+        assert!(analytic.abs() > 1e-5, "{name}: no gradient ({analytic})");
+        let rel = (numeric - analytic).abs() / analytic.abs().max(1e-4);
+        assert!(
+            rel < 0.1,
+            "{name}[{k}]: analytic {analytic:.6e}, numeric {numeric:.6e}"
+        );
+        checked += 1;
+    }
+    assert_eq!(checked, names.len());
+}
+
+fn weights_bits(trainable: &Trainable) -> Vec<(String, Vec<u32>)> {
+    trainable
+        .weights()
+        .unwrap()
+        .into_iter()
+        .map(|(n, t)| {
+            let bits = t
+                .flatten_all()
+                .unwrap()
+                .to_vec1::<f32>()
+                .unwrap()
+                .iter()
+                .map(|v| v.to_bits())
+                .collect();
+            (n, bits)
+        })
+        .collect()
+}
+
+#[test]
+fn a_resumed_run_equals_an_unbroken_one_bit_for_bit() {
+    let config = tiny_config();
+    let heads = vec![synthetic_head()];
+    let (n, m) = (2, 2);
+    let unbroken = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut adam = unbroken.optimizer(&config).unwrap();
+    for _ in 0..n + m {
+        train_step(&unbroken, &mut adam, &heads, &config).unwrap();
+    }
+
+    let dir = tempfile::tempdir().unwrap();
+    let first = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut adam1 = first.optimizer(&config).unwrap();
+    let mut last = LossParts::default();
+    for _ in 0..n {
+        last = train_step(&first, &mut adam1, &heads, &config).unwrap();
+    }
+    let info = CheckpointInfo {
+        step: adam1.steps(),
+        train_secs: 1.0,
+        config: config.clone(),
+        last_loss: last,
+    };
+    save_checkpoint(dir.path(), &first, &adam1, &info).unwrap();
+    drop((first, adam1));
+
+    // A fresh process: different initial weights, then the checkpoint.
+    let other = TrainConfig {
+        seed: 99,
+        ..config.clone()
+    };
+    let resumed = Trainable::init(&other, &Device::Cpu).unwrap();
+    let mut adam2 = resumed.optimizer(&config).unwrap();
+    let loaded = load_checkpoint(dir.path(), &resumed, &mut adam2).unwrap();
+    assert_eq!(loaded.step, n as u64);
+    for _ in 0..m {
+        train_step(&resumed, &mut adam2, &heads, &config).unwrap();
+    }
+    assert_eq!(adam2.steps(), (n + m) as u64);
+    assert!(
+        weights_bits(&unbroken) == weights_bits(&resumed),
+        "weights differ after resuming"
+    );
+}
+
+#[test]
+fn a_damaged_checkpoint_is_refused_with_its_name() {
+    let config = tiny_config();
+    let dir = tempfile::tempdir().unwrap();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut adam = trainable.optimizer(&config).unwrap();
+    let info = CheckpointInfo {
+        step: 0,
+        train_secs: 0.0,
+        config: config.clone(),
+        last_loss: LossParts::default(),
+    };
+    save_checkpoint(dir.path(), &trainable, &adam, &info).unwrap();
+    let path = dir.path().join(nelf_train::trainer::CHECKPOINT_TENSORS);
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::write(&path, &bytes[..bytes.len() / 2]).unwrap();
+    let err = load_checkpoint(dir.path(), &trainable, &mut adam)
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("checkpoint.safetensors"), "{err}");
+}
+
+/// The training renderer (gradients, candle ops) and the inference renderer
+/// (`nelf_field::render`, fused kernels) give the same pixels for the same weights
+/// and depths: what is trained is what bakes.
+#[test]
+fn the_training_renderer_matches_the_inference_renderer() {
+    use nelf_field::render::{NetRay, RayUniforms, render_rays as infer};
+    use nelf_field::{Model, NelfConfig, Stage};
+    use nelf_train::forward::{encode, irradiance, render_rays};
+
+    let config = tiny_config();
+    let head = synthetic_head();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("weights.safetensors");
+    nelf_train::run::export_weights(&trainable, &path).unwrap();
+    let nelf_config = NelfConfig {
+        coarse_samples: config.coarse_samples,
+        fine_samples: config.fine_samples,
+        ..NelfConfig::default()
+    };
+    let model = Model::load(&path, nelf_config, &Device::Cpu).unwrap();
+    let target = &head.targets[1];
+    let centre = head.capture.head_centre_net();
+    let rays: Vec<NetRay> = (0..40)
+        .map(|i| {
+            let (x, y) = (8.0 + (i % 8) as f64 * 2.1, 9.0 + (i / 8) as f64 * 2.7);
+            NetRay::through_pixel(&target.camera, x, y, centre, 200.0)
+        })
+        .collect();
+    let uniforms = RayUniforms::stratified(rays.len(), config.coarse_samples, config.fine_samples);
+    let want = infer(
+        &model,
+        &model.encode(&head.capture.views).unwrap(),
+        &rays,
+        &uniforms,
+        &target.light_net,
+    )
+    .unwrap();
+    let encoded = encode(&trainable.model, &head.capture.views).unwrap();
+    let irr = irradiance(&target.light_net, &Device::Cpu).unwrap();
+    let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
+    let mut opaque = 0;
+    for (stage, composite) in [(Stage::Coarse, &want.coarse), (Stage::Fine, &want.fine)] {
+        let got = render_rays(
+            &trainable.model,
+            &encoded,
+            &head.geometry,
+            &rays,
+            &composite.depth_samples,
+            stage,
+            &irr,
+        )
+        .unwrap();
+        let close = |a: &[f32], b: &[f32], what: &str| {
+            let scale = b.iter().fold(1e-6f32, |m, v| m.max(v.abs()));
+            for (i, (x, y)) in a.iter().zip(b).enumerate() {
+                assert!((x - y).abs() <= 1e-4 * scale, "{what}[{i}]: {x} vs {y}");
+            }
+        };
+        close(&flat(&got.rgb), &composite.rgb, "rgb");
+        close(&flat(&got.alpha), &composite.alpha, "alpha");
+        close(&flat(&got.depth), &composite.depth, "depth");
+        opaque += composite.alpha.iter().filter(|a| **a > 0.5).count();
+    }
+    assert!(opaque > 0, "no ray hit anything: the comparison says nothing");
+}
