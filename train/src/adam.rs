@@ -52,8 +52,7 @@ impl Adam {
         self.steps
     }
 
-    /// One update from `grads` (variables without a gradient keep their moments
-    /// decaying as if the gradient were zero, as PyTorch does not: they are skipped).
+    /// One update from `grads` (variables without a gradient are skipped).
     pub fn step(&mut self, grads: &GradStore) -> Result<(), TrainError> {
         self.steps += 1;
         let t = self.steps as i32;
@@ -70,6 +69,18 @@ impl Adam {
             let delta = (m_hat / (v_hat.sqrt()? + EPS)?)?;
             let next = (slot.var.as_tensor() - (delta * slot.lr)?)?;
             slot.var.set(&next)?;
+        }
+        Ok(())
+    }
+
+    /// Waits for the device to finish the update (reads one value back).
+    pub fn sync(&self) -> Result<(), TrainError> {
+        if let Some(slot) = self.slots.values().next() {
+            slot.var
+                .as_tensor()
+                .flatten_all()?
+                .narrow(0, 0, 1)?
+                .to_vec1::<f32>()?;
         }
         Ok(())
     }

@@ -69,7 +69,7 @@ fn run_training(config: &TrainConfig) -> Result<(), TrainError> {
         ProgressStyle::with_template("{bar:30} {pos}/{len} steps, {per_sec}, ETA {eta} · {msg}")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    progress.println(format!("training on {}", nelf_field::device_name(&device)));
+    eprintln!("training on {}", nelf_field::device_name(&device));
     let report = crate::run::run(config, &device, &progress)?;
     progress.finish_and_clear();
     println!(

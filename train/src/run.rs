@@ -211,6 +211,43 @@ fn log_validation(
     })
 }
 
+/// Steps between lines of the loss log.
+const LOSS_LOG_EVERY: u64 = 50;
+
+/// Appends a step's losses to `loss.csv` (the training curve).
+fn log_loss(path: &Path, step: u64, train_secs: f64, loss: &LossParts) -> Result<(), TrainError> {
+    let new = !path.exists();
+    let mut text = String::new();
+    if new {
+        text.push_str(
+            "step,train_secs,loss,rgb_coarse,rgb_fine,depth,alpha,light,distill,encode_s,coarse_s,fine_s,backward_s,adam_s\n",
+        );
+    }
+    let values = [
+        loss.total,
+        loss.rgb_coarse,
+        loss.rgb_fine,
+        loss.depth,
+        loss.alpha,
+        loss.light,
+        loss.distill,
+    ];
+    let mut fields = vec![step.to_string(), format!("{train_secs:.1}")];
+    fields.extend(values.iter().map(|v| format!("{v:.5}")));
+    fields.extend(loss.phase_secs.iter().map(|v| format!("{v:.4}")));
+    text.push_str(&fields.join(","));
+    text.push('\n');
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .and_then(|mut f| f.write_all(text.as_bytes()))
+        .map_err(|source| TrainError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
 /// Writes the network alone (official key names) for `Model::load`.
 pub fn export_weights(trainable: &Trainable, path: &Path) -> Result<(), TrainError> {
     let tensors: std::collections::HashMap<String, Tensor> = trainable.weights()?.into_iter().collect();
@@ -262,10 +299,14 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
     let mut last_loss = LossParts::default();
     if paths.dir.join(CHECKPOINT_INFO).exists() {
         let info = load_checkpoint(&paths.dir, &trainable, &mut adam)?;
-        if !info.config.same_training(config) {
+        if !info.config.same_network(config) {
             return Err(TrainError::Settings(format!(
-                "{}: the checkpoint was trained with other settings; use the same settings to resume, or another --out",
-                paths.dir.join(CHECKPOINT_INFO).display()
+                "{}: the checkpoint has other widths, image size or seed ({} at {} px, seed {}); \
+                 use the same to resume, or another --out",
+                paths.dir.join(CHECKPOINT_INFO).display(),
+                info.config.arch,
+                info.config.image_size,
+                info.config.seed
             )));
         }
         train_secs = info.train_secs;
@@ -298,13 +339,35 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
             "loss {:.4} (colour {:.4})",
             last_loss.total, last_loss.rgb_fine
         ));
+        if step % LOSS_LOG_EVERY == 0 {
+            log_loss(&paths.dir.join("loss.csv"), step, train_secs, &last_loss)?;
+            if progress.is_hidden() {
+                let p = last_loss.phase_secs;
+                eprintln!(
+                    "step {step}: loss {:.4} (colour {:.4}), {:.3} s/step; last step: encode {:.3}, coarse {:.3}, fine {:.3}, backward {:.3}, adam {:.3} s",
+                    last_loss.total,
+                    last_loss.rgb_fine,
+                    train_secs / step.max(1) as f64,
+                    p[0],
+                    p[1],
+                    p[2],
+                    p[3],
+                    p[4]
+                );
+            }
+        }
         if config.val_every > 0 && step % config.val_every == 0 {
             if let Some(v) = validate(&trainable, &val_heads, config)? {
                 log_validation(&paths.log(), step, train_secs, &last_loss, &v)?;
-                progress.println(format!(
+                let line = format!(
                     "step {step}: validation PSNR {:.2} dB, foreground {:.2} dB",
                     v.psnr, v.foreground_psnr
-                ));
+                );
+                if progress.is_hidden() {
+                    eprintln!("{line}");
+                } else {
+                    progress.println(line);
+                }
                 validation = Some(v);
             }
         }

@@ -10,8 +10,12 @@
 //!
 //! (colours L1 over rays; depth along the ray inside the true mask; alpha of the
 //! fine pass; the log-L1 lighting loss on the encoder's source-light estimate)
-//! plus, when `distill_weight > 0`, `λ_s·|σ − σ*|` at ground-truth points near the
-//! surface. Every random choice of step `k` comes from a generator seeded by
+//! plus, when `distill_weight > 0`, the 3D distillation loss at ground-truth points
+//! near the surface, `λ_s·(|α(σ) − α(σ*)| + |Σ T·L − Σ T*·L|)` with `α(σ) = 1 − e^{−σ·2 mm}` and the
+//! light transport compared through the radiance it gives, toward the direction the
+//! true `T*` is for, under each of the head's lightings (its source lighting and its
+//! targets'): `T` lives in the network's light frame and `T*` in the world's, and
+//! radiance is what both must agree on. Every random choice of step `k` comes from a generator seeded by
 //! `(seed, k)`, so the state of a run is its weights, its Adam moments and its step
 //! count: a checkpoint holds exactly those, and a resumed run continues bit for bit.
 
@@ -27,7 +31,7 @@ use nelf_field::geometry::NetCamera;
 use nelf_field::light::latlong_to_net_light;
 use nelf_field::render::{NetRay, importance_depths};
 use nelf_field::{EncodedViews, Model, NetCapture, Stage};
-use nelf_format::conventions::{LatLong, PinholeCamera, project_envmap};
+use nelf_format::conventions::{ENV_TEXELS, LatLong, PinholeCamera, project_envmap};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};
@@ -37,6 +41,9 @@ use crate::config::TrainConfig;
 use crate::data::{Dataset, TargetMode, TrainingSample};
 use crate::error::TrainError;
 use crate::forward::{self, encode, irradiance, l1, log_l1, render_rays};
+
+/// Step over which distilled densities are compared as opacities, millimetres.
+const DISTILL_STEP_MM: f64 = 2.0;
 
 /// Depth normaliser of the depth loss (the paper's 200 mm).
 const DEPTH_SCALE_MM: f64 = 200.0;
@@ -73,6 +80,13 @@ pub struct PreparedHead {
     pub distill_points: Vec<[f32; 3]>,
     /// σ at [`PreparedHead::distill_points`], 1/mm.
     pub distill_sigma: Vec<f32>,
+    /// Unit directions (point → viewer, network frame) the true `T` is for.
+    pub distill_dirs: Vec<[f32; 3]>,
+    /// The head's lightings (source and targets), network layout: the true `T` is
+    /// distilled through the radiance it gives under each.
+    pub distill_lights: Vec<Vec<f32>>,
+    /// `(N, lights, 3)`: true radiance `Σ_k T[c, k]·L[c, k]` under each lighting.
+    pub distill_radiance: Vec<f32>,
 }
 
 /// Averages `factor × factor` blocks of a row-major `width`-wide image.
@@ -219,6 +233,35 @@ pub fn prepare(sample: &TrainingSample, size: usize) -> Result<PreparedHead, Tra
         .map(|p| capture.to_net_point(DVec3::new(f64::from(p[0]), f64::from(p[1]), f64::from(p[2]))))
         .collect();
     let distill_sigma = sample.distill.sigma_per_m.iter().map(|s| s / 1000.0).collect();
+    let distill_dirs = sample
+        .distill
+        .view_dirs
+        .iter()
+        .map(|d| capture.to_net_direction(DVec3::new(f64::from(d[0]), f64::from(d[1]), f64::from(d[2]))))
+        .collect();
+    // The lightings as 8 × 16 maps in the world (the ground truth's light frame) and
+    // in the network's layout.
+    let mut world_lights = Vec::with_capacity(1 + sample.targets.len());
+    for light in std::iter::once(&sample.source_light).chain(sample.targets.iter().map(|t| &t.light)) {
+        world_lights.push(
+            project_envmap(light, glam::DMat3::IDENTITY)
+                .map_err(|e| TrainError::Settings(format!("lighting: {e}")))?,
+        );
+    }
+    let mut distill_lights = vec![source_light_net.clone()];
+    distill_lights.extend(targets.iter().map(|t| t.light_net.clone()));
+    let mut distill_radiance = Vec::with_capacity(sample.distill.len() * world_lights.len() * 3);
+    for i in 0..sample.distill.len() {
+        let t = sample.distill.lt_of(i);
+        for map in &world_lights {
+            for c in 0..3 {
+                let radiance: f32 = (0..ENV_TEXELS)
+                    .map(|k| t[c * ENV_TEXELS + k] * map.get(k / map.width(), k % map.width())[c])
+                    .sum();
+                distill_radiance.push(radiance);
+            }
+        }
+    }
     Ok(PreparedHead {
         capture,
         geometry,
@@ -226,6 +269,9 @@ pub fn prepare(sample: &TrainingSample, size: usize) -> Result<PreparedHead, Tra
         targets,
         distill_points,
         distill_sigma,
+        distill_dirs,
+        distill_lights,
+        distill_radiance,
     })
 }
 
@@ -246,6 +292,10 @@ pub struct LossParts {
     pub light: f64,
     /// Distillation loss on σ (1/mm).
     pub distill: f64,
+    /// Seconds of the step's phases: encoder, coarse pass, fine pass and losses,
+    /// backward, Adam (what limits a step).
+    #[serde(default)]
+    pub phase_secs: [f64; 5],
 }
 
 /// The generator of step `step`'s random choices.
@@ -320,7 +370,9 @@ pub fn step_loss(
     rng: &mut Pcg64,
 ) -> Result<(Tensor, LossParts), TrainError> {
     let device = model.device();
+    let clock = Instant::now();
     let encoded = encode(model, &head.capture.views)?;
+    let encode_secs = secs_since(clock);
     let want_mode = if rng.random::<f64>() < config.novel_light_share {
         TargetMode::NovelLight
     } else {
@@ -359,6 +411,7 @@ pub fn step_loss(
         Stage::Coarse,
         &irr,
     )?;
+    let coarse_secs = secs_since(clock) - encode_secs;
     let fine = if config.fine_samples > 0 {
         let d = fine_depths(&rays, &coarse_d, &coarse.weights, config.fine_samples, rng);
         Some(render_rays(
@@ -422,24 +475,41 @@ pub fn step_loss(
             .map(|_| rng.random_range(0..head.distill_points.len()))
             .collect();
         let points: Vec<[f32; 3]> = chosen.iter().map(|&i| head.distill_points[i]).collect();
-        let towards = head.capture.views.cameras[0].centre();
-        let dirs: Vec<[f32; 3]> = points
-            .iter()
-            .map(|p| {
-                let d = [towards[0] - p[0], towards[1] - p[1], towards[2] - p[2]];
-                let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-6);
-                d.map(|v| v / norm)
-            })
-            .collect();
+        let dirs: Vec<[f32; 3]> = chosen.iter().map(|&i| head.distill_dirs[i]).collect();
         if let Some(pass) = forward::run_points(model, &encoded, &head.geometry, &points, &dirs, Stage::Fine)?
         {
+            let n_in = pass.inside.len();
             let want: Vec<f32> = pass
                 .inside
                 .iter()
                 .map(|&i| head.distill_sigma[chosen[i as usize]])
                 .collect();
-            let want = Tensor::from_vec(want, (pass.inside.len(), 1), device)?;
-            let loss = l1(&pass.trace.density, &want)?;
+            let want = Tensor::from_vec(want, (n_in, 1), device)?;
+            // σ compared as the opacity of a 2 mm step, `1 − e^{−2σ}` (σ in 1/mm):
+            // in [0, 1] like the colours, whatever the shell's peak density.
+            let opacity =
+                |t: &Tensor| -> Result<Tensor, TrainError> { Ok((1.0 - (t * -DISTILL_STEP_MM)?.exp()?)?) };
+            let sigma_loss = l1(&opacity(&pass.trace.density)?, &opacity(&want)?)?;
+            // T through the radiance under each of the head's lightings.
+            let lights = head.distill_lights.len();
+            let lt = forward::light_transport(&pass, device)?;
+            let light_matrix: Vec<f32> = head.distill_lights.iter().flatten().copied().collect();
+            let light_matrix = Tensor::from_vec(light_matrix, (lights, 3, ENV_TEXELS), device)?;
+            let predicted = lt
+                .reshape((n_in, 1, 3, ENV_TEXELS))?
+                .broadcast_mul(&light_matrix.unsqueeze(0)?)?
+                .sum(3)?;
+            let want_radiance: Vec<f32> = pass
+                .inside
+                .iter()
+                .flat_map(|&i| {
+                    let k = chosen[i as usize] * lights * 3;
+                    head.distill_radiance[k..k + lights * 3].to_vec()
+                })
+                .collect();
+            let want_radiance = Tensor::from_vec(want_radiance, (n_in, lights, 3), device)?;
+            let radiance_loss = l1(&predicted, &want_radiance)?;
+            let loss = (sigma_loss + radiance_loss)?;
             distill_value = f64::from(loss.to_scalar::<f32>()?);
             total = (total + (loss * config.distill_weight)?)?;
         }
@@ -455,6 +525,13 @@ pub fn step_loss(
         alpha: scalar(&alpha)?,
         light: scalar(&light)?,
         distill: distill_value,
+        phase_secs: [
+            encode_secs,
+            coarse_secs,
+            secs_since(clock) - encode_secs - coarse_secs,
+            0.0,
+            0.0,
+        ],
     };
     Ok((total, parts))
 }
@@ -701,9 +778,14 @@ pub fn train_step(
         return Err(TrainError::Settings("no training heads".into()));
     }
     let head = &heads[rng.random_range(0..heads.len())];
-    let (loss, parts) = step_loss(&trainable.model, head, config, &mut rng)?;
+    let (loss, mut parts) = step_loss(&trainable.model, head, config, &mut rng)?;
+    let clock = Instant::now();
     let grads = loss.backward()?;
+    parts.phase_secs[3] = secs_since(clock);
     adam.step(&grads)?;
+    // Values are read back (a device sync) so the time is the update's own.
+    adam.sync()?;
+    parts.phase_secs[4] = secs_since(clock) - parts.phase_secs[3];
     Ok(parts)
 }
 

@@ -110,7 +110,13 @@ pub fn generate(
     let mut written = Vec::new();
     let mut skipped = Vec::new();
     let mut render_total = 0.0;
-    for spec in &split.heads {
+    // Validation heads first: a run stopped early can still be validated.
+    let order = split
+        .heads
+        .iter()
+        .filter(|s| config.is_val(s.id))
+        .chain(split.heads.iter().filter(|s| !config.is_val(s.id)));
+    for spec in order {
         if head_dir(&dir, spec.id).is_dir() {
             skipped.push(spec.id);
             progress.inc(1);
