@@ -25,7 +25,7 @@ use crate::error::TrainError;
 use crate::forward::{encode, irradiance, render_rays};
 use crate::trainer::{
     CHECKPOINT_INFO, CheckpointInfo, LossParts, PreparedHead, RunPaths, Trainable, load_checkpoint,
-    prepare_heads, save_checkpoint, train_step,
+    prepare_heads, read_checkpoint_info, save_checkpoint, train_step,
 };
 
 /// Rays per validation chunk (bounds memory).
@@ -280,6 +280,23 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
         path: paths.dir.clone(),
         source,
     })?;
+    // A checkpoint of another network is refused before any work.
+    let resume_from = if paths.dir.join(CHECKPOINT_INFO).exists() {
+        let info = read_checkpoint_info(&paths.dir)?;
+        if !info.config.same_network(config) {
+            return Err(TrainError::Settings(format!(
+                "{}: the checkpoint has other widths, image size or seed ({} at {} px, seed {}); \
+                 use the same to resume, or another --out",
+                paths.dir.join(CHECKPOINT_INFO).display(),
+                info.config.arch,
+                info.config.image_size,
+                info.config.seed
+            )));
+        }
+        Some(info)
+    } else {
+        None
+    };
     let dataset = Dataset::open(&config.data)?;
     let train_ids = dataset.train_ids();
     if train_ids.is_empty() {
@@ -297,18 +314,8 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
     let mut adam = trainable.optimizer(config)?;
     let mut train_secs = 0.0;
     let mut last_loss = LossParts::default();
-    if paths.dir.join(CHECKPOINT_INFO).exists() {
+    if resume_from.is_some() {
         let info = load_checkpoint(&paths.dir, &trainable, &mut adam)?;
-        if !info.config.same_network(config) {
-            return Err(TrainError::Settings(format!(
-                "{}: the checkpoint has other widths, image size or seed ({} at {} px, seed {}); \
-                 use the same to resume, or another --out",
-                paths.dir.join(CHECKPOINT_INFO).display(),
-                info.config.arch,
-                info.config.image_size,
-                info.config.seed
-            )));
-        }
         train_secs = info.train_secs;
         last_loss = info.last_loss;
     }

@@ -714,6 +714,19 @@ pub fn save_checkpoint(
     write_atomic(&dir.join(CHECKPOINT_INFO), &json)
 }
 
+/// Reads a checkpoint's description (`checkpoint.json`) without its tensors.
+pub fn read_checkpoint_info(dir: &Path) -> Result<CheckpointInfo, TrainError> {
+    let info_path = dir.join(CHECKPOINT_INFO);
+    let text = std::fs::read(&info_path).map_err(|source| TrainError::Io {
+        path: info_path.clone(),
+        source,
+    })?;
+    serde_json::from_slice(&text).map_err(|e| TrainError::File {
+        path: info_path,
+        message: format!("not a checkpoint description: {e}"),
+    })
+}
+
 /// Loads a checkpoint saved by [`save_checkpoint`] into `trainable` and `adam`.
 pub fn load_checkpoint(
     dir: &Path,
@@ -721,14 +734,7 @@ pub fn load_checkpoint(
     adam: &mut Adam,
 ) -> Result<CheckpointInfo, TrainError> {
     let info_path = dir.join(CHECKPOINT_INFO);
-    let text = std::fs::read(&info_path).map_err(|source| TrainError::Io {
-        path: info_path.clone(),
-        source,
-    })?;
-    let info: CheckpointInfo = serde_json::from_slice(&text).map_err(|e| TrainError::File {
-        path: info_path.clone(),
-        message: format!("not a checkpoint description: {e}"),
-    })?;
+    let info = read_checkpoint_info(dir)?;
     let path = dir.join(CHECKPOINT_TENSORS);
     let tensors =
         candle_core::safetensors::load(&path, trainable.model.device()).map_err(|e| TrainError::File {

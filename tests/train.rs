@@ -1,0 +1,111 @@
+//! End-to-end test of `nelf train`: a tiny dataset is rendered, a tiny network is
+//! trained on it for a few steps and resumed, and its exported weights bake a
+//! held-out head with `nelf bake capture --weights` (the widths are read from the
+//! weights file). Minutes of training say nothing about accuracy; this checks that
+//! the pieces fit.
+
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
+mod common;
+
+use common::{nelf, succeed};
+use nelf_format::read_asset;
+
+#[test]
+fn train_data_run_resume_and_bake_with_the_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = dir.path().join("data");
+    let run = dir.path().join("run");
+    let d = data.to_str().unwrap();
+    let r = run.to_str().unwrap();
+    let out = succeed(&[
+        "train",
+        "data",
+        "-o",
+        d,
+        "--heads",
+        "2",
+        "--val-heads",
+        "1",
+        "--size",
+        "32",
+        "--distill-points",
+        "64",
+        "--texel-samples",
+        "1",
+        "--indirect-samples",
+        "4",
+        "--bounces",
+        "1",
+    ]);
+    assert!(out.contains("3 heads written"), "{out}");
+    let train = |steps: &str| {
+        succeed(&[
+            "train",
+            "run",
+            "--data",
+            d,
+            "-o",
+            r,
+            "--arch",
+            "tiny",
+            "--image-size",
+            "32",
+            "--rays",
+            "32",
+            "--coarse-samples",
+            "8",
+            "--fine-samples",
+            "4",
+            "--steps",
+            steps,
+            "--val-every",
+            "2",
+            "--val-heads",
+            "1",
+            "--distill-weight",
+            "0.1",
+        ])
+    };
+    let first = train("2");
+    assert!(first.contains("step 2 (2 now"), "{first}");
+    assert!(run.join("curve.svg").is_file() && run.join("validation.csv").is_file());
+    let resumed = train("3");
+    assert!(resumed.contains("step 3 (1 now"), "{resumed}");
+    // Another width cannot continue this checkpoint.
+    let refused = nelf(&[
+        "train",
+        "run",
+        "--data",
+        d,
+        "-o",
+        r,
+        "--arch",
+        "small",
+        "--image-size",
+        "32",
+        "--steps",
+        "4",
+    ]);
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("checkpoint.json"));
+
+    // The exported weights bake the held-out head (id 2).
+    let asset = dir.path().join("net.nelf");
+    let head = data.join("heads").join("h00002");
+    succeed(&[
+        "bake",
+        "capture",
+        head.to_str().unwrap(),
+        "--weights",
+        run.join("weights.safetensors").to_str().unwrap(),
+        "-o",
+        asset.to_str().unwrap(),
+        "--resolution",
+        "16",
+        "--view-dependence",
+        "off",
+    ]);
+    let baked = read_asset(&asset).unwrap();
+    assert!(!baked.bricks.is_empty());
+}
