@@ -143,20 +143,26 @@ pub struct RenderOutput {
     pub fine: Composite,
 }
 
+/// The length `δ_i` each sample of a ray stands for (module docs): `d_1 − d_0` for
+/// the first, `d_last − d_{last−1}` for the last, `(d_{i+1} − d_{i−1})/2` between;
+/// 0 for a ray of fewer than two samples.
+pub fn sample_delta(depths: &[f32], i: usize) -> f32 {
+    let n = depths.len();
+    if n < 2 {
+        0.0
+    } else if i == 0 {
+        depths[1] - depths[0]
+    } else if i == n - 1 {
+        depths[n - 1] - depths[n - 2]
+    } else {
+        (depths[i + 1] - depths[i - 1]) / 2.0
+    }
+}
+
 /// Composites one ray: returns the weights and `(rgb, depth, alpha)`.
 pub fn composite_ray(depths: &[f32], sigma: &[f32], rgb: &[f32]) -> (Vec<f32>, [f32; 3], f32, f32) {
     let n = depths.len();
-    let delta = |i: usize| -> f32 {
-        if n < 2 {
-            0.0
-        } else if i == 0 {
-            depths[1] - depths[0]
-        } else if i == n - 1 {
-            depths[n - 1] - depths[n - 2]
-        } else {
-            (depths[i + 1] - depths[i - 1]) / 2.0
-        }
-    };
+    let delta = |i: usize| sample_delta(depths, i);
     let mut weights = Vec::with_capacity(n);
     let mut optical = 0.0f32;
     let (mut c, mut d) = ([0.0f64; 3], 0.0f64);

@@ -17,7 +17,7 @@
 use candle_core::{D, Device, Tensor};
 use nelf_field::light::{alignment_taps, net_solid_angles};
 use nelf_field::nelfnet::{NelfNet, NelfNetTrace, PointInputs};
-use nelf_field::render::NetRay;
+use nelf_field::render::{NetRay, sample_delta};
 use nelf_field::{EncodedViews, Model, SourceViews, Stage};
 use nelf_format::conventions::ENV_TEXELS;
 
@@ -168,24 +168,6 @@ pub struct RayPass {
     pub weights: Vec<f32>,
 }
 
-/// The `δ` of each sample of a ray (module docs).
-fn deltas(depths: &[f32]) -> Vec<f32> {
-    let n = depths.len();
-    (0..n)
-        .map(|i| {
-            if n < 2 {
-                0.0
-            } else if i == 0 {
-                depths[1] - depths[0]
-            } else if i == n - 1 {
-                depths[n - 1] - depths[n - 2]
-            } else {
-                (depths[i + 1] - depths[i - 1]) / 2.0
-            }
-        })
-        .collect()
-}
-
 /// Renders `rays` with `samples` sorted depths each (`depths`, `(R, S)`, mm) through
 /// `stage`'s network under `irradiance` (`(3, 128)`, `L·Ω`, network layout).
 pub fn render_rays(
@@ -237,7 +219,10 @@ pub fn render_rays(
     };
     let sigma = sigma.reshape((r, s))?;
     let rgb = rgb.reshape((r, s, 3))?;
-    let delta: Vec<f32> = depths.chunks(s).flat_map(deltas).collect();
+    let delta: Vec<f32> = depths
+        .chunks(s)
+        .flat_map(|ray| (0..ray.len()).map(|i| sample_delta(ray, i)))
+        .collect();
     let delta = Tensor::from_vec(delta, (r, s), device)?;
     let depth_t = Tensor::from_slice(depths, (r, s), device)?;
     let optical = (sigma * delta)?;

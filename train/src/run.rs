@@ -12,8 +12,6 @@ use std::time::Instant;
 
 use candle_core::{Device, Tensor};
 use indicatif::ProgressBar;
-use nelf_field::Stage;
-use nelf_field::render::{NetRay, importance_depths};
 use nelf_scene::mesh_io::linear_to_srgb;
 use nelf_scene::metrics::{psnr, psnr_masked};
 use serde::Serialize;
@@ -22,10 +20,10 @@ use crate::adam::Adam;
 use crate::config::TrainConfig;
 use crate::data::{Dataset, TargetMode};
 use crate::error::TrainError;
-use crate::forward::{encode, irradiance, render_rays};
+use crate::forward::{encode, irradiance};
 use crate::trainer::{
-    CHECKPOINT_INFO, CheckpointInfo, LossParts, PreparedHead, RunPaths, Trainable, load_checkpoint,
-    prepare_heads, read_checkpoint_info, save_checkpoint, train_step,
+    CHECKPOINT_INFO, CheckpointInfo, Jitter, LossParts, PreparedHead, RunPaths, Trainable, load_checkpoint,
+    prepare_heads, read_checkpoint_info, render_passes, save_checkpoint, target_rays, train_step,
 };
 
 /// Rays per validation chunk (bounds memory).
@@ -79,58 +77,9 @@ pub fn validate_head(
     let mut rendered = Vec::with_capacity(w * h);
     let pixels: Vec<usize> = (0..w * h).collect();
     for chunk in pixels.chunks(VAL_CHUNK_RAYS) {
-        let rays: Vec<NetRay> = chunk
-            .iter()
-            .map(|&p| {
-                NetRay::through_pixel(
-                    &target.camera,
-                    (p % w) as f64 + 0.5,
-                    (p / w) as f64 + 0.5,
-                    centre,
-                    radius,
-                )
-            })
-            .collect();
-        let s = config.coarse_samples;
-        let coarse_d: Vec<f32> = rays
-            .iter()
-            .flat_map(|ray| {
-                (0..s).map(move |k| {
-                    let z = (k as f32 + 0.5) / s as f32;
-                    ray.near * (1.0 - z) + ray.far * z
-                })
-            })
-            .collect();
-        let coarse = render_rays(
-            model,
-            &encoded,
-            &head.geometry,
-            &rays,
-            &coarse_d,
-            Stage::Coarse,
-            &irr,
-        )?;
-        let pass = if config.fine_samples > 0 {
-            let f = config.fine_samples;
-            let u: Vec<f32> = (0..f).map(|k| (k as f32 + 0.5) / f as f32).collect();
-            let jitter = vec![0.5f32; f];
-            let mut depths = Vec::with_capacity(rays.len() * (s + f));
-            for (r, ray) in rays.iter().enumerate() {
-                let mut d = importance_depths(
-                    &coarse.weights[r * s..(r + 1) * s],
-                    ray.near,
-                    ray.far,
-                    &u,
-                    &jitter,
-                );
-                d.extend_from_slice(&coarse_d[r * s..(r + 1) * s]);
-                d.sort_by(f32::total_cmp);
-                depths.extend(d);
-            }
-            render_rays(model, &encoded, &head.geometry, &rays, &depths, Stage::Fine, &irr)?
-        } else {
-            coarse
-        };
+        let rays = target_rays(target, chunk, centre, radius);
+        let (coarse, fine) = render_passes(model, &encoded, head, &rays, &irr, config, &mut Jitter::Centred)?;
+        let pass = fine.unwrap_or(coarse);
         let rgb = pass.rgb.detach().to_vec2::<f32>()?;
         rendered.extend(rgb.into_iter().map(|c| [c[0], c[1], c[2]]));
     }
@@ -220,7 +169,7 @@ fn log_loss(path: &Path, step: u64, train_secs: f64, loss: &LossParts) -> Result
     let mut text = String::new();
     if new {
         text.push_str(
-            "step,train_secs,loss,rgb_coarse,rgb_fine,depth,alpha,light,distill,encode_s,coarse_s,fine_s,backward_s,adam_s\n",
+            "step,train_secs,loss,rgb_coarse,rgb_fine,depth,alpha,light,distill,encode_s,render_s,losses_s,backward_s,adam_s\n",
         );
     }
     let values = [
@@ -351,7 +300,7 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
             if progress.is_hidden() {
                 let p = last_loss.phase_secs;
                 eprintln!(
-                    "step {step}: loss {:.4} (colour {:.4}), {:.3} s/step; last step: encode {:.3}, coarse {:.3}, fine {:.3}, backward {:.3}, adam {:.3} s",
+                    "step {step}: loss {:.4} (colour {:.4}), {:.3} s/step; last step: encode {:.3}, render {:.3}, losses {:.3}, backward {:.3}, adam {:.3} s",
                     last_loss.total,
                     last_loss.rgb_fine,
                     train_secs / step.max(1) as f64,

@@ -40,7 +40,7 @@ use crate::adam::Adam;
 use crate::config::TrainConfig;
 use crate::data::{Dataset, TargetMode, TrainingSample};
 use crate::error::TrainError;
-use crate::forward::{self, encode, irradiance, l1, log_l1, render_rays};
+use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, render_rays};
 
 /// Step over which distilled densities are compared as opacities, millimetres.
 const DISTILL_STEP_MM: f64 = 2.0;
@@ -292,8 +292,8 @@ pub struct LossParts {
     pub light: f64,
     /// Distillation loss on σ (1/mm).
     pub distill: f64,
-    /// Seconds of the step's phases: encoder, coarse pass, fine pass and losses,
-    /// backward, Adam (what limits a step).
+    /// Seconds of the step's phases: encoder, rendering (coarse and fine passes),
+    /// losses (with distillation), backward, Adam (what limits a step).
     #[serde(default)]
     pub phase_secs: [f64; 5],
 }
@@ -332,14 +332,64 @@ fn pick_pixels(target: &PreparedTarget, width: usize, count: usize, rng: &mut Pc
         .collect()
 }
 
-/// Evenly jittered coarse depths `(R, S)` of `rays`.
-fn coarse_depths(rays: &[NetRay], samples: usize, rng: &mut Pcg64) -> Vec<f32> {
+/// Where samples fall in their bins: drawn at random (training) or at the middle
+/// of each bin with evenly spaced CDF levels (validation: no noise).
+#[derive(Debug)]
+pub enum Jitter<'a> {
+    /// Uniform draws from this generator.
+    Random(&'a mut Pcg64),
+    /// Bin middles, levels `(k + ½)/n`.
+    Centred,
+}
+
+impl Jitter<'_> {
+    /// `n` offsets in `[0, 1)` within bins.
+    fn offsets(&mut self, n: usize) -> Vec<f32> {
+        match self {
+            Self::Random(rng) => (0..n).map(|_| rng.random::<f32>()).collect(),
+            Self::Centred => vec![0.5; n],
+        }
+    }
+
+    /// `n` CDF levels in `[0, 1)`.
+    fn levels(&mut self, n: usize) -> Vec<f32> {
+        match self {
+            Self::Random(rng) => (0..n).map(|_| rng.random::<f32>()).collect(),
+            Self::Centred => (0..n).map(|k| (k as f32 + 0.5) / n as f32).collect(),
+        }
+    }
+}
+
+/// The rays of `target`'s pixels `pixels` (through their centres).
+pub fn target_rays(
+    target: &PreparedTarget,
+    pixels: &[usize],
+    centre: [f32; 3],
+    radius_mm: f32,
+) -> Vec<NetRay> {
+    let width = target.camera.width;
+    pixels
+        .iter()
+        .map(|&p| {
+            NetRay::through_pixel(
+                &target.camera,
+                (p % width) as f64 + 0.5,
+                (p / width) as f64 + 0.5,
+                centre,
+                radius_mm,
+            )
+        })
+        .collect()
+}
+
+/// Coarse depths `(R, S)` of `rays`, one per bin of `[near, far]`.
+fn coarse_depths(rays: &[NetRay], samples: usize, jitter: &mut Jitter<'_>) -> Vec<f32> {
     rays.iter()
         .flat_map(|ray| {
-            let jitter: Vec<f32> = (0..samples).map(|_| rng.random::<f32>()).collect();
+            let offsets = jitter.offsets(samples);
             (0..samples)
                 .map(|k| {
-                    let z = (k as f32 + jitter[k]) / samples as f32;
+                    let z = (k as f32 + offsets[k]) / samples as f32;
                     ray.near * (1.0 - z) + ray.far * z
                 })
                 .collect::<Vec<_>>()
@@ -348,18 +398,62 @@ fn coarse_depths(rays: &[NetRay], samples: usize, rng: &mut Pcg64) -> Vec<f32> {
 }
 
 /// The fine pass's depths: coarse ones plus `fine` importance samples, sorted.
-fn fine_depths(rays: &[NetRay], coarse: &[f32], weights: &[f32], fine: usize, rng: &mut Pcg64) -> Vec<f32> {
+fn fine_depths(
+    rays: &[NetRay],
+    coarse: &[f32],
+    weights: &[f32],
+    fine: usize,
+    jitter: &mut Jitter<'_>,
+) -> Vec<f32> {
     let s = coarse.len() / rays.len().max(1);
     let mut out = Vec::with_capacity(rays.len() * (s + fine));
     for (r, ray) in rays.iter().enumerate() {
-        let u: Vec<f32> = (0..fine).map(|_| rng.random::<f32>()).collect();
-        let jitter: Vec<f32> = (0..fine).map(|_| rng.random::<f32>()).collect();
-        let mut d = importance_depths(&weights[r * s..(r + 1) * s], ray.near, ray.far, &u, &jitter);
+        let u = jitter.levels(fine);
+        let offsets = jitter.offsets(fine);
+        let mut d = importance_depths(&weights[r * s..(r + 1) * s], ray.near, ray.far, &u, &offsets);
         d.extend_from_slice(&coarse[r * s..(r + 1) * s]);
         d.sort_by(f32::total_cmp);
         out.extend(d);
     }
     out
+}
+
+/// The coarse pass over `rays` and, when the configuration has importance samples,
+/// the fine pass, under `irradiance` (`(3, 128)`).
+pub fn render_passes(
+    model: &Model,
+    encoded: &Encoded,
+    head: &PreparedHead,
+    rays: &[NetRay],
+    irradiance: &Tensor,
+    config: &TrainConfig,
+    jitter: &mut Jitter<'_>,
+) -> Result<(RayPass, Option<RayPass>), TrainError> {
+    let coarse_d = coarse_depths(rays, config.coarse_samples, jitter);
+    let coarse = render_rays(
+        model,
+        encoded,
+        &head.geometry,
+        rays,
+        &coarse_d,
+        Stage::Coarse,
+        irradiance,
+    )?;
+    let fine = if config.fine_samples > 0 {
+        let d = fine_depths(rays, &coarse_d, &coarse.weights, config.fine_samples, jitter);
+        Some(render_rays(
+            model,
+            encoded,
+            &head.geometry,
+            rays,
+            &d,
+            Stage::Fine,
+            irradiance,
+        )?)
+    } else {
+        None
+    };
+    Ok((coarse, fine))
 }
 
 /// The loss of one step on `head` (module docs), with the graph for its gradients.
@@ -386,46 +480,23 @@ pub fn step_loss(
         .ok_or_else(|| TrainError::Settings("a head without target views".into()))?;
     let width = target.camera.width;
     let pixels = pick_pixels(target, width, config.rays, rng);
-    let centre = head.capture.head_centre_net();
-    let radius = model.config().head_radius_mm;
-    let rays: Vec<NetRay> = pixels
-        .iter()
-        .map(|&p| {
-            NetRay::through_pixel(
-                &target.camera,
-                (p % width) as f64 + 0.5,
-                (p / width) as f64 + 0.5,
-                centre,
-                radius,
-            )
-        })
-        .collect();
+    let rays = target_rays(
+        target,
+        &pixels,
+        head.capture.head_centre_net(),
+        model.config().head_radius_mm,
+    );
     let irr = irradiance(&target.light_net, device)?;
-    let coarse_d = coarse_depths(&rays, config.coarse_samples, rng);
-    let coarse = render_rays(
+    let (coarse, fine) = render_passes(
         model,
         &encoded,
-        &head.geometry,
+        head,
         &rays,
-        &coarse_d,
-        Stage::Coarse,
         &irr,
+        config,
+        &mut Jitter::Random(rng),
     )?;
-    let coarse_secs = secs_since(clock) - encode_secs;
-    let fine = if config.fine_samples > 0 {
-        let d = fine_depths(&rays, &coarse_d, &coarse.weights, config.fine_samples, rng);
-        Some(render_rays(
-            model,
-            &encoded,
-            &head.geometry,
-            &rays,
-            &d,
-            Stage::Fine,
-            &irr,
-        )?)
-    } else {
-        None
-    };
+    let render_secs = secs_since(clock) - encode_secs;
     let last = fine.as_ref().unwrap_or(&coarse);
     let r = rays.len();
     let want_rgb: Vec<f32> = pixels.iter().flat_map(|&p| target.image[p]).collect();
@@ -527,8 +598,8 @@ pub fn step_loss(
         distill: distill_value,
         phase_secs: [
             encode_secs,
-            coarse_secs,
-            secs_since(clock) - encode_secs - coarse_secs,
+            render_secs,
+            secs_since(clock) - encode_secs - render_secs,
             0.0,
             0.0,
         ],
