@@ -70,6 +70,17 @@ fn train_data_run_resume_and_bake_with_the_weights() {
     let first = train("2");
     assert!(first.contains("step 2 (2 now"), "{first}");
     assert!(run.join("curve.svg").is_file() && run.join("validation.csv").is_file());
+    // Validation stands beside the flat-colour baseline of the same views.
+    let log = std::fs::read_to_string(run.join("validation.csv")).unwrap();
+    let last: Vec<f64> = log
+        .lines()
+        .last()
+        .unwrap()
+        .split(',')
+        .map(|f| f.parse().unwrap())
+        .collect();
+    assert_eq!(last.len(), 8, "{log}");
+    assert!(last[4..].iter().all(|db| db.is_finite() && *db > 3.0), "{log}");
     let resumed = train("3");
     assert!(resumed.contains("step 3 (1 now"), "{resumed}");
     // Another width cannot continue this checkpoint.

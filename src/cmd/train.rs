@@ -33,11 +33,16 @@ fn write_curve(csv: &Path, svg: &Path) -> anyhow::Result<bool> {
     };
     let mut whole = Vec::new();
     let mut foreground = Vec::new();
+    let mut flat = Vec::new();
     for line in text.lines().skip(1) {
         let fields: Vec<f64> = line.split(',').filter_map(|f| f.parse().ok()).collect();
-        if let [_, secs, _, _, psnr, fg] = fields[..] {
+        if let [_, secs, _, _, psnr, fg, ..] = fields[..] {
             whole.push((secs / 3600.0, psnr));
             foreground.push((secs / 3600.0, fg));
+        }
+        // Later logs add the flat-colour baseline of the same views.
+        if let [_, secs, _, _, _, _, _, flat_fg] = fields[..] {
+            flat.push((secs / 3600.0, flat_fg));
         }
     }
     if whole.is_empty() {
@@ -53,7 +58,11 @@ fn write_curve(csv: &Path, svg: &Path) -> anyhow::Result<bool> {
         x_label: "hours of training".into(),
         y_label: "PSNR, 8-bit sRGB (dB)".into(),
         log_x: false,
-        series: vec![series("whole image", whole), series("foreground", foreground)],
+        series: vec![
+            series("whole image", whole),
+            series("foreground", foreground),
+            series("flat colour in the true silhouette, foreground", flat),
+        ],
         threshold_y: None,
     };
     let drawn = nelf_eval::report::chart_svg(&chart).context("drawing the validation curve")?;

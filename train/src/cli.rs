@@ -83,8 +83,8 @@ fn run_training(config: &TrainConfig) -> Result<(), TrainError> {
         report
             .validation
             .map(|v| format!(
-                ", validation PSNR {:.2} dB (foreground {:.2} dB)",
-                v.psnr, v.foreground_psnr
+                ", validation PSNR {:.2} dB (foreground {:.2} dB; flat colour {:.2}, {:.2} dB)",
+                v.psnr, v.foreground_psnr, v.flat_psnr, v.flat_foreground_psnr
             ))
             .unwrap_or_default(),
         config.out.display()

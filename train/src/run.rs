@@ -36,6 +36,11 @@ pub struct Validation {
     pub psnr: f64,
     /// PSNR inside the true mask (alpha > 0.5), 8-bit sRGB, dB.
     pub foreground_psnr: f64,
+    /// The trivial baseline on the same views: the true foreground's mean colour
+    /// inside the true silhouette, black outside; whole image, dB.
+    pub flat_psnr: f64,
+    /// The same baseline inside the mask, dB.
+    pub flat_foreground_psnr: f64,
 }
 
 /// What a run did.
@@ -91,11 +96,26 @@ pub fn validate_head(
         .iter()
         .map(|a| if *a > 0.5 { 1.0 } else { 0.0 })
         .collect();
-    let psnr_all = psnr(&got, &want, 255.0).map_err(|e| TrainError::Settings(e.to_string()))?;
-    let fg = psnr_masked(&got, &want, &mask, 255.0).map_err(|e| TrainError::Settings(e.to_string()))?;
+    let score = |image: &[[f32; 3]]| -> Result<(f64, f64), TrainError> {
+        let whole = psnr(image, &want, 255.0).map_err(|e| TrainError::Settings(e.to_string()))?;
+        let fg = psnr_masked(image, &want, &mask, 255.0).map_err(|e| TrainError::Settings(e.to_string()))?;
+        Ok((whole, fg))
+    };
+    let (psnr_all, fg) = score(&got)?;
+    let inside = mask.iter().filter(|m| **m > 0.0).count().max(1) as f32;
+    let mut mean = [0.0f32; 3];
+    for (c, m) in target.image.iter().zip(&mask) {
+        for k in 0..3 {
+            mean[k] += c[k] * m / inside;
+        }
+    }
+    let flat: Vec<[f32; 3]> = mask.iter().map(|m| srgb8(&mean.map(|v| v * m))).collect();
+    let (flat_all, flat_fg) = score(&flat)?;
     Ok(Validation {
         psnr: psnr_all,
         foreground_psnr: fg,
+        flat_psnr: flat_all,
+        flat_foreground_psnr: flat_fg,
     })
 }
 
@@ -108,16 +128,22 @@ pub fn validate(
     if heads.is_empty() {
         return Ok(None);
     }
-    let (mut p, mut f) = (0.0, 0.0);
+    let mut sum = [0.0f64; 4];
     for head in heads {
         let v = validate_head(trainable, head, config)?;
-        p += v.psnr;
-        f += v.foreground_psnr;
+        for (s, x) in sum
+            .iter_mut()
+            .zip([v.psnr, v.foreground_psnr, v.flat_psnr, v.flat_foreground_psnr])
+        {
+            *s += x;
+        }
     }
-    let n = heads.len() as f64;
+    let [p, f, fp, ff] = sum.map(|s| s / heads.len() as f64);
     Ok(Some(Validation {
-        psnr: p / n,
-        foreground_psnr: f / n,
+        psnr: p,
+        foreground_psnr: f,
+        flat_psnr: fp,
+        flat_foreground_psnr: ff,
     }))
 }
 
@@ -140,7 +166,9 @@ fn log_validation(
         })?;
     let mut text = String::new();
     if new {
-        text.push_str("step,train_secs,loss,rgb_fine,val_psnr_db,val_foreground_psnr_db\n");
+        text.push_str(
+            "step,train_secs,loss,rgb_fine,val_psnr_db,val_foreground_psnr_db,flat_psnr_db,flat_foreground_psnr_db\n",
+        );
     }
     text.push_str(
         &[
@@ -150,6 +178,8 @@ fn log_validation(
             format!("{:.5}", loss.rgb_fine),
             format!("{:.3}", v.psnr),
             format!("{:.3}", v.foreground_psnr),
+            format!("{:.3}", v.flat_psnr),
+            format!("{:.3}", v.flat_foreground_psnr),
         ]
         .join(","),
     );
@@ -316,8 +346,8 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
             if let Some(v) = validate(&trainable, &val_heads, config)? {
                 log_validation(&paths.log(), step, train_secs, &last_loss, &v)?;
                 let line = format!(
-                    "step {step}: validation PSNR {:.2} dB, foreground {:.2} dB",
-                    v.psnr, v.foreground_psnr
+                    "step {step}: validation PSNR {:.2} dB, foreground {:.2} dB (flat colour: {:.2}, {:.2} dB)",
+                    v.psnr, v.foreground_psnr, v.flat_psnr, v.flat_foreground_psnr
                 );
                 if progress.is_hidden() {
                     eprintln!("{line}");
