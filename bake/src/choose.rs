@@ -32,15 +32,15 @@
 
 use std::time::Instant;
 
-use nelf_format::{Asset, WriteOptions, encode_asset};
+use nelf_format::Asset;
 use nelf_render::{BrickGrid, MarchSettings, project_light_texels, render_asset, render_features};
-use nelf_scene::metrics::{mse, psnr};
+use nelf_scene::metrics::mse;
 use serde::{Deserialize, Serialize};
 
 use crate::capture_in::LoadedCapture;
 use crate::config::{BakeConfig, EncodingChoice};
 use crate::error::{BakeError, Result};
-use crate::eval::{EVAL_PIXEL_GRID, HeldAside, data_range, load_held_aside};
+use crate::eval::{EVAL_PIXEL_GRID, HeldAside, data_range, encoded_bytes, load_held_aside};
 use crate::jobs::with_capture_job;
 use crate::pipeline::{BakeOutput, SampledField, add_view_dependence, finish_bake, sample_field};
 use crate::progress::Progress;
@@ -211,21 +211,7 @@ pub fn rank_psnrs(full: &Asset, ranks: &[usize], held: &HeldAside, step_voxels: 
 
 /// Mean held-aside PSNR of `asset` rendered exactly ([`EVAL_PIXEL_GRID`]² rays per pixel).
 pub fn held_aside_psnr(asset: &Asset, held: &HeldAside, step_voxels: f32) -> Result<f64> {
-    let settings = MarchSettings {
-        step_voxels,
-        pixel_grid: EVAL_PIXEL_GRID,
-        ..MarchSettings::default()
-    };
-    let mut sum = 0.0;
-    for ((camera, truth), env) in held.cameras.iter().zip(&held.images).zip(&held.envs) {
-        let image = render_asset(asset, camera, env, glam::DMat3::IDENTITY, None, &settings)?;
-        sum += psnr(&image.rgb, truth, f64::from(data_range(truth)))?;
-    }
-    Ok(sum / held.len().max(1) as f64)
-}
-
-fn encoded_bytes(asset: &Asset) -> Result<u64> {
-    Ok(encode_asset(asset, &WriteOptions::default())?.0.len() as u64)
+    crate::eval::held_aside_psnr(asset, held, step_voxels, EVAL_PIXEL_GRID)
 }
 
 /// The candidates of one sampled resolution: per encoding, the smallest rank

@@ -231,3 +231,29 @@ pub fn load_held_aside(capture: &nelf_format::capture::Capture, dir: &Path) -> R
     }
     Ok(held)
 }
+
+/// Mean PSNR of `asset` over the held-aside `views`, rendered with `pixel_grid`²
+/// rays per pixel and march step `step_voxels` (the one measure `--target-psnr`,
+/// `--max-bytes` and `--view-dependence auto` judge candidates by).
+pub fn held_aside_psnr(asset: &Asset, views: &HeldAside, step_voxels: f32, pixel_grid: u32) -> Result<f64> {
+    let settings = MarchSettings {
+        step_voxels,
+        pixel_grid,
+        ..MarchSettings::default()
+    };
+    let mut sum = 0.0;
+    for ((camera, truth), env) in views.cameras.iter().zip(&views.images).zip(&views.envs) {
+        let image = render_asset(asset, camera, env, DMat3::IDENTITY, None, &settings)?;
+        sum += psnr(&image.rgb, truth, f64::from(data_range(truth)))?;
+    }
+    Ok(sum / views.len().max(1) as f64)
+}
+
+/// Bytes of `asset` as written with the default options.
+pub fn encoded_bytes(asset: &Asset) -> Result<u64> {
+    Ok(
+        nelf_format::encode_asset(asset, &nelf_format::WriteOptions::default())?
+            .0
+            .len() as u64,
+    )
+}

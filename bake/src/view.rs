@@ -652,23 +652,7 @@ pub fn judge_psnr(
     views: &crate::eval::HeldAside,
     step_voxels: f32,
 ) -> Result<f64> {
-    use nelf_render::{MarchSettings, render_asset};
-    let settings = MarchSettings {
-        step_voxels,
-        pixel_grid: JUDGE_PIXEL_GRID,
-        ..MarchSettings::default()
-    };
-    let mut sum = 0.0;
-    for ((camera, truth), env) in views.cameras.iter().zip(&views.images).zip(&views.envs) {
-        let image = render_asset(asset, camera, env, glam::DMat3::IDENTITY, None, &settings)?;
-        sum += nelf_scene::metrics::psnr(&image.rgb, truth, f64::from(crate::eval::data_range(truth)))?;
-    }
-    Ok(sum / views.len().max(1) as f64)
-}
-
-fn encoded_bytes(asset: &nelf_format::Asset) -> Result<u64> {
-    let (bytes, _) = nelf_format::encode_asset(asset, &nelf_format::WriteOptions::default())?;
-    Ok(bytes.len() as u64)
+    crate::eval::held_aside_psnr(asset, views, step_voxels, JUDGE_PIXEL_GRID)
 }
 
 /// View-basis rank of an explicit `--view-dependence` without `--view-rank`, and the
@@ -727,7 +711,7 @@ pub fn choose_view(
         settings.max_rank,
         progress,
     )?;
-    let base_bytes = encoded_bytes(asset)?;
+    let base_bytes = crate::eval::encoded_bytes(asset)?;
     let mut report = ViewReport {
         requested: settings.choice,
         chosen: ViewChoice::Off,
@@ -802,7 +786,7 @@ pub fn choose_view(
             rank: with.view.as_ref().map_or(0, ViewDependence::rank),
             psnr_db,
             gain_db: psnr_db.zip(report.base_psnr_db).map(|(a, b)| a - b),
-            bytes: encoded_bytes(&with)?,
+            bytes: crate::eval::encoded_bytes(&with)?,
         });
         parts.push(with.view);
     }
