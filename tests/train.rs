@@ -83,6 +83,9 @@ fn train_data_run_resume_and_bake_with_the_weights() {
     assert!(last[4..].iter().all(|db| db.is_finite() && *db > 3.0), "{log}");
     let resumed = train("3");
     assert!(resumed.contains("step 3 (1 now"), "{resumed}");
+    // The network as a run ends is validated even off the --val-every grid.
+    let log = std::fs::read_to_string(run.join("validation.csv")).unwrap();
+    assert!(log.lines().last().unwrap().starts_with("3,"), "{log}");
     // Another width cannot continue this checkpoint.
     let refused = nelf(&[
         "train",

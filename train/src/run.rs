@@ -227,6 +227,34 @@ fn log_loss(path: &Path, step: u64, train_secs: f64, loss: &LossParts) -> Result
         })
 }
 
+/// Validates on `heads`, appends the result to the log and prints it.
+#[allow(clippy::too_many_arguments, reason = "the loop's state, passed through once")]
+fn validate_and_log(
+    trainable: &Trainable,
+    heads: &[PreparedHead],
+    config: &TrainConfig,
+    paths: &RunPaths,
+    step: u64,
+    train_secs: f64,
+    loss: &LossParts,
+    progress: &ProgressBar,
+) -> Result<Option<Validation>, TrainError> {
+    let Some(v) = validate(trainable, heads, config)? else {
+        return Ok(None);
+    };
+    log_validation(&paths.log(), step, train_secs, loss, &v)?;
+    let line = format!(
+        "step {step}: validation PSNR {:.2} dB, foreground {:.2} dB (flat colour: {:.2}, {:.2} dB)",
+        v.psnr, v.foreground_psnr, v.flat_psnr, v.flat_foreground_psnr
+    );
+    if progress.is_hidden() {
+        eprintln!("{line}");
+    } else {
+        progress.println(line);
+    }
+    Ok(Some(v))
+}
+
 /// Writes the network alone (official key names) for `Model::load`.
 pub fn export_weights(trainable: &Trainable, path: &Path) -> Result<(), TrainError> {
     let tensors: std::collections::HashMap<String, Tensor> = trainable.weights()?.into_iter().collect();
@@ -312,6 +340,7 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
     let mut last_checkpoint = Instant::now();
     let first_step = adam.steps();
     let mut validation = None;
+    let mut validated_at = None;
     while adam.steps() < config.steps {
         if config.max_secs > 0.0 && start.elapsed().as_secs_f64() >= config.max_secs {
             break;
@@ -343,19 +372,10 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
             }
         }
         if config.val_every > 0 && step % config.val_every == 0 {
-            if let Some(v) = validate(&trainable, &val_heads, config)? {
-                log_validation(&paths.log(), step, train_secs, &last_loss, &v)?;
-                let line = format!(
-                    "step {step}: validation PSNR {:.2} dB, foreground {:.2} dB (flat colour: {:.2}, {:.2} dB)",
-                    v.psnr, v.foreground_psnr, v.flat_psnr, v.flat_foreground_psnr
-                );
-                if progress.is_hidden() {
-                    eprintln!("{line}");
-                } else {
-                    progress.println(line);
-                }
-                validation = Some(v);
-            }
+            validation = validate_and_log(
+                &trainable, &val_heads, config, &paths, step, train_secs, &last_loss, progress,
+            )?;
+            validated_at = Some(step);
         }
         if last_checkpoint.elapsed().as_secs_f64() >= config.checkpoint_secs {
             let info = CheckpointInfo {
@@ -367,6 +387,20 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
             checkpoint(&paths, &trainable, &adam, &info)?;
             last_checkpoint = Instant::now();
         }
+    }
+    // The network as it ends is always validated (also when no step was taken: a
+    // run to the step it is at validates its checkpoint).
+    if config.val_every > 0 && validated_at != Some(adam.steps()) {
+        validation = validate_and_log(
+            &trainable,
+            &val_heads,
+            config,
+            &paths,
+            adam.steps(),
+            train_secs,
+            &last_loss,
+            progress,
+        )?;
     }
     let info = CheckpointInfo {
         step: adam.steps(),
