@@ -12,6 +12,7 @@ use std::time::Instant;
 
 use candle_core::{Device, Tensor};
 use indicatif::ProgressBar;
+use nelf_field::Model;
 use nelf_scene::mesh_io::linear_to_srgb;
 use nelf_scene::metrics::{psnr, psnr_masked};
 use serde::Serialize;
@@ -27,7 +28,7 @@ use crate::trainer::{
 };
 
 /// Rays per validation chunk (bounds memory).
-const VAL_CHUNK_RAYS: usize = 1024;
+const VAL_CHUNK_RAYS: usize = 512;
 
 /// A validation result: the mean over held-out heads.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -60,14 +61,14 @@ pub struct RunReport {
     pub validation: Option<Validation>,
 }
 
-/// Renders the novel-light target of `head` (fine network, evenly spaced samples)
-/// and scores it against the truth in 8-bit sRGB.
+/// Renders the novel-light target of `head` with `model` (a [`Trainable::snapshot`]:
+/// fine network, evenly spaced samples) and scores it against the truth in 8-bit
+/// sRGB, beside the flat-colour baseline.
 pub fn validate_head(
-    trainable: &Trainable,
+    model: &Model,
     head: &PreparedHead,
     config: &TrainConfig,
 ) -> Result<Validation, TrainError> {
-    let model = &trainable.model;
     let target = head
         .targets
         .iter()
@@ -128,9 +129,10 @@ pub fn validate(
     if heads.is_empty() {
         return Ok(None);
     }
+    let model = trainable.snapshot()?;
     let mut sum = [0.0f64; 4];
     for head in heads {
-        let v = validate_head(trainable, head, config)?;
+        let v = validate_head(&model, head, config)?;
         for (s, x) in sum
             .iter_mut()
             .zip([v.psnr, v.foreground_psnr, v.flat_psnr, v.flat_foreground_psnr])

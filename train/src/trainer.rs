@@ -692,6 +692,19 @@ impl Trainable {
             .collect())
     }
 
+    /// The network with a copy of the current weights as plain tensors: it builds no
+    /// gradient graph and takes the fused inference kernels (validation: a graph
+    /// over a full image held ~24 GB here).
+    pub fn snapshot(&self) -> Result<Model, TrainError> {
+        let tensors = self
+            .weights()?
+            .into_iter()
+            .map(|(n, t)| Ok((n, t.detach().copy()?)))
+            .collect::<Result<HashMap<_, _>, TrainError>>()?;
+        let vb = VarBuilder::from_tensors(tensors, DType::F32, self.model.device());
+        Ok(Model::new(&vb, *self.model.config())?)
+    }
+
     /// Sets the weights from named tensors (every variable must be present).
     pub fn load_weights(&self, tensors: &HashMap<String, Tensor>, prefix: &str) -> Result<(), TrainError> {
         for (name, var) in sorted_vars(&self.varmap)? {
