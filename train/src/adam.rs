@@ -19,6 +19,25 @@ const BETA2: f64 = 0.999;
 /// ε.
 const EPS: f64 = 1e-8;
 
+/// The tensor `key` of a checkpoint, which must have the shape `dims` of the
+/// network it is loaded into.
+pub fn checkpoint_tensor<'a>(
+    tensors: &'a std::collections::HashMap<String, Tensor>,
+    key: &str,
+    dims: &[usize],
+) -> Result<&'a Tensor, TrainError> {
+    let t = tensors
+        .get(key)
+        .ok_or_else(|| TrainError::Settings(format!("the checkpoint has no `{key}`")))?;
+    if t.dims() != dims {
+        return Err(TrainError::Settings(format!(
+            "`{key}` is {:?} in the checkpoint, {dims:?} in this network",
+            t.dims()
+        )));
+    }
+    Ok(t)
+}
+
 /// One optimised variable.
 #[derive(Debug)]
 struct Slot {
@@ -109,16 +128,7 @@ impl Adam {
                 (format!("adam_m.{name}"), &mut slot.m),
                 (format!("adam_v.{name}"), &mut slot.v),
             ] {
-                let t = tensors
-                    .get(&key)
-                    .ok_or_else(|| TrainError::Settings(format!("the checkpoint has no `{key}`")))?;
-                if t.dims() != target.dims() {
-                    return Err(TrainError::Settings(format!(
-                        "`{key}` is {:?} in the checkpoint, {:?} in this network",
-                        t.dims(),
-                        target.dims()
-                    )));
-                }
+                let t = checkpoint_tensor(tensors, &key, target.dims())?;
                 *target = t.to_device(target.device())?;
             }
         }

@@ -14,7 +14,7 @@
 //!   `w_i = (1 − e^{−σ_i δ_i})·e^{−Σ_{j<i} σ_j δ_j}`, colour `Σ w c`, alpha
 //!   `1 − e^{−Σ σδ}`, depth `Σ w d / (alpha + 10⁻⁶)`.
 
-use candle_core::{D, Device, Tensor};
+use candle_core::{Device, Tensor};
 use nelf_field::light::{alignment_taps, net_solid_angles};
 use nelf_field::nelfnet::{NelfNet, NelfNetTrace, PointInputs};
 use nelf_field::render::{NetRay, sample_delta};
@@ -268,9 +268,4 @@ pub fn log_l1(a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
     let la = (a.relu()? + 1.0)?.log()?;
     let lb = (b.relu()? + 1.0)?.log()?;
     l1(&la, &lb)
-}
-
-/// Sum over the last dimension (helper for masks and weights).
-pub fn sum_last(t: &Tensor) -> Result<Tensor, TrainError> {
-    Ok(t.sum(D::Minus1)?)
 }

@@ -149,7 +149,28 @@ pub fn validate(
     }))
 }
 
-/// Appends a line to the validation log, writing its header first when new.
+/// Appends the row `fields` to the CSV file `path`, writing `header` first when the
+/// file is new.
+fn append_csv(path: &Path, header: &str, fields: &[String]) -> Result<(), TrainError> {
+    let mut text = String::new();
+    if !path.exists() {
+        text.push_str(header);
+        text.push('\n');
+    }
+    text.push_str(&fields.join(","));
+    text.push('\n');
+    std::fs::OpenOptions::new()
+        .create(true)
+        .append(true)
+        .open(path)
+        .and_then(|mut f| f.write_all(text.as_bytes()))
+        .map_err(|source| TrainError::Io {
+            path: path.to_path_buf(),
+            source,
+        })
+}
+
+/// Appends a validation to the validation log.
 fn log_validation(
     path: &Path,
     step: u64,
@@ -157,22 +178,9 @@ fn log_validation(
     loss: &LossParts,
     v: &Validation,
 ) -> Result<(), TrainError> {
-    let new = !path.exists();
-    let mut file = std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)
-        .map_err(|source| TrainError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
-    let mut text = String::new();
-    if new {
-        text.push_str(
-            "step,train_secs,loss,rgb_fine,val_psnr_db,val_foreground_psnr_db,flat_psnr_db,flat_foreground_psnr_db\n",
-        );
-    }
-    text.push_str(
+    append_csv(
+        path,
+        "step,train_secs,loss,rgb_fine,val_psnr_db,val_foreground_psnr_db,flat_psnr_db,flat_foreground_psnr_db",
         &[
             step.to_string(),
             format!("{train_secs:.1}"),
@@ -182,14 +190,8 @@ fn log_validation(
             format!("{:.3}", v.foreground_psnr),
             format!("{:.3}", v.flat_psnr),
             format!("{:.3}", v.flat_foreground_psnr),
-        ]
-        .join(","),
-    );
-    text.push('\n');
-    file.write_all(text.as_bytes()).map_err(|source| TrainError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+        ],
+    )
 }
 
 /// Steps between lines of the loss log.
@@ -197,13 +199,6 @@ const LOSS_LOG_EVERY: u64 = 50;
 
 /// Appends a step's losses to `loss.csv` (the training curve).
 fn log_loss(path: &Path, step: u64, train_secs: f64, loss: &LossParts) -> Result<(), TrainError> {
-    let new = !path.exists();
-    let mut text = String::new();
-    if new {
-        text.push_str(
-            "step,train_secs,loss,rgb_coarse,rgb_fine,depth,alpha,light,distill,encode_s,render_s,losses_s,backward_s,adam_s\n",
-        );
-    }
     let values = [
         loss.total,
         loss.rgb_coarse,
@@ -216,17 +211,11 @@ fn log_loss(path: &Path, step: u64, train_secs: f64, loss: &LossParts) -> Result
     let mut fields = vec![step.to_string(), format!("{train_secs:.1}")];
     fields.extend(values.iter().map(|v| format!("{v:.5}")));
     fields.extend(loss.phase_secs.iter().map(|v| format!("{v:.4}")));
-    text.push_str(&fields.join(","));
-    text.push('\n');
-    std::fs::OpenOptions::new()
-        .create(true)
-        .append(true)
-        .open(path)
-        .and_then(|mut f| f.write_all(text.as_bytes()))
-        .map_err(|source| TrainError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+    append_csv(
+        path,
+        "step,train_secs,loss,rgb_coarse,rgb_fine,depth,alpha,light,distill,encode_s,render_s,losses_s,backward_s,adam_s",
+        &fields,
+    )
 }
 
 /// Validates on `heads`, appends the result to the log and prints it.

@@ -709,16 +709,7 @@ impl Trainable {
     pub fn load_weights(&self, tensors: &HashMap<String, Tensor>, prefix: &str) -> Result<(), TrainError> {
         for (name, var) in sorted_vars(&self.varmap)? {
             let key = format!("{prefix}{name}");
-            let t = tensors
-                .get(&key)
-                .ok_or_else(|| TrainError::Settings(format!("the checkpoint has no `{key}`")))?;
-            if t.dims() != var.dims() {
-                return Err(TrainError::Settings(format!(
-                    "`{key}` is {:?} in the checkpoint, {:?} in this network",
-                    t.dims(),
-                    var.dims()
-                )));
-            }
+            let t = crate::adam::checkpoint_tensor(tensors, &key, var.dims())?;
             var.set(&t.to_device(var.device())?)?;
         }
         Ok(())
