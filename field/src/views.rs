@@ -329,40 +329,32 @@ impl EncodedViews {
             )));
         }
         let (n, v) = (points.len(), self.views());
-        let (w, h) = (self.width, self.height);
-        let (fw, fh) = (w / 2, h / 2);
         let channels = self.feature_channels;
         let latent_channels = channels / 2;
         let offset = stage.feature_offset(latent_channels);
-        let mut source_rgb = vec![0.0f32; n * v * 3];
+        // The taps of the differentiable gather, applied to the host feature maps
+        // (channel-last rows; the same sums, in the same order, as `Taps::sample_into`).
+        let taps = self.gather_taps(points);
         let mut latent = vec![0.0f32; n * v * latent_channels];
-        let mut source_dirc = vec![0.0f32; n * v * 3];
-        source_rgb
-            .par_chunks_mut(v * 3)
-            .zip(latent.par_chunks_mut(v * latent_channels))
-            .zip(source_dirc.par_chunks_mut(v * 3))
-            .zip(points.par_iter())
-            .for_each_init(
-                || vec![0.0f32; channels],
-                |feature, (((rgb, lat), dirc), x)| {
-                    for view in 0..v {
-                        let g = project_normalized(&self.projections[view], w, h, *x);
-                        let image = &self.images[view * w * h * 3..(view + 1) * w * h * 3];
-                        Taps::bilinear(g[0], g[1], w, h).sample_into(image, &mut rgb[view * 3..view * 3 + 3]);
-                        let plane_len = fw * fh * channels;
-                        let plane = &self.features[view * plane_len..(view + 1) * plane_len];
-                        Taps::bilinear(g[0], g[1], fw, fh).sample_into(plane, feature);
-                        lat[view * latent_channels..(view + 1) * latent_channels]
-                            .copy_from_slice(&feature[offset..offset + latent_channels]);
-                        let c = self.centres[view];
-                        let d = [c[0] - x[0], c[1] - x[1], c[2] - x[2]];
-                        let norm = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt().max(1e-12);
-                        for k in 0..3 {
-                            dirc[view * 3 + k] = d[k] / norm;
+        latent
+            .par_chunks_mut(latent_channels)
+            .enumerate()
+            .for_each(|(i, lat)| {
+                for (rows, weights) in taps.rows.iter().zip(&taps.weights) {
+                    let w = weights[i];
+                    if w != 0.0 {
+                        let base = rows[i] as usize * channels + offset;
+                        for (o, x) in lat.iter_mut().zip(&self.features[base..base + latent_channels]) {
+                            *o += w * x;
                         }
                     }
-                },
-            );
+                }
+            });
+        let FeatureTaps {
+            source_rgb,
+            source_dirc,
+            ..
+        } = taps;
         Ok(HostPointInputs {
             points: n,
             views: v,
