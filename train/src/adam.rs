@@ -21,7 +21,7 @@ const EPS: f64 = 1e-8;
 
 /// The tensor `key` of a checkpoint, which must have the shape `dims` of the
 /// network it is loaded into.
-pub fn checkpoint_tensor<'a>(
+pub(crate) fn checkpoint_tensor<'a>(
     tensors: &'a std::collections::HashMap<String, Tensor>,
     key: &str,
     dims: &[usize],
