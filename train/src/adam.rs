@@ -81,6 +81,12 @@ impl Adam {
             let Some(g) = grads.get(slot.var.as_tensor()) else {
                 continue;
             };
+            // candle leaves a variable's gradient attached to the graph that made it
+            // (its backward pass skips variables when it detaches), so a moment built
+            // from it would keep that step's whole forward graph alive, and the next
+            // moment this one: ~70 MB a step. Detached, a step frees its graph.
+            let g = g.detach();
+            let g = &g;
             slot.m = ((&slot.m * BETA1)? + (g * (1.0 - BETA1))?)?;
             slot.v = ((&slot.v * BETA2)? + (g.sqr()? * (1.0 - BETA2))?)?;
             let m_hat = (&slot.m / c1)?;
