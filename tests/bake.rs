@@ -8,7 +8,7 @@ mod common;
 
 use std::fmt::Write as _;
 
-use common::{fixture_weights, nelf, tiny_capture};
+use common::{fixture_weights, nelf, succeed, tiny_capture};
 use nelf_format::read_asset;
 
 /// A closed sphere-like mesh (a subdivided cube pushed onto a sphere of radius
@@ -174,4 +174,71 @@ fn bake_capture_with_network_weights() {
     );
     assert!(!missing.status.success());
     assert!(String::from_utf8_lossy(&missing.stderr).contains("/nonexistent/w.safetensors"));
+}
+
+/// A capture with no ground truth bakes with the shipped network by default;
+/// `--source` chooses explicitly, and impossible choices are refused.
+#[test]
+fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
+    let dir = tempfile::tempdir().unwrap();
+    let cap = tiny_capture(dir.path(), 64, 0, &["--head-cells", "40"]);
+    // A synthetic capture carries its ground truth (synth_config.json); without
+    // it, the capture is like a photographed one.
+    std::fs::remove_file(cap.join("synth_config.json")).unwrap();
+    let asset_path = dir.path().join("shipped.nelf");
+    let out = cap.to_str().unwrap();
+    succeed(&[
+        "bake",
+        "capture",
+        out,
+        "-o",
+        asset_path.to_str().unwrap(),
+        "--resolution",
+        "24",
+        "--view-dependence",
+        "off",
+        "--quiet",
+    ]);
+    let asset = read_asset(&asset_path).unwrap();
+    let source = &asset.metadata["source"]["source"];
+    assert_eq!(source["kind"], "nelf-network", "{}", asset.metadata);
+    assert!(
+        source["weights"].as_str().unwrap().contains("nelf-small"),
+        "{source}"
+    );
+    // The shipped network was trained at 64 pixels: the views are encoded so.
+    assert_eq!(source["encoded_image_size"][0], source["working_image_size"]);
+    assert!(asset.voxel_count() > 0);
+
+    // --source truth without a mesh: refused, naming the folder and what is missing.
+    let truth = nelf(&[
+        "bake",
+        "capture",
+        out,
+        "--source",
+        "truth",
+        "-o",
+        asset_path.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(!truth.status.success());
+    let message = String::from_utf8_lossy(&truth.stderr);
+    assert!(
+        message.contains("synth_config.json") && message.contains(out),
+        "{message}"
+    );
+    // --source truth with --weights: contradictory.
+    let both = nelf(&[
+        "bake",
+        "capture",
+        out,
+        "--source",
+        "truth",
+        "--weights",
+        fixture_weights(),
+        "-o",
+        asset_path.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(!both.status.success());
 }

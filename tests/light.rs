@@ -42,6 +42,32 @@ fn light_writes_the_estimate_in_the_world_frame() {
         "--light-frame",
     ]);
 
+    // Without --weights the shipped network estimates the lighting.
+    let shipped = dir.path().join("shipped.exr");
+    let shipped_summary: serde_json::Value = serde_json::from_str(&succeed(&[
+        "light",
+        cap,
+        "-o",
+        shipped.to_str().unwrap(),
+        "--json",
+    ]))
+    .unwrap();
+    assert!(
+        shipped_summary["weights"]
+            .as_str()
+            .unwrap()
+            .contains("nelf-small"),
+        "{shipped_summary}"
+    );
+    assert!(
+        load_envmap(&shipped)
+            .unwrap()
+            .texels()
+            .iter()
+            .flatten()
+            .all(|v| v.is_finite())
+    );
+
     let world_map = load_envmap(&world).unwrap();
     let light_map = load_envmap(&raw).unwrap();
     assert_eq!((world_map.width(), world_map.height()), (128, 64));
@@ -83,7 +109,7 @@ fn light_writes_the_estimate_in_the_world_frame() {
         dir.path().join("missing.safetensors").to_str().unwrap(),
     ]);
     assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stderr).contains("loading the weights"));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("missing.safetensors"));
     let out = nelf(&["light", dir.path().to_str().unwrap(), "--weights", weights]);
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("loading the capture"));

@@ -160,7 +160,7 @@ fn occupied_sphere(asset: &nelf_format::Asset) -> (DVec3, f64) {
 }
 
 /// Ground truth | baked | |difference| × 4, side by side, sRGB at `stops`.
-fn side_by_side(
+pub fn side_by_side(
     path: &Path,
     camera: &PinholeCamera,
     truth: &[[f32; 3]],

@@ -25,7 +25,9 @@
 //! Σ ½(σ⁺_a + σ⁺_b)·|a − b|` (`σ⁺ = max(σ, 0)`, as the renderer clips), is computed by forward/backward sweeps (a
 //! chamfer-style shortest path; it is at most the optical depth along any straight
 //! ray, so it errs toward keeping voxels). `T` is evaluated for every voxel with
-//! `σ > 0` and `τ < τ_max`, and for their 26 neighbours (trilinear interpolation of
+//! `σ > 0` and `τ < τ_max` or on the surface (a neighbour outside or at `τ = 0`:
+//! a skin opaque within one voxel keeps the layer rays stop in), and for their 26
+//! neighbours (trilinear interpolation of
 //! radiance reads them, even where `σ = 0`). Other voxels get `T` = the PCA mean.
 //! With `τ_max = 10` a ray reaching an excluded voxel has transmittance below
 //! `e⁻¹⁰ ≈ 4.5·10⁻⁵`, under the renderer's `10⁻³` cut-off.
@@ -428,14 +430,24 @@ pub fn optical_depth_from_outside(grid: &BrickGrid, density: &[f32]) -> Vec<f32>
     depth
 }
 
-/// Voxels (sorted indices) whose light transport is evaluated: `σ > 0` and optical
-/// depth from outside below `max_optical_depth`, plus their 26 neighbours.
+/// Voxels (sorted indices) whose light transport is evaluated: `σ > 0` and an
+/// optical depth from outside below `max_optical_depth`, or `σ > 0` on the surface
+/// (a neighbour missing or at depth 0), plus their 26 neighbours. The surface rule
+/// keeps the layer every ray stops in where one voxel alone is beyond the limit (a
+/// trained network's opaque skin: σ·voxel of 20 and more).
 pub fn light_transport_band(grid: &BrickGrid, density: &[f32], max_optical_depth: f64) -> Vec<usize> {
     let depth = optical_depth_from_outside(grid, density);
     let offsets = neighbour_offsets();
+    let on_surface = |v: usize| -> bool {
+        let c = voxel_coords(grid.bricks(), v);
+        offsets.iter().any(|(o, _)| {
+            grid.voxel_at([c[0] + o[0], c[1] + o[1], c[2] + o[2]])
+                .is_none_or(|u| depth[u] == 0.0)
+        })
+    };
     let mut needed = vec![false; grid.voxel_count()];
     for v in 0..grid.voxel_count() {
-        if density[v] > 0.0 && f64::from(depth[v]) < max_optical_depth {
+        if density[v] > 0.0 && (f64::from(depth[v]) < max_optical_depth || on_surface(v)) {
             needed[v] = true;
             let c = voxel_coords(grid.bricks(), v);
             for (o, _) in &offsets {
@@ -542,5 +554,12 @@ mod tests {
         let band_all = light_transport_band(&grid, &density, 100.0);
         assert!(has(&band_all, [3, 3, 3]));
         assert!(band.len() < band_all.len());
+
+        // A skin opaque within one voxel (σΔ = 50 ≫ the limit): its outer layer, the
+        // one rays stop in, and the layer under it are still evaluated.
+        let skin: Vec<f32> = density.iter().map(|d| d * 50.0).collect();
+        let band_skin = light_transport_band(&grid, &skin, 10.0);
+        assert!(has(&band_skin, [1, 1, 1]) && has(&band_skin, [1, 3, 3]) && has(&band_skin, [2, 2, 2]));
+        assert!(!has(&band_skin, [3, 3, 3]));
     }
 }

@@ -17,6 +17,10 @@
 //! multiples of 16 (the encoder halves the resolution four times), which keeps the
 //! principal point where it was.
 //!
+//! A network trained at a small image size ([`crate::Model::working_image_size`]) is
+//! given the views box-filtered by a whole factor toward that size
+//! ([`NetCapture::for_model`]).
+//!
 //! [`load_capture_dir`] reads a capture folder: EXR images are linear, PNG/JPEG
 //! sRGB-decoded (IEC 61966-2-1); masks are the mask file's value in `[0, 1]` or the
 //! image's alpha; the head centre is the point nearest every optical axis.
@@ -43,6 +47,103 @@ pub fn default_net_from_world() -> DMat3 {
     DMat3::from_rotation_x(std::f64::consts::FRAC_PI_2)
 }
 
+/// Averages `factor × factor` blocks of a row-major `width`-wide image (a last
+/// partial block column or row is cropped, which keeps the principal point).
+pub fn box_down<T: Copy>(
+    pixels: &[T],
+    width: usize,
+    factor: usize,
+    zero: T,
+    add: impl Fn(T, T) -> T,
+    scale: impl Fn(T, f32) -> T,
+) -> Vec<T> {
+    let height = pixels.len() / width.max(1);
+    let (w, h) = (width / factor, height / factor);
+    let inv = 1.0 / (factor * factor) as f32;
+    let mut out = Vec::with_capacity(w * h);
+    for y in 0..h {
+        for x in 0..w {
+            let mut acc = zero;
+            for dy in 0..factor {
+                for dx in 0..factor {
+                    acc = add(acc, pixels[(y * factor + dy) * width + x * factor + dx]);
+                }
+            }
+            out.push(scale(acc, inv));
+        }
+    }
+    out
+}
+
+/// [`box_down`] of linear RGB.
+pub fn down_rgb(pixels: &[[f32; 3]], width: usize, factor: usize) -> Vec<[f32; 3]> {
+    box_down(
+        pixels,
+        width,
+        factor,
+        [0.0; 3],
+        |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]],
+        |a, s| a.map(|v| v * s),
+    )
+}
+
+/// [`box_down`] of one channel (a mask: soft where a block straddles its edge).
+pub fn down_scalar(pixels: &[f32], width: usize, factor: usize) -> Vec<f32> {
+    box_down(pixels, width, factor, 0.0, |a, b| a + b, |a, s| a * s)
+}
+
+/// `camera` seen at `1/factor` of its resolution.
+pub fn scaled_camera(camera: &PinholeCamera, factor: usize) -> PinholeCamera {
+    let s = 1.0 / factor as f64;
+    PinholeCamera {
+        width: camera.width / factor as u32,
+        height: camera.height / factor as u32,
+        fx: camera.fx * s,
+        fy: camera.fy * s,
+        cx: camera.cx * s,
+        cy: camera.cy * s,
+        ..*camera
+    }
+}
+
+/// The whole factor that brings a `width × height` capture nearest to a network's
+/// working image side (the shorter side ≈ `working`), never enlarging: 1 when
+/// `working` is unknown or not smaller.
+pub fn working_factor(width: usize, height: usize, working: Option<usize>) -> usize {
+    match working {
+        Some(side) if side > 0 => {
+            let short = width.min(height) as f64;
+            ((short / side as f64).round() as usize).max(1)
+        }
+        _ => 1,
+    }
+}
+
+/// Views reduced by a whole `factor` ([`box_down`] of images and masks, intrinsics
+/// scaled); `factor = 1` returns them as they are.
+pub fn reduce_views(
+    cameras: &[PinholeCamera],
+    images: &[Vec<[f32; 3]>],
+    masks: &[Vec<f32>],
+    factor: usize,
+) -> (Vec<PinholeCamera>, Vec<Vec<[f32; 3]>>, Vec<Vec<f32>>) {
+    if factor <= 1 {
+        return (cameras.to_vec(), images.to_vec(), masks.to_vec());
+    }
+    let cams = cameras.iter().map(|c| scaled_camera(c, factor)).collect();
+    let imgs = images
+        .iter()
+        .zip(cameras)
+        .map(|(i, c)| down_rgb(i, c.width as usize, factor))
+        .collect();
+    let msks = masks
+        .iter()
+        .zip(cameras)
+        .map(|(m, c)| down_scalar(m, c.width as usize, factor))
+        .collect();
+    (cams, imgs, msks)
+}
+
 /// A capture prepared for the network.
 #[derive(Debug, Clone)]
 pub struct NetCapture {
@@ -57,6 +158,25 @@ pub struct NetCapture {
 }
 
 impl NetCapture {
+    /// [`NetCapture::new`] after reducing the views toward `model`'s working image
+    /// size ([`working_factor`]), so that a network trained at 64 pixels sees a
+    /// 512-pixel capture as it saw its training images.
+    pub fn for_model(
+        model: &crate::Model,
+        cameras: &[PinholeCamera],
+        images: &[Vec<[f32; 3]>],
+        masks: &[Vec<f32>],
+        head_centre_m: DVec3,
+        net_from_world: DMat3,
+    ) -> Result<Self, NetError> {
+        let (w, h) = cameras
+            .first()
+            .map_or((0, 0), |c| (c.width as usize, c.height as usize));
+        let factor = working_factor(w, h, model.working_image_size());
+        let (cams, imgs, msks) = reduce_views(cameras, images, masks, factor);
+        Self::new(&cams, &imgs, &msks, head_centre_m, net_from_world)
+    }
+
     /// Prepares views: `images` (linear RGB, row-major) and `masks` (`[0, 1]`) of the
     /// size of each camera, all views one size, at least two; `head_centre_m` in our
     /// world; `net_from_world` a rotation ([`default_net_from_world`] for our captures).
@@ -243,7 +363,24 @@ pub fn load_capture_dir(
     dir: impl AsRef<Path>,
     net_from_world: DMat3,
 ) -> Result<(NetCapture, Capture), NetError> {
-    let dir = dir.as_ref();
+    load_capture_dir_at(dir.as_ref(), net_from_world, None)
+}
+
+/// [`load_capture_dir`] for `model`: the views reduced toward its working image size
+/// as [`NetCapture::for_model`] does.
+pub fn load_capture_dir_for_model(
+    dir: impl AsRef<Path>,
+    net_from_world: DMat3,
+    model: &crate::Model,
+) -> Result<(NetCapture, Capture), NetError> {
+    load_capture_dir_at(dir.as_ref(), net_from_world, model.working_image_size())
+}
+
+fn load_capture_dir_at(
+    dir: &Path,
+    net_from_world: DMat3,
+    working_image_size: Option<usize>,
+) -> Result<(NetCapture, Capture), NetError> {
     let capture = Capture::load(dir)?;
     let mut images = Vec::with_capacity(capture.views.len());
     let mut masks = Vec::with_capacity(capture.views.len());
@@ -259,6 +396,10 @@ pub fn load_capture_dir(
             "the cameras' optical axes are (nearly) parallel: no head centre",
         )
     })?;
+    let factor = cameras.first().map_or(1, |c| {
+        working_factor(c.width as usize, c.height as usize, working_image_size)
+    });
+    let (cameras, images, masks) = reduce_views(&cameras, &images, &masks, factor);
     let prepared = NetCapture::new(&cameras, &images, &masks, centre, net_from_world)?;
     Ok((prepared, capture))
 }
@@ -272,6 +413,34 @@ mod tests {
         let a = default_net_from_world();
         assert!((a * DVec3::Y).abs_diff_eq(DVec3::Z, 1e-12));
         assert!((a * DVec3::Z).abs_diff_eq(DVec3::NEG_Y, 1e-12));
+    }
+
+    #[test]
+    fn views_reduce_toward_the_working_size_and_keep_projections() {
+        assert_eq!(working_factor(192, 192, Some(64)), 3);
+        assert_eq!(working_factor(512, 384, Some(64)), 6);
+        assert_eq!(working_factor(48, 48, Some(64)), 1);
+        assert_eq!(working_factor(512, 512, None), 1);
+        let cam = PinholeCamera::look_at(DVec3::new(0.3, 0.1, 1.0), DVec3::ZERO, DVec3::Y, 97, 64, 0.6);
+        // A 2 × 2 checker of 3-pixel cells: every 3 × 3 block is one colour.
+        let image: Vec<[f32; 3]> = (0..97 * 64)
+            .map(|i| [((i % 97 / 3 + i / 97 / 3) % 2) as f32, 0.5, 0.0])
+            .collect();
+        let mask = vec![1.0f32; 97 * 64];
+        let (cams, images, masks) = reduce_views(&[cam], &[image.clone()], &[mask], 3);
+        // 97 is cropped to 32 whole blocks; the blocks average exactly.
+        assert_eq!((cams[0].width, cams[0].height), (32, 21));
+        assert_eq!(images[0].len(), 32 * 21);
+        assert_eq!(images[0][1], image[3]);
+        assert_eq!(images[0][32], image[3 * 97]);
+        assert!(masks[0].iter().all(|&m| m == 1.0));
+        // A point projects to the same place, in reduced pixels.
+        let p = DVec3::new(0.02, -0.03, 0.01);
+        let full = cam.project(p).unwrap();
+        let reduced = cams[0].project(p).unwrap();
+        assert!((full / 3.0 - reduced).length() < 1e-9);
+        let (same, _, _) = reduce_views(&[cam], &[image], &[vec![1.0; 97 * 64]], 1);
+        assert_eq!(same[0], cam);
     }
 
     #[test]

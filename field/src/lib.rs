@@ -10,6 +10,7 @@
 //!   must match);
 //! * [`capture`]: a capture folder (metres, our world) as network inputs
 //!   (millimetres, the network's world);
+//! * [`shipped`]: the network trained by `nelf train` and shipped with the tool;
 //! * [`source::NelfField`]: the baker's [`nelf_scene::field::FieldSource`].
 //!
 //! Runs in `f32` on the CPU; the `cuda` feature enables candle's CUDA backend.
@@ -24,6 +25,7 @@ pub mod light;
 pub mod model;
 pub mod nelfnet;
 pub mod render;
+pub mod shipped;
 pub mod source;
 pub mod views;
 

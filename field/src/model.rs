@@ -196,7 +196,14 @@ pub struct Model {
     fine: NelfNet,
     config: NelfConfig,
     device: Device,
+    working_image_size: Option<usize>,
 }
+
+/// The key of the optional one-element tensor in a weights file that holds the image
+/// side, pixels, the network was trained at (`nelf train` writes it): captures are
+/// reduced to about that size before encoding, as the encoder's receptive field is
+/// measured in pixels.
+pub const WORKING_IMAGE_SIZE_KEY: &str = "nelf.working_image_size";
 
 /// Per-point outputs of a batch: density and colour or light transport, zero
 /// outside the hull.
@@ -230,7 +237,23 @@ impl Model {
             fine: NelfNet::new(&vb.pp("fine_appearance_encoder"), &config.architecture)?,
             config,
             device: vb.device().clone(),
+            working_image_size: None,
         })
+    }
+
+    /// The image side the network was trained at, if its weights say
+    /// ([`WORKING_IMAGE_SIZE_KEY`]).
+    pub fn working_image_size(&self) -> Option<usize> {
+        self.working_image_size
+    }
+
+    /// The model with its working image size set.
+    #[must_use]
+    pub fn with_working_image_size(self, size: Option<usize>) -> Self {
+        Self {
+            working_image_size: size,
+            ..self
+        }
     }
 
     /// Loads the weights from a safetensors file (official key names; f32, or any
@@ -240,10 +263,39 @@ impl Model {
     pub fn load(path: impl AsRef<Path>, config: NelfConfig, device: &Device) -> Result<Self, NetError> {
         let path = path.as_ref();
         let bytes = read_safetensors_bytes(path)?;
-        let tensors = candle_core::safetensors::load_buffer(&bytes, device)
-            .map_err(|e| NetError::file(path, format!("not a safetensors file: {e}")))?;
+        Self::from_safetensors_bytes(&bytes, path, config, device)
+    }
+
+    /// [`Model::load`] from the bytes of a safetensors file; `origin` names them in errors.
+    pub fn from_safetensors_bytes(
+        bytes: &[u8],
+        origin: &Path,
+        config: NelfConfig,
+        device: &Device,
+    ) -> Result<Self, NetError> {
+        let mut tensors = candle_core::safetensors::load_buffer(bytes, device)
+            .map_err(|e| NetError::file(origin, format!("not a safetensors file: {e}")))?;
+        let working_image_size = match tensors.remove(WORKING_IMAGE_SIZE_KEY) {
+            None => None,
+            Some(t) => {
+                let size = t
+                    .flatten_all()
+                    .and_then(|t| t.to_dtype(DType::F32))
+                    .and_then(|t| t.to_vec1::<f32>())
+                    .ok()
+                    .and_then(|v| v.first().copied())
+                    .filter(|v| v.is_finite() && *v >= 16.0 && *v <= 16_384.0 && v.fract() == 0.0)
+                    .ok_or_else(|| {
+                        NetError::file(
+                            origin,
+                            format!("`{WORKING_IMAGE_SIZE_KEY}` is not an image side of 16 to 16384 pixels"),
+                        )
+                    })?;
+                Some(size as usize)
+            }
+        };
         let architecture = Architecture::from_tensors(&tensors)
-            .map_err(|e| NetError::file(path, format!("not NeLF weights: {e}")))?;
+            .map_err(|e| NetError::file(origin, format!("not NeLF weights: {e}")))?;
         let vb = VarBuilder::from_tensors(tensors, DType::F32, device);
         Self::new(
             &vb,
@@ -252,7 +304,8 @@ impl Model {
                 ..config
             },
         )
-        .map_err(|e| NetError::file(path, format!("not NeLF weights: {e}")))
+        .map(|m| m.with_working_image_size(working_image_size))
+        .map_err(|e| NetError::file(origin, format!("not NeLF weights: {e}")))
     }
 
     /// The configuration.

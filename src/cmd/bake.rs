@@ -1,7 +1,10 @@
 //! `nelf bake …`: turn a capture or a mesh into a `.nelf` asset (`nelf-bake`).
-//! `capture DIR` bakes the capture's ground-truth field over the visual hull of its
-//! masks (or, with `--weights`, the NeLF network's field from the capture's own
-//! images); `mesh FILE` bakes a mesh directly (its occupancy is the hull).
+//! `capture DIR` bakes, over the visual hull of the capture's masks, either its
+//! ground-truth field (a mesh: `--mesh`, or the `synth_config.json` of a synthetic
+//! capture) or the NeLF network's field from the capture's own images (the shipped
+//! network, or `--weights`); `--source` chooses, and by default a capture with no
+//! ground truth gets the network. `mesh FILE` bakes a mesh directly (its occupancy
+//! is the hull).
 
 use std::path::PathBuf;
 
@@ -12,7 +15,8 @@ use nelf_bake::{
     sidecar_path, write_bake,
 };
 use nelf_field::capture::default_net_from_world;
-use nelf_field::{Model, NelfConfig, NelfField, NetCapture};
+use nelf_field::shipped::load_or_shipped;
+use nelf_field::{NelfConfig, NelfField, NetCapture};
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 
 /// Options of `nelf bake`.
@@ -53,9 +57,14 @@ pub struct CaptureBakeArgs {
     pub dir: PathBuf,
     #[command(flatten)]
     pub output: OutputArgs,
-    /// Bake the NeLF network's field, evaluated from the capture's own images, with
-    /// these weights (safetensors with the official checkpoint's key names,
-    /// field/CHECKPOINT.md) instead of a ground-truth mesh.
+    /// Which field to bake: `truth` (the ground-truth mesh), `network` (the NeLF
+    /// network evaluated from the capture's own images) or `auto` (the truth when
+    /// there is one, else the network).
+    #[arg(long, value_enum, default_value_t)]
+    pub source: SourceChoice,
+    /// The network's weights (safetensors with the official checkpoint's key names,
+    /// field/CHECKPOINT.md; default: the shipped network, models/nelf-small.safetensors,
+    /// built in). Implies `--source network`.
     #[arg(long, conflicts_with = "mesh")]
     pub weights: Option<PathBuf>,
     /// Ground-truth mesh in the capture's world frame (default: rebuilt from
@@ -78,6 +87,19 @@ pub struct CaptureBakeArgs {
     pub config: BakeConfig,
     #[command(flatten)]
     pub choice: ChoiceArgs,
+}
+
+/// Which field `nelf bake capture` bakes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum SourceChoice {
+    /// The ground truth when the capture has one (`--mesh` or a synthetic capture's
+    /// `synth_config.json`), else the network.
+    #[default]
+    Auto,
+    /// The NeLF network from the capture's own images.
+    Network,
+    /// The ground-truth mesh.
+    Truth,
 }
 
 /// Options of `nelf bake mesh`.
@@ -119,20 +141,35 @@ fn run_capture(args: &CaptureBakeArgs) -> anyhow::Result<()> {
     };
     let capture = load_capture(&args.dir, &options)
         .with_context(|| format!("loading the capture in {}", args.dir.display()))?;
-    if args.choice.is_active() && args.weights.is_some() {
+    let synth_truth = || GroundTruth::from_synth_capture(&args.dir);
+    let network = match args.source {
+        SourceChoice::Network => true,
+        SourceChoice::Truth => false,
+        SourceChoice::Auto => args.weights.is_some() || (args.mesh.is_none() && synth_truth().is_err()),
+    };
+    if network && args.mesh.is_some() {
+        anyhow::bail!("--source network bakes the network's field; --mesh gives a ground truth");
+    }
+    if !network && args.weights.is_some() {
+        anyhow::bail!("--weights are the network's; --source truth bakes the ground truth");
+    }
+    if network && args.choice.is_active() {
         anyhow::bail!(
-            "--target-psnr/--max-bytes choose among ground-truth bakes; with --weights bake at a given --resolution and --rank"
+            "--target-psnr/--max-bytes choose among ground-truth bakes; the network bakes at a given --resolution and --rank"
         );
     }
-    if let Some(weights) = &args.weights {
-        let mut output =
-            bake_network(&capture, weights, &args.config, progress(&args.output)).with_context(|| {
-                format!(
-                    "baking {} with the network {}",
-                    args.dir.display(),
-                    weights.display()
-                )
-            })?;
+    if network {
+        let name = args.weights.as_ref().map_or_else(
+            || nelf_field::shipped::SHIPPED_WEIGHTS_NAME.to_string(),
+            |w| w.display().to_string(),
+        );
+        let mut output = bake_network(
+            &capture,
+            args.weights.as_deref(),
+            &args.config,
+            progress(&args.output),
+        )
+        .with_context(|| format!("baking {} with the network {name}", args.dir.display()))?;
         return finish(&mut output, &args.config, &args.output);
     }
     let truth = match &args.mesh {
@@ -144,9 +181,9 @@ fn run_capture(args: &CaptureBakeArgs) -> anyhow::Result<()> {
                 ..LoadOptions::default()
             },
         },
-        None => GroundTruth::from_synth_capture(&args.dir).with_context(|| {
+        None => synth_truth().with_context(|| {
             format!(
-                "no --mesh given, and the capture has no usable synth_config.json to rebuild its ground truth from ({})",
+                "--source truth: no --mesh given, and the capture has no usable synth_config.json to rebuild its ground truth from ({})",
                 args.dir.display()
             )
         })?,
@@ -197,28 +234,33 @@ fn print_choice(report: &ChoiceReport) {
 /// The network's field over the capture's hull: the views are encoded once, then
 /// density and light transport are evaluated at the voxels (toward the mean camera,
 /// the policy measured best in field/README.md).
-fn bake_network(
+pub fn bake_network(
     capture: &LoadedCapture,
-    weights: &std::path::Path,
+    weights: Option<&std::path::Path>,
     config: &BakeConfig,
     progress: Progress,
 ) -> anyhow::Result<BakeOutput> {
-    let prepared = NetCapture::new(
+    let device = nelf_field::default_device();
+    let (model, weights_name) = load_or_shipped(weights, NelfConfig::for_device(&device), &device)
+        .context("loading the network's weights")?;
+    let prepared = NetCapture::for_model(
+        &model,
         &capture.cameras,
         &capture.images,
         &capture.masks,
         capture.head_centre_m,
         default_net_from_world(),
     )?;
-    let device = nelf_field::default_device();
-    let model = Model::load(weights, NelfConfig::for_device(&device), &device)
-        .with_context(|| format!("loading the weights {}", weights.display()))?;
+    let model_size = model.working_image_size();
+    let encoded_size = prepared.cameras.first().map(|c| [c.width, c.height]);
     let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
     let planned = plan_capture(capture, config, &field, &progress)?;
     let view_policy = field.recommended_view_policy();
     let provenance = serde_json::json!({
         "kind": "nelf-network",
-        "weights": weights.display().to_string(),
+        "weights": weights_name,
+        "working_image_size": model_size,
+        "encoded_image_size": encoded_size,
         "device": nelf_field::device_name(&device),
         "view_policy": "toward the mean camera",
     });

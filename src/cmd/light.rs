@@ -1,4 +1,5 @@
-//! `nelf light CAPTURE --weights W.safetensors -o light.exr`: the NeLF network's
+//! `nelf light CAPTURE [--weights W.safetensors] -o light.exr`: the NeLF network's
+//! (the shipped one unless `--weights` names another)
 //! estimate of the lighting a capture was taken under (`nelf_field`: per-view
 //! estimates from the encoder's light head, rotated into view 0 and
 //! confidence-weighted), written as a lat-long EXR in the project's env-map
@@ -16,9 +17,10 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
-use nelf_field::capture::{default_net_from_world, load_capture_dir};
+use nelf_field::NelfConfig;
+use nelf_field::capture::{default_net_from_world, load_capture_dir_for_model};
 use nelf_field::light::{light_map_in_world, net_light_to_latlong};
-use nelf_field::{Model, NelfConfig};
+use nelf_field::shipped::load_or_shipped;
 use nelf_format::conventions::LatLong;
 use nelf_scene::image_io::write_exr_rgb;
 
@@ -27,9 +29,10 @@ use nelf_scene::image_io::write_exr_rgb;
 pub struct LightArgs {
     /// Capture folder (cameras.json, images, masks).
     pub capture: PathBuf,
-    /// NeLF weights: safetensors with the official checkpoint's key names (field/CHECKPOINT.md).
+    /// NeLF weights: safetensors with the official checkpoint's key names
+    /// (field/CHECKPOINT.md; default: the shipped network, models/nelf-small.safetensors, built in).
     #[arg(long)]
-    pub weights: PathBuf,
+    pub weights: Option<PathBuf>,
     /// Output lat-long EXR (linear RGB radiance).
     #[arg(short, long, default_value = "light.exr")]
     pub out: PathBuf,
@@ -46,11 +49,12 @@ pub struct LightArgs {
 
 pub fn run(args: &LightArgs) -> anyhow::Result<()> {
     let start = Instant::now();
-    let (capture, _) = load_capture_dir(&args.capture, default_net_from_world())
-        .with_context(|| format!("loading the capture {}", args.capture.display()))?;
     let device = nelf_field::default_device();
-    let model = Model::load(&args.weights, NelfConfig::for_device(&device), &device)
-        .with_context(|| format!("loading the weights {}", args.weights.display()))?;
+    let (model, weights_name) =
+        load_or_shipped(args.weights.as_deref(), NelfConfig::for_device(&device), &device)
+            .context("loading the network's weights")?;
+    let (capture, _) = load_capture_dir_for_model(&args.capture, default_net_from_world(), &model)
+        .with_context(|| format!("loading the capture {}", args.capture.display()))?;
     let encoded = model.encode(&capture.views).context("running the encoder")?;
     let light = net_light_to_latlong(&encoded.light().source_light)?;
     let world_from_light = capture.world_from_light();
@@ -76,6 +80,7 @@ pub fn run(args: &LightArgs) -> anyhow::Result<()> {
             "image_size": [capture.views.width, capture.views.height],
             "seconds": start.elapsed().as_secs_f64(),
             "device": nelf_field::device_name(&device),
+            "weights": weights_name,
         });
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {

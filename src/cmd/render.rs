@@ -16,8 +16,8 @@
 //! The options, the resolved camera and the timings are saved beside the image as
 //! `<out>.render.json`.
 //!
-//! `--field CAPTURE_DIR --weights W.safetensors` renders straight from the NeLF
-//! network over a capture instead of an asset (`nelf_field`: coarse + fine
+//! `--field CAPTURE_DIR [--weights W.safetensors]` renders straight from the NeLF
+//! network (the shipped one by default) over a capture instead of an asset (`nelf_field`: coarse + fine
 //! hierarchical sampling inside the head sphere, visual-hull pruning): slow, and the
 //! reference a bake of that capture must match. The lighting is projected into the
 //! network's light frame; `--estimated-light` uses the network's own estimate of the
@@ -41,10 +41,11 @@ pub struct RenderArgs {
     #[arg(required_unless_present = "field")]
     pub asset: Option<PathBuf>,
     /// Render straight from the NeLF network over this capture folder instead of an
-    /// asset (slow: the reference a bake must match). Needs --weights.
-    #[arg(long, value_name = "CAPTURE_DIR", requires = "weights", conflicts_with_all = ["asset", "gpu", "rank"])]
+    /// asset (slow: the reference a bake must match).
+    #[arg(long, value_name = "CAPTURE_DIR", conflicts_with_all = ["asset", "gpu", "rank"])]
     pub field: Option<PathBuf>,
-    /// --field: the network's weights (safetensors, official checkpoint key names).
+    /// --field: the network's weights (safetensors, official checkpoint key names;
+    /// default: the shipped network, models/nelf-small.safetensors, built in).
     #[arg(long, requires = "field")]
     pub weights: Option<PathBuf>,
     /// --field: light with the network's own estimate of the capture's lighting
@@ -210,22 +211,25 @@ fn render_gpu(
     Ok(gpu.render(camera, &view)?)
 }
 
-/// `--field CAPTURE --weights W`: renders every pixel straight from the NeLF network
+/// `--field CAPTURE [--weights W]`: renders every pixel straight from the NeLF network
 /// (`nelf_field::render::render_image`: coarse + fine hierarchical sampling, rays
 /// through pixel centres, bounded by the head sphere) under the lighting projected
 /// into the network's light frame. Orbits circle the field's hull box.
 fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyhow::Result<()> {
-    use nelf_field::capture::{default_net_from_world, load_capture_dir};
+    use nelf_field::capture::{default_net_from_world, load_capture_dir_for_model};
     use nelf_field::render::{ImageSettings, Sampling, render_image};
     use nelf_scene::field::FieldSource;
 
     let start = Instant::now();
-    let weights = args.weights.as_ref().context("--field needs --weights")?;
-    let (capture, _) = load_capture_dir(capture_dir, default_net_from_world())
-        .with_context(|| format!("loading the capture {}", capture_dir.display()))?;
     let device = nelf_field::default_device();
-    let model = nelf_field::Model::load(weights, nelf_field::NelfConfig::for_device(&device), &device)
-        .with_context(|| format!("loading the weights {}", weights.display()))?;
+    let (model, _) = nelf_field::shipped::load_or_shipped(
+        args.weights.as_deref(),
+        nelf_field::NelfConfig::for_device(&device),
+        &device,
+    )
+    .context("loading the network's weights")?;
+    let (capture, _) = load_capture_dir_for_model(capture_dir, default_net_from_world(), &model)
+        .with_context(|| format!("loading the capture {}", capture_dir.display()))?;
     let field = nelf_field::NelfField::new(model, &capture).context("encoding the capture")?;
     let (lo, hi) = field.bounds();
     let (camera, capture_envmap) = resolve_camera(&args.view, (lo.as_dvec3(), hi.as_dvec3()))?;

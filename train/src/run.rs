@@ -1,7 +1,8 @@
 //! `nelf train run`: the resumable training loop. Starts from the run folder's
 //! checkpoint when there is one (same training settings required), trains until
 //! the step target or the time limit, validates on held-out heads (novel-light
-//! views, never trained on) into `validation.csv`, and checkpoints every few minutes
+//! views, never trained on) into `validation.csv` (and `validation.png`: truth,
+//! network and flat colour side by side), and checkpoints every few minutes
 //! and at the end: `checkpoint.safetensors` + `checkpoint.json` (resume state) and
 //! `weights.safetensors` (the network alone, official key names, loadable by
 //! `nelf_field::Model::load`), each written through a temporary file.
@@ -61,6 +62,23 @@ pub struct RunReport {
     pub validation: Option<Validation>,
 }
 
+/// One held-out view as validated: linear RGB images, row-major.
+#[derive(Debug, Clone)]
+pub struct ValidationView {
+    /// The scores.
+    pub validation: Validation,
+    /// Image width, pixels.
+    pub width: usize,
+    /// Image height, pixels.
+    pub height: usize,
+    /// The path-traced truth.
+    pub truth: Vec<[f32; 3]>,
+    /// The network's rendering.
+    pub network: Vec<[f32; 3]>,
+    /// The flat-colour baseline.
+    pub flat: Vec<[f32; 3]>,
+}
+
 /// Renders the novel-light target of `head` with `model` (a [`Trainable::snapshot`]:
 /// fine network, evenly spaced samples) and scores it against the truth in 8-bit
 /// sRGB, beside the flat-colour baseline.
@@ -68,7 +86,7 @@ pub fn validate_head(
     model: &Model,
     head: &PreparedHead,
     config: &TrainConfig,
-) -> Result<Validation, TrainError> {
+) -> Result<ValidationView, TrainError> {
     let target = head
         .targets
         .iter()
@@ -110,35 +128,74 @@ pub fn validate_head(
             mean[k] += c[k] * m / inside;
         }
     }
-    let flat: Vec<[f32; 3]> = mask.iter().map(|m| srgb8(&mean.map(|v| v * m))).collect();
+    let flat_linear: Vec<[f32; 3]> = mask.iter().map(|m| mean.map(|v| v * m)).collect();
+    let flat: Vec<[f32; 3]> = flat_linear.iter().map(srgb8).collect();
     let (flat_all, flat_fg) = score(&flat)?;
-    Ok(Validation {
-        psnr: psnr_all,
-        foreground_psnr: fg,
-        flat_psnr: flat_all,
-        flat_foreground_psnr: flat_fg,
+    Ok(ValidationView {
+        validation: Validation {
+            psnr: psnr_all,
+            foreground_psnr: fg,
+            flat_psnr: flat_all,
+            flat_foreground_psnr: flat_fg,
+        },
+        width: w,
+        height: h,
+        truth: target.image.clone(),
+        network: rendered,
+        flat: flat_linear,
     })
 }
 
-/// Mean validation over `heads`.
+/// Writes the validated views as one PNG, a row per head: truth | network | flat colour.
+pub fn write_validation_sheet(path: &Path, views: &[ValidationView]) -> Result<(), TrainError> {
+    let Some(first) = views.first() else {
+        return Ok(());
+    };
+    let (w, h) = (first.width, first.height);
+    if views.iter().any(|v| v.width != w || v.height != h) {
+        return Err(TrainError::Settings("validation views of different sizes".into()));
+    }
+    let sheet_w = 3 * w;
+    let mut sheet = vec![[0.0f32; 3]; sheet_w * h * views.len()];
+    for (row, view) in views.iter().enumerate() {
+        for (col, image) in [&view.truth, &view.network, &view.flat].into_iter().enumerate() {
+            for y in 0..h {
+                let dst = (row * h + y) * sheet_w + col * w;
+                sheet[dst..dst + w].copy_from_slice(&image[y * w..(y + 1) * w]);
+            }
+        }
+    }
+    nelf_scene::image_io::write_png_srgb(path, sheet_w as u32, (h * views.len()) as u32, &sheet, 0.0)
+        .map_err(|e| TrainError::Settings(format!("{}: {e}", path.display())))
+}
+
+/// Mean validation over `heads`; when `sheet` is given, the views are written there
+/// as a PNG ([`write_validation_sheet`]).
 pub fn validate(
     trainable: &Trainable,
     heads: &[PreparedHead],
     config: &TrainConfig,
+    sheet: Option<&Path>,
 ) -> Result<Option<Validation>, TrainError> {
     if heads.is_empty() {
         return Ok(None);
     }
     let model = trainable.snapshot()?;
     let mut sum = [0.0f64; 4];
+    let mut views = Vec::with_capacity(heads.len());
     for head in heads {
-        let v = validate_head(&model, head, config)?;
+        let view = validate_head(&model, head, config)?;
+        let v = view.validation;
+        views.push(view);
         for (s, x) in sum
             .iter_mut()
             .zip([v.psnr, v.foreground_psnr, v.flat_psnr, v.flat_foreground_psnr])
         {
             *s += x;
         }
+    }
+    if let Some(path) = sheet {
+        write_validation_sheet(path, &views)?;
     }
     let [p, f, fp, ff] = sum.map(|s| s / heads.len() as f64);
     Ok(Some(Validation {
@@ -230,7 +287,7 @@ fn validate_and_log(
     loss: &LossParts,
     progress: &ProgressBar,
 ) -> Result<Option<Validation>, TrainError> {
-    let Some(v) = validate(trainable, heads, config)? else {
+    let Some(v) = validate(trainable, heads, config, Some(&paths.dir.join("validation.png")))? else {
         return Ok(None);
     };
     log_validation(&paths.log(), step, train_secs, loss, &v)?;
@@ -246,9 +303,14 @@ fn validate_and_log(
     Ok(Some(v))
 }
 
-/// Writes the network alone (official key names) for `Model::load`.
-pub fn export_weights(trainable: &Trainable, path: &Path) -> Result<(), TrainError> {
-    let tensors: std::collections::HashMap<String, Tensor> = trainable.weights()?.into_iter().collect();
+/// Writes the network alone (official key names) for `Model::load`, with the image
+/// side it was trained at (`nelf_field::model::WORKING_IMAGE_SIZE_KEY`).
+pub fn export_weights(trainable: &Trainable, image_size: usize, path: &Path) -> Result<(), TrainError> {
+    let mut tensors: std::collections::HashMap<String, Tensor> = trainable.weights()?.into_iter().collect();
+    tensors.insert(
+        nelf_field::model::WORKING_IMAGE_SIZE_KEY.into(),
+        Tensor::new(&[image_size as f32], &Device::Cpu)?,
+    );
     let tmp = path.with_extension("tmp");
     candle_core::safetensors::save(&tensors, &tmp)?;
     std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
@@ -265,7 +327,7 @@ fn checkpoint(
     info: &CheckpointInfo,
 ) -> Result<(), TrainError> {
     save_checkpoint(&paths.dir, trainable, adam, info)?;
-    export_weights(trainable, &paths.weights())
+    export_weights(trainable, info.config.image_size, &paths.weights())
 }
 
 /// Trains per `config` (module docs).

@@ -26,12 +26,14 @@ use std::time::Instant;
 use candle_core::{DType, Device, Tensor, Var};
 use candle_nn::{VarBuilder, VarMap};
 use glam::DVec3;
-use nelf_field::capture::default_net_from_world;
+use nelf_field::capture::{
+    box_down, default_net_from_world, down_rgb, down_scalar, reduce_views, scaled_camera,
+};
 use nelf_field::geometry::NetCamera;
 use nelf_field::light::latlong_to_net_light;
 use nelf_field::render::{NetRay, importance_depths};
 use nelf_field::{EncodedViews, Model, NetCapture, Stage};
-use nelf_format::conventions::{ENV_TEXELS, LatLong, PinholeCamera, project_envmap};
+use nelf_format::conventions::{ENV_TEXELS, LatLong, project_envmap};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};
@@ -89,48 +91,6 @@ pub struct PreparedHead {
     pub distill_radiance: Vec<f32>,
 }
 
-/// Averages `factor × factor` blocks of a row-major `width`-wide image.
-fn box_down<T: Copy>(
-    pixels: &[T],
-    width: usize,
-    factor: usize,
-    zero: T,
-    add: impl Fn(T, T) -> T,
-    scale: impl Fn(T, f32) -> T,
-) -> Vec<T> {
-    let height = pixels.len() / width.max(1);
-    let (w, h) = (width / factor, height / factor);
-    let inv = 1.0 / (factor * factor) as f32;
-    let mut out = Vec::with_capacity(w * h);
-    for y in 0..h {
-        for x in 0..w {
-            let mut acc = zero;
-            for dy in 0..factor {
-                for dx in 0..factor {
-                    acc = add(acc, pixels[(y * factor + dy) * width + x * factor + dx]);
-                }
-            }
-            out.push(scale(acc, inv));
-        }
-    }
-    out
-}
-
-fn down_rgb(pixels: &[[f32; 3]], width: usize, factor: usize) -> Vec<[f32; 3]> {
-    box_down(
-        pixels,
-        width,
-        factor,
-        [0.0; 3],
-        |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]],
-        |a, s| a.map(|v| v * s),
-    )
-}
-
-fn down_scalar(pixels: &[f32], width: usize, factor: usize) -> Vec<f32> {
-    box_down(pixels, width, factor, 0.0, |a, b| a + b, |a, s| a * s)
-}
-
 /// Depth down-sampled as the mean of the block's foreground depths (0 if none).
 fn down_depth(depth: &[f32], width: usize, factor: usize) -> Vec<f32> {
     let pairs: Vec<[f32; 2]> = depth
@@ -150,20 +110,6 @@ fn down_depth(depth: &[f32], width: usize, factor: usize) -> Vec<f32> {
     .collect()
 }
 
-/// `camera` seen at `1/factor` of its resolution.
-fn scaled_camera(camera: &PinholeCamera, factor: usize) -> PinholeCamera {
-    let s = 1.0 / factor as f64;
-    PinholeCamera {
-        width: camera.width / factor as u32,
-        height: camera.height / factor as u32,
-        fx: camera.fx * s,
-        fy: camera.fy * s,
-        cx: camera.cx * s,
-        cy: camera.cy * s,
-        ..*camera
-    }
-}
-
 /// A world-frame lighting map in the network's layout for `capture`'s light frame.
 fn net_light(map: &LatLong, capture: &NetCapture) -> Result<Vec<f32>, TrainError> {
     let light = project_envmap(map, capture.world_from_light())
@@ -181,21 +127,12 @@ pub fn prepare(sample: &TrainingSample, size: usize) -> Result<PreparedHead, Tra
         )));
     }
     let factor = full / size;
-    let cameras: Vec<PinholeCamera> = sample
-        .source_cameras
-        .iter()
-        .map(|c| scaled_camera(c, factor))
-        .collect();
-    let images: Vec<Vec<[f32; 3]>> = sample
-        .source_images
-        .iter()
-        .map(|i| down_rgb(i, full, factor))
-        .collect();
-    let masks: Vec<Vec<f32>> = sample
-        .source_masks
-        .iter()
-        .map(|m| down_scalar(m, full, factor))
-        .collect();
+    let (cameras, images, masks) = reduce_views(
+        &sample.source_cameras,
+        &sample.source_images,
+        &sample.source_masks,
+        factor,
+    );
     let capture = NetCapture::new(
         &cameras,
         &images,

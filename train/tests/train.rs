@@ -321,13 +321,15 @@ fn the_training_renderer_matches_the_inference_renderer() {
     let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("weights.safetensors");
-    nelf_train::run::export_weights(&trainable, &path).unwrap();
+    nelf_train::run::export_weights(&trainable, config.image_size, &path).unwrap();
     let nelf_config = NelfConfig {
         coarse_samples: config.coarse_samples,
         fine_samples: config.fine_samples,
         ..NelfConfig::default()
     };
     let model = Model::load(&path, nelf_config, &Device::Cpu).unwrap();
+    // The exported weights say what image size they were trained at.
+    assert_eq!(model.working_image_size(), Some(config.image_size));
     let target = &head.targets[1];
     let centre = head.capture.head_centre_net();
     let rays: Vec<NetRay> = (0..40)
