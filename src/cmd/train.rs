@@ -14,6 +14,10 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
     let what = match &args.command {
         TrainCommand::Data(data) => format!("writing the training dataset {}", data.out.display()),
         TrainCommand::Run(config) => format!("training into {}", config.out.display()),
+        TrainCommand::Eval(eval) => format!(
+            "scoring a network on the held-out heads of {}",
+            eval.data.display()
+        ),
     };
     nelf_train::cli::run(args).context(what)?;
     if let TrainCommand::Run(config) = &args.command {

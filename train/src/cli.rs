@@ -1,7 +1,8 @@
 //! The `nelf train` subcommands, shared by the `nelf` binary and the small
 //! `nelf_train` example binary (no viewer, no wgpu: what a GPU machine runs, built
 //! with `--features cuda`). `data` renders (or resumes) a dataset of training
-//! triplets; `run` trains (or resumes training) on one.
+//! triplets; `run` trains (or resumes training) on one; `eval` scores a network on
+//! a dataset's held-out heads with 2–5 source views.
 
 use std::path::PathBuf;
 
@@ -29,6 +30,39 @@ pub enum TrainCommand {
     /// checkpoints every few minutes; validation on held-out heads in
     /// validation.csv; the network alone in weights.safetensors).
     Run(TrainConfig),
+    /// Score a network (default: the shipped one) on a dataset's held-out heads at
+    /// their novel-light views, with 2, 3, 4 and 5 source views (the paper's Table 3),
+    /// beside the flat-colour baseline.
+    Eval(EvalArgs),
+}
+
+/// Options of `nelf train eval`.
+#[derive(Debug, clap::Args)]
+pub struct EvalArgs {
+    /// Dataset folder (`nelf train data`); its held-out heads are scored.
+    #[arg(long, default_value = "out/train-data")]
+    pub data: PathBuf,
+    /// Weights to score (default: the shipped network, models/nelf-small.safetensors).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Source-view counts, one table row each.
+    #[arg(long, value_delimiter = ',', default_values_t = [2usize, 3, 4, 5])]
+    pub views: Vec<usize>,
+    /// Held-out heads to score (the first ones).
+    #[arg(long, default_value_t = 8)]
+    pub heads: usize,
+    /// Image side the heads are scored at (default: the weights' working size).
+    #[arg(long)]
+    pub image_size: Option<usize>,
+    /// Evenly spaced samples per ray (coarse pass).
+    #[arg(long, default_value_t = 32)]
+    pub coarse_samples: usize,
+    /// Importance samples per ray (fine pass).
+    #[arg(long, default_value_t = 32)]
+    pub fine_samples: usize,
+    /// Print the table as JSON.
+    #[arg(long)]
+    pub json: bool,
 }
 
 /// Options of `nelf train data`.
@@ -46,7 +80,57 @@ pub fn run(args: &TrainArgs) -> Result<(), TrainError> {
     match &args.command {
         TrainCommand::Data(data) => run_data(data),
         TrainCommand::Run(config) => run_training(config),
+        TrainCommand::Eval(eval) => run_eval(eval),
     }
+}
+
+fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
+    let device = nelf_field::default_device();
+    let nelf_config = nelf_field::NelfConfig {
+        coarse_samples: args.coarse_samples,
+        fine_samples: args.fine_samples,
+        ..nelf_field::NelfConfig::for_device(&device)
+    };
+    let (model, name) = nelf_field::shipped::load_or_shipped(args.weights.as_deref(), nelf_config, &device)?;
+    let image_size = args.image_size.or(model.working_image_size()).ok_or_else(|| {
+        TrainError::Settings(format!(
+            "{name} does not say what image size it was trained at: give --image-size"
+        ))
+    })?;
+    let config = TrainConfig {
+        image_size,
+        coarse_samples: args.coarse_samples,
+        fine_samples: args.fine_samples,
+        ..TrainConfig::default()
+    };
+    let dataset = crate::data::Dataset::open(&args.data)?;
+    let ids: Vec<u32> = dataset.val_ids().into_iter().take(args.heads).collect();
+    let heads = crate::trainer::prepare_heads(&dataset, &ids, image_size)?;
+    let rows = crate::eval::view_count_table(&model, &heads, &config, &args.views)?;
+    if args.json {
+        let text = serde_json::to_string_pretty(&serde_json::json!({
+            "weights": name,
+            "data": args.data,
+            "image_size": image_size,
+            "rows": rows,
+        }))
+        .map_err(|e| TrainError::Settings(e.to_string()))?;
+        println!("{text}");
+        return Ok(());
+    }
+    println!(
+        "{name} on {} held-out heads of {} at {image_size}², novel-light views, 8-bit sRGB:",
+        heads.len(),
+        args.data.display()
+    );
+    println!("  views   PSNR dB   fg PSNR dB   SSIM     | flat colour: PSNR dB   fg PSNR dB   SSIM");
+    for r in &rows {
+        println!(
+            "  {:>5}   {:>7.2}   {:>10.2}   {:.4}   |              {:>7.2}   {:>10.2}   {:.4}",
+            r.views, r.psnr, r.foreground_psnr, r.ssim, r.flat_psnr, r.flat_foreground_psnr, r.flat_ssim
+        );
+    }
+    Ok(())
 }
 
 fn run_data(args: &DataArgs) -> Result<(), TrainError> {

@@ -13,6 +13,7 @@
 //! * [`adam`]: Adam with a state that saves and restores exactly;
 //! * [`trainer`]: the paper's losses and modes, steps, checkpoints;
 //! * [`run`]: the resumable loop with validation on held-out heads;
+//! * [`eval`]: a network on held-out heads with 2–5 source views (the view-count table);
 //! * [`cli`]: the `nelf train` subcommands (also the `nelf_train` example binary);
 //! * [`error`]: the crate's error type, [`TrainError`].
 
@@ -21,6 +22,7 @@ pub mod cli;
 pub mod config;
 pub mod data;
 pub mod error;
+pub mod eval;
 pub mod forward;
 pub mod run;
 pub mod trainer;

@@ -375,3 +375,36 @@ fn the_training_renderer_matches_the_inference_renderer() {
     }
     assert!(opaque > 0, "no ray hit anything: the comparison says nothing");
 }
+
+/// The view-count table scores a network with fewer source views: rows in the
+/// order asked, finite scores, the flat-colour baseline the same in every row (it
+/// does not see the source views), and impossible counts refused.
+#[test]
+fn the_view_count_table_scores_subsets_of_the_source_views() {
+    use nelf_train::eval::{first_views, view_count_table};
+
+    let config = tiny_config();
+    let head = synthetic_head();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let model = trainable.snapshot().unwrap();
+    let all = head.capture.views.views();
+    let two = first_views(&head, 2).unwrap();
+    assert_eq!(two.capture.views.views(), 2);
+    assert_eq!(
+        two.capture.views.images.len() * all,
+        head.capture.views.images.len() * 2
+    );
+    assert!(first_views(&head, 1).is_err());
+    assert!(first_views(&head, all + 1).is_err());
+    let rows = view_count_table(&model, &[head], &config, &[2, all]).unwrap();
+    assert_eq!(rows.iter().map(|r| r.views).collect::<Vec<_>>(), [2, all]);
+    for r in &rows {
+        assert!(
+            r.psnr.is_finite() && r.foreground_psnr.is_finite() && r.ssim.is_finite(),
+            "{r:?}"
+        );
+        assert_eq!(r.heads, 1);
+    }
+    assert_eq!(rows[0].flat_psnr, rows[1].flat_psnr);
+    assert_eq!(rows[0].flat_ssim, rows[1].flat_ssim);
+}
