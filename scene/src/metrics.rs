@@ -375,6 +375,51 @@ mod tests {
     use super::*;
 
     #[test]
+    fn srgb8_scores_compare_with_the_flat_colour_baseline() {
+        // A 16 × 16 view: a 8 × 8 square of two colours (mean 0.3, 0.2, 0.1) on black.
+        let (w, h) = (16u32, 16u32);
+        let mask: Vec<f32> = (0..256)
+            .map(|i| {
+                f32::from(u8::from(
+                    (4..12).contains(&(i % 16)) && (4..12).contains(&(i / 16)),
+                ))
+            })
+            .collect();
+        let truth: Vec<[f32; 3]> = (0..256)
+            .map(|i| {
+                let bright = if i % 2 == 0 { 0.1 } else { -0.1 };
+                if mask[i] > 0.5 {
+                    [0.3 + bright, 0.2, 0.1]
+                } else {
+                    [0.0; 3]
+                }
+            })
+            .collect();
+        let flat = flat_colour_baseline(&truth, &mask);
+        assert!(
+            flat[4 * 16 + 4]
+                .iter()
+                .zip([0.3, 0.2, 0.1])
+                .all(|(a, b)| (a - b).abs() < 1e-6)
+        );
+        assert_eq!(flat[0], [0.0; 3]);
+        // The truth scores perfectly; the baseline scores itself perfectly.
+        let exact = srgb8_scores(&truth, &truth, &mask, w, h).unwrap();
+        assert!(exact.psnr.is_infinite() && exact.foreground_psnr.is_infinite());
+        assert!((exact.ssim - 1.0).abs() < 1e-12);
+        let baseline = srgb8_scores(&flat, &truth, &mask, w, h).unwrap();
+        assert_eq!(baseline.psnr, baseline.flat_psnr);
+        assert_eq!(baseline.foreground_psnr, baseline.flat_foreground_psnr);
+        assert_eq!(baseline.ssim, baseline.flat_ssim);
+        // Outside the mask both are black, so the whole image scores higher than the
+        // foreground alone.
+        assert!(baseline.psnr > baseline.foreground_psnr);
+        // A black image is worse than the baseline.
+        let black = srgb8_scores(&vec![[0.0; 3]; 256], &truth, &mask, w, h).unwrap();
+        assert!(black.foreground_psnr < baseline.foreground_psnr);
+    }
+
+    #[test]
     fn kernel_matches_scipy_radius_and_normalisation() {
         assert_eq!(SSIM_RADIUS, (3.5 * SSIM_SIGMA + 0.5) as usize);
         let k = gaussian_kernel();
@@ -403,4 +448,74 @@ mod tests {
         blur(&src, w, h, &kernel, &mut tmp, &mut out);
         assert!((out[4 * w + 7] - kernel[3] * kernel[6]).abs() < 1e-17);
     }
+}
+
+/// Scores of a rendering in 8-bit sRGB (values 0–255 after clamping to [0, 1] and
+/// encoding, as a viewer shows them), beside the flat-colour baseline of the same
+/// view: the true foreground's mean linear colour inside the true silhouette, black
+/// outside. See [`srgb8_scores`].
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct Srgb8Scores {
+    /// Whole-image PSNR, dB.
+    pub psnr: f64,
+    /// PSNR inside the mask (`mask > 0.5`), dB.
+    pub foreground_psnr: f64,
+    /// Whole-image SSIM.
+    pub ssim: f64,
+    /// The flat-colour baseline's whole-image PSNR, dB.
+    pub flat_psnr: f64,
+    /// The flat-colour baseline's PSNR inside the mask, dB.
+    pub flat_foreground_psnr: f64,
+    /// The flat-colour baseline's SSIM.
+    pub flat_ssim: f64,
+}
+
+/// Linear RGB as 8-bit sRGB values (0–255, rounded).
+pub fn srgb8_values(image: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    image
+        .iter()
+        .map(|c| c.map(|v| (crate::mesh_io::linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round()))
+        .collect()
+}
+
+/// The flat-colour baseline of `truth` (linear, premultiplied over black): the mean
+/// of `truth` where `mask > 0.5`, there, and black elsewhere.
+pub fn flat_colour_baseline(truth: &[[f32; 3]], mask: &[f32]) -> Vec<[f32; 3]> {
+    let inside = mask.iter().filter(|m| **m > 0.5).count().max(1) as f64;
+    let mut mean = [0.0f64; 3];
+    for (c, m) in truth.iter().zip(mask) {
+        if *m > 0.5 {
+            for k in 0..3 {
+                mean[k] += f64::from(c[k]) / inside;
+            }
+        }
+    }
+    let mean = mean.map(|v| v as f32);
+    mask.iter()
+        .map(|m| if *m > 0.5 { mean } else { [0.0; 3] })
+        .collect()
+}
+
+/// Scores `image` against `truth` (both linear RGB, `width × height`) in 8-bit sRGB,
+/// with `mask` (the true silhouette, > 0.5 inside) for the foreground PSNR and the
+/// flat-colour baseline ([`Srgb8Scores`]).
+pub fn srgb8_scores(
+    image: &[[f32; 3]],
+    truth: &[[f32; 3]],
+    mask: &[f32],
+    width: u32,
+    height: u32,
+) -> Result<Srgb8Scores, MetricError> {
+    let binary: Vec<f32> = mask.iter().map(|m| if *m > 0.5 { 1.0 } else { 0.0 }).collect();
+    let want = srgb8_values(truth);
+    let flat = srgb8_values(&flat_colour_baseline(truth, mask));
+    let got = srgb8_values(image);
+    Ok(Srgb8Scores {
+        psnr: psnr(&got, &want, 255.0)?,
+        foreground_psnr: psnr_masked(&got, &want, &binary, 255.0)?,
+        ssim: ssim(&got, &want, width, height, 255.0)?,
+        flat_psnr: psnr(&flat, &want, 255.0)?,
+        flat_foreground_psnr: psnr_masked(&flat, &want, &binary, 255.0)?,
+        flat_ssim: ssim(&flat, &want, width, height, 255.0)?,
+    })
 }

@@ -516,3 +516,70 @@ fn evaluate_directions_timing() {
         );
     }
 }
+
+/// A slab 1 mm thick at x ∈ [0.2, 1.2) mm with σ = 5000 /m and `T` = 1 everywhere in it,
+/// `T` = 7 outside (where σ = 0).
+struct ThinSlab;
+
+impl FieldSource for ThinSlab {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        _view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        for ((p, d), t) in points
+            .iter()
+            .zip(density.iter_mut())
+            .zip(lt.chunks_exact_mut(LT_DIM))
+        {
+            let inside = (0.0002..0.0012).contains(&p.x);
+            *d = if inside { 5000.0 } else { 0.0 };
+            t.fill(if inside { 1.0 } else { 7.0 });
+        }
+        Ok(())
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        (Vec3::splat(-1.0), Vec3::splat(1.0))
+    }
+}
+
+/// Box-filtering over voxels keeps the optical depth of a shell thinner than a voxel
+/// (which a point sample at the voxel centre misses or overstates), and takes `T`
+/// from where the density is.
+#[test]
+fn voxel_filter_keeps_a_thin_shells_optical_depth() {
+    use nelf_scene::field::VoxelFiltered;
+    let voxel = 0.004f32;
+    // A voxel centred at x = 1.5 mm covers [−0.5, 3.5) mm: a quarter of it is slab.
+    let centre = [Vec3::new(0.0015, 0.0, 0.0)];
+    let point = |f: &dyn FieldSource| {
+        let (mut d, mut t) = ([0.0f32], vec![0.0f32; LT_DIM]);
+        f.evaluate(&centre, &ViewPolicy::Direction(Vec3::Z), &mut d, &mut t)
+            .unwrap();
+        (d[0], t[0])
+    };
+    // The point sample misses the slab entirely.
+    assert_eq!(point(&ThinSlab), (0.0, 7.0));
+    for n in [4usize, 8] {
+        let filtered = VoxelFiltered::new(&ThinSlab, voxel, n).unwrap();
+        let (sigma, t) = point(&filtered);
+        // Sub-points at cell centres: exactly n/4 of n columns lie in the slab.
+        assert!(
+            (sigma * voxel - 5000.0 * 0.001).abs() < 1e-3,
+            "n = {n}: σΔ = {}",
+            sigma * voxel
+        );
+        assert!((t - 1.0).abs() < 1e-6, "n = {n}: T = {t}");
+        let mut density = [0.0f32];
+        filtered.evaluate_density(&centre, &mut density).unwrap();
+        assert_eq!(density[0], sigma);
+    }
+    // Where there is no density at all, T is the plain mean; n = 1 is the point sample.
+    let one = VoxelFiltered::new(&ThinSlab, voxel, 1).unwrap();
+    assert_eq!(point(&one), (0.0, 7.0));
+    assert!(VoxelFiltered::new(&ThinSlab, 0.0, 2).is_err());
+    assert!(VoxelFiltered::new(&ThinSlab, voxel, 0).is_err());
+}

@@ -17,6 +17,7 @@ use nelf_bake::{
 use nelf_field::capture::default_net_from_world;
 use nelf_field::shipped::load_or_shipped;
 use nelf_field::{NelfConfig, NelfField, NetCapture};
+use nelf_scene::field::VoxelFiltered;
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 
 /// Options of `nelf bake`.
@@ -254,8 +255,6 @@ pub fn bake_network(
     let model_size = model.working_image_size();
     let encoded_size = prepared.cameras.first().map(|c| [c.width, c.height]);
     let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
-    let planned = plan_capture(capture, config, &field, &progress)?;
-    let view_policy = field.recommended_view_policy();
     let provenance = serde_json::json!({
         "kind": "nelf-network",
         "weights": weights_name,
@@ -264,14 +263,44 @@ pub fn bake_network(
         "device": nelf_field::device_name(&device),
         "view_policy": "toward the mean camera",
     });
-    Ok(bake_capture_field(
+    bake_network_field(
         capture,
-        planned,
         &field,
-        view_policy,
         &provenance,
         config,
         &progress,
+        NETWORK_VOXEL_FILTER,
+    )
+}
+
+/// Sub-points per voxel edge where a network's field is baked
+/// ([`VoxelFiltered`]): a trained network's skin is a shell thinner than a voxel,
+/// which point samples at voxel centres alias into stripes. Measured with `nelf eval
+/// network` on held-out heads (docs/measurements/2026-11-26-network-bake.md).
+pub const NETWORK_VOXEL_FILTER: usize = 2;
+
+/// Bakes `field` (the network over `capture`'s views) with the network's
+/// recommended view policy, box-filtered over voxels ([`NETWORK_VOXEL_FILTER`]);
+/// `provenance` goes into the asset's metadata.
+pub fn bake_network_field(
+    capture: &LoadedCapture,
+    field: &NelfField,
+    provenance: &serde_json::Value,
+    config: &BakeConfig,
+    progress: &Progress,
+    voxel_filter: usize,
+) -> anyhow::Result<BakeOutput> {
+    let planned = plan_capture(capture, config, field, progress)?;
+    let view_policy = field.recommended_view_policy();
+    let filtered = VoxelFiltered::new(field, planned.voxel_size_m as f32, voxel_filter)?;
+    Ok(bake_capture_field(
+        capture,
+        planned,
+        &filtered,
+        view_policy,
+        provenance,
+        config,
+        progress,
     )?)
 }
 

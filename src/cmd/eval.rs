@@ -1,5 +1,6 @@
-//! `nelf eval pareto|stability`: speed charted against accuracy, and accuracy where
-//! methods fail (`nelf-eval`); both write report.html, a CSV and a JSON beside it.
+//! `nelf eval pareto|stability|network`: speed charted against accuracy, and accuracy
+//! where methods fail (`nelf-eval`; both write report.html, a CSV and a JSON beside
+//! it); the network against the ground truth on held-out captures.
 
 use anyhow::Context;
 use nelf_eval::{ParetoConfig, StabilityConfig, run_pareto, run_stability};
@@ -20,10 +21,15 @@ pub enum EvalCommand {
     /// Accuracy along the axes where methods fail: views, spread, target angle,
     /// light sharpness, rank, pose noise, mask errors, mesh defects.
     Stability(StabilityConfig),
+    /// The NeLF network (the shipped one, or --weights) on captures with ground
+    /// truth: the network itself, its bake and the ground-truth bake at the held-aside
+    /// targets, 8-bit sRGB, beside the flat-colour baseline.
+    Network(super::eval_network::NetworkEvalArgs),
 }
 
 pub fn run(args: &EvalArgs) -> anyhow::Result<()> {
     match &args.command {
+        EvalCommand::Network(network) => super::eval_network::run(network)?,
         EvalCommand::Pareto(config) => {
             let results = run_pareto(config)
                 .with_context(|| format!("nelf eval pareto into {}", config.out.display()))?;

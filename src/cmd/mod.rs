@@ -4,6 +4,7 @@ pub mod bake;
 pub mod capture;
 pub mod demo;
 pub mod eval;
+pub mod eval_network;
 pub mod export;
 pub mod inspect;
 pub mod light;

@@ -1,0 +1,209 @@
+//! `nelf eval network CAPTURE…`: the network (the shipped one, or `--weights`) against
+//! the ground truth on captures it was never trained on, at each capture's
+//! held-aside target views: the network rendered directly, its bake, and the
+//! ground-truth bake of the same capture, in 8-bit sRGB (whole image, inside the
+//! true mask, SSIM) beside the flat-colour baseline of the same views
+//! (`nelf_scene::metrics::srgb8_scores`). Every capture must carry its ground truth
+//! (a synthetic capture's `synth_config.json`, e.g. the held-out heads of a
+//! `nelf train data` folder). `network.json` in `--out` records every score.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use glam::DMat3;
+use nelf_bake::eval::load_held_aside;
+use nelf_bake::{
+    BakeConfig, CaptureLoadOptions, GroundTruth, Progress, ViewChoice, bake_capture, load_capture, write_bake,
+};
+use nelf_field::capture::default_net_from_world;
+use nelf_field::render::{ImageSettings, Sampling, render_image};
+use nelf_field::shipped::load_or_shipped;
+use nelf_field::{NelfConfig, NelfField, NetCapture};
+use nelf_format::read_asset;
+use nelf_render::{MarchSettings, render_asset};
+use nelf_scene::metrics::{Srgb8Scores, srgb8_scores};
+use serde::Serialize;
+
+/// Options of `nelf eval network`.
+#[derive(Debug, clap::Args)]
+pub struct NetworkEvalArgs {
+    /// Capture folders with their ground truth and held-aside targets.
+    #[arg(required = true)]
+    pub captures: Vec<PathBuf>,
+    /// The network's weights (default: the shipped network, built in).
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Bake resolution (voxels along the longest side of the occupied box).
+    #[arg(long, default_value_t = 64)]
+    pub resolution: u32,
+    /// Sub-points per voxel edge in the network's bake (box filter; 1 = point samples).
+    #[arg(long, default_value_t = super::bake::NETWORK_VOXEL_FILTER)]
+    pub voxel_filter: usize,
+    /// Output folder: the bakes and `network.json`.
+    #[arg(short, long, default_value = "out/eval-network")]
+    pub out: PathBuf,
+}
+
+/// The scores of one target view.
+#[derive(Debug, Clone, Serialize)]
+struct TargetScores {
+    capture: PathBuf,
+    target: String,
+    network: Srgb8Scores,
+    network_bake: Srgb8Scores,
+    truth_bake: Srgb8Scores,
+}
+
+pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
+    std::fs::create_dir_all(&args.out).with_context(|| format!("creating {}", args.out.display()))?;
+    let device = nelf_field::default_device();
+    let (model, weights_name) =
+        load_or_shipped(args.weights.as_deref(), NelfConfig::for_device(&device), &device)
+            .context("loading the network's weights")?;
+    let config = BakeConfig {
+        resolution: args.resolution,
+        view_dependence: ViewChoice::Off,
+        ..BakeConfig::default()
+    };
+    let progress = Progress::hidden();
+    let mut rows = Vec::new();
+    for (index, dir) in args.captures.iter().enumerate() {
+        let capture = load_capture(dir, &CaptureLoadOptions::default())
+            .with_context(|| format!("loading the capture {}", dir.display()))?;
+        let description = capture
+            .description()
+            .with_context(|| format!("{}: no cameras.json with held-aside targets", dir.display()))?;
+        let held =
+            load_held_aside(description, dir).with_context(|| format!("{}: the targets", dir.display()))?;
+        anyhow::ensure!(
+            !held.is_empty(),
+            "{}: no held-aside targets to score",
+            dir.display()
+        );
+        let truth = GroundTruth::from_synth_capture(dir)
+            .with_context(|| format!("{}: no ground truth (synth_config.json)", dir.display()))?;
+
+        // The network, over the capture's views reduced to its working size.
+        let prepared = NetCapture::for_model(
+            &model,
+            &capture.cameras,
+            &capture.images,
+            &capture.masks,
+            capture.head_centre_m,
+            default_net_from_world(),
+        )?;
+        let field = NelfField::new(model.clone(), &prepared).context("encoding the capture's views")?;
+        let provenance = serde_json::json!({ "kind": "nelf-network", "weights": weights_name });
+        let mut network_bake = super::bake::bake_network_field(
+            &capture,
+            &field,
+            &provenance,
+            &config,
+            &progress,
+            args.voxel_filter,
+        )
+        .with_context(|| format!("baking {} with the network", dir.display()))?;
+        let network_path = args.out.join(format!("capture{index}_network.nelf"));
+        write_bake(&mut network_bake, &config, &network_path)?;
+        let mut truth_bake = bake_capture(&capture, &truth, &config, &progress)
+            .with_context(|| format!("baking {} from its ground truth", dir.display()))?;
+        let truth_path = args.out.join(format!("capture{index}_truth.nelf"));
+        write_bake(&mut truth_bake, &config, &truth_path)?;
+        let network_asset = read_asset(&network_path)?;
+        let truth_asset = read_asset(&truth_path)?;
+
+        for t in 0..held.len() {
+            let camera = &held.cameras[t];
+            let (w, h) = (camera.width, camera.height);
+            let score = |image: &[[f32; 3]]| srgb8_scores(image, &held.images[t], &held.masks[t], w, h);
+            let light = nelf_format::conventions::project_envmap(&held.envs[t], prepared.world_from_light())?;
+            let direct = render_image(
+                field.model(),
+                field.encoded(),
+                &prepared.net_camera(camera),
+                &nelf_field::light::latlong_to_net_light(&light)?,
+                &ImageSettings {
+                    head_centre: prepared.head_centre_net(),
+                    sampling: Sampling::Stratified,
+                    ..ImageSettings::default()
+                },
+                None,
+            )?;
+            let settings = MarchSettings::default();
+            let baked = |asset| render_asset(asset, camera, &held.envs[t], DMat3::IDENTITY, None, &settings);
+            let row = TargetScores {
+                capture: dir.clone(),
+                target: held.names[t].clone(),
+                network: score(&direct.rgb)?,
+                network_bake: score(&baked(&network_asset)?.rgb)?,
+                truth_bake: score(&baked(&truth_asset)?.rgb)?,
+            };
+            println!(
+                "{} {}: foreground PSNR network {:.2}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB \
+                 (whole image {:.2}, {:.2}, {:.2}, {:.2}; SSIM {:.3}, {:.3}, {:.3}, {:.3})",
+                dir.display(),
+                row.target,
+                row.network.foreground_psnr,
+                row.network_bake.foreground_psnr,
+                row.truth_bake.foreground_psnr,
+                row.network.flat_foreground_psnr,
+                row.network.psnr,
+                row.network_bake.psnr,
+                row.truth_bake.psnr,
+                row.network.flat_psnr,
+                row.network.ssim,
+                row.network_bake.ssim,
+                row.truth_bake.ssim,
+                row.network.flat_ssim
+            );
+            rows.push(row);
+        }
+    }
+    let mean = |f: &dyn Fn(&TargetScores) -> f64| rows.iter().map(f).sum::<f64>() / rows.len().max(1) as f64;
+    let summary = serde_json::json!({
+        "weights": weights_name,
+        "resolution": args.resolution,
+        "voxel_filter": args.voxel_filter,
+        "targets": rows.len(),
+        "mean_foreground_psnr": {
+            "network": mean(&|r| r.network.foreground_psnr),
+            "network_bake": mean(&|r| r.network_bake.foreground_psnr),
+            "truth_bake": mean(&|r| r.truth_bake.foreground_psnr),
+            "flat_colour": mean(&|r| r.network.flat_foreground_psnr),
+        },
+        "mean_psnr": {
+            "network": mean(&|r| r.network.psnr),
+            "network_bake": mean(&|r| r.network_bake.psnr),
+            "truth_bake": mean(&|r| r.truth_bake.psnr),
+            "flat_colour": mean(&|r| r.network.flat_psnr),
+        },
+        "mean_ssim": {
+            "network": mean(&|r| r.network.ssim),
+            "network_bake": mean(&|r| r.network_bake.ssim),
+            "truth_bake": mean(&|r| r.truth_bake.ssim),
+            "flat_colour": mean(&|r| r.network.flat_ssim),
+        },
+        "rows": rows,
+    });
+    println!(
+        "mean over {} targets, foreground PSNR (8-bit sRGB): network {:.2}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB",
+        rows.len(),
+        summary["mean_foreground_psnr"]["network"]
+            .as_f64()
+            .unwrap_or(f64::NAN),
+        summary["mean_foreground_psnr"]["network_bake"]
+            .as_f64()
+            .unwrap_or(f64::NAN),
+        summary["mean_foreground_psnr"]["truth_bake"]
+            .as_f64()
+            .unwrap_or(f64::NAN),
+        summary["mean_foreground_psnr"]["flat_colour"]
+            .as_f64()
+            .unwrap_or(f64::NAN),
+    );
+    let path = args.out.join("network.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n")
+        .with_context(|| format!("writing {}", path.display()))?;
+    println!("scores     {}", path.display());
+    Ok(())
+}
