@@ -270,6 +270,7 @@ pub fn bake_network(
         config,
         &progress,
         NETWORK_VOXEL_FILTER,
+        None,
     )
 }
 
@@ -279,8 +280,8 @@ pub fn bake_network(
 /// network` on held-out heads (docs/measurements/2026-11-26-network-bake.md).
 pub const NETWORK_VOXEL_FILTER: usize = 2;
 
-/// Bakes `field` (the network over `capture`'s views) with the network's
-/// recommended view policy, box-filtered over voxels ([`NETWORK_VOXEL_FILTER`]);
+/// Bakes `field` (the network over `capture`'s views) with `view_policy` (default:
+/// the network's recommended one), box-filtered over voxels ([`NETWORK_VOXEL_FILTER`]);
 /// `provenance` goes into the asset's metadata.
 pub fn bake_network_field(
     capture: &LoadedCapture,
@@ -289,9 +290,10 @@ pub fn bake_network_field(
     config: &BakeConfig,
     progress: &Progress,
     voxel_filter: usize,
+    view_policy: Option<nelf_scene::field::ViewPolicy>,
 ) -> anyhow::Result<BakeOutput> {
     let planned = plan_capture(capture, config, field, progress)?;
-    let view_policy = field.recommended_view_policy();
+    let view_policy = view_policy.unwrap_or_else(|| field.recommended_view_policy());
     let filtered = VoxelFiltered::new(field, planned.voxel_size_m as f32, voxel_filter)?;
     Ok(bake_capture_field(
         capture,

@@ -36,9 +36,18 @@ pub struct NetworkEvalArgs {
     /// Bake resolution (voxels along the longest side of the occupied box).
     #[arg(long, default_value_t = 64)]
     pub resolution: u32,
+    /// Force the PCA rank of both bakes (default: chosen per scene).
+    #[arg(long)]
+    pub rank: Option<usize>,
     /// Sub-points per voxel edge in the network's bake (box filter; 1 = point samples).
     #[arg(long, default_value_t = super::bake::NETWORK_VOXEL_FILTER)]
     pub voxel_filter: usize,
+    /// Also bake the network once per target with its light transport toward that
+    /// target's camera (`oracle_view_bake` in the scores): what a bake without a
+    /// view-dependent part could reach at best, to tell view dependence from other
+    /// losses.
+    #[arg(long)]
+    pub oracle_view: bool,
     /// Output folder: the bakes and `network.json`.
     #[arg(short, long, default_value = "out/eval-network")]
     pub out: PathBuf,
@@ -52,6 +61,7 @@ struct TargetScores {
     network: Srgb8Scores,
     network_bake: Srgb8Scores,
     truth_bake: Srgb8Scores,
+    oracle_view_bake: Option<Srgb8Scores>,
 }
 
 pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
@@ -62,6 +72,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             .context("loading the network's weights")?;
     let config = BakeConfig {
         resolution: args.resolution,
+        rank: args.rank,
         view_dependence: ViewChoice::Off,
         ..BakeConfig::default()
     };
@@ -101,6 +112,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             &config,
             &progress,
             args.voxel_filter,
+            None,
         )
         .with_context(|| format!("baking {} with the network", dir.display()))?;
         let network_path = args.out.join(format!("capture{index}_network.nelf"));
@@ -130,13 +142,35 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                 None,
             )?;
             let settings = MarchSettings::default();
-            let baked = |asset| render_asset(asset, camera, &held.envs[t], DMat3::IDENTITY, None, &settings);
+            let baked = |asset: &nelf_format::Asset| {
+                render_asset(asset, camera, &held.envs[t], DMat3::IDENTITY, None, &settings)
+            };
+            let oracle_view_bake = if args.oracle_view {
+                let policy = nelf_scene::field::ViewPolicy::TowardPoint(camera.centre().as_vec3());
+                let mut output = super::bake::bake_network_field(
+                    &capture,
+                    &field,
+                    &provenance,
+                    &config,
+                    &progress,
+                    args.voxel_filter,
+                    Some(policy),
+                )?;
+                let path = args
+                    .out
+                    .join(format!("capture{index}_network_{}.nelf", held.names[t]));
+                write_bake(&mut output, &config, &path)?;
+                Some(score(&baked(&read_asset(&path)?)?.rgb)?)
+            } else {
+                None
+            };
             let row = TargetScores {
                 capture: dir.clone(),
                 target: held.names[t].clone(),
                 network: score(&direct.rgb)?,
                 network_bake: score(&baked(&network_asset)?.rgb)?,
                 truth_bake: score(&baked(&truth_asset)?.rgb)?,
+                oracle_view_bake,
             };
             println!(
                 "{} {}: foreground PSNR network {:.2}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB \
@@ -164,6 +198,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         "weights": weights_name,
         "resolution": args.resolution,
         "voxel_filter": args.voxel_filter,
+        "rank": args.rank,
         "targets": rows.len(),
         "mean_foreground_psnr": {
             "network": mean(&|r| r.network.foreground_psnr),
@@ -171,6 +206,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             "truth_bake": mean(&|r| r.truth_bake.foreground_psnr),
             "flat_colour": mean(&|r| r.network.flat_foreground_psnr),
         },
+        "mean_foreground_psnr_oracle_view_bake": args.oracle_view.then(|| mean(&|r| r.oracle_view_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
         "mean_psnr": {
             "network": mean(&|r| r.network.psnr),
             "network_bake": mean(&|r| r.network_bake.psnr),
@@ -204,6 +240,14 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
     let path = args.out.join("network.json");
     std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n")
         .with_context(|| format!("writing {}", path.display()))?;
+    if args.oracle_view {
+        println!(
+            "  the network baked toward each target's own camera: {:.2} dB",
+            summary["mean_foreground_psnr_oracle_view_bake"]
+                .as_f64()
+                .unwrap_or(f64::NAN)
+        );
+    }
     println!("scores     {}", path.display());
     Ok(())
 }

@@ -9,8 +9,6 @@
 //! so that a network that learned only silhouettes and average colour shows as such.
 
 use nelf_field::{EncodedViews, Model};
-use nelf_scene::mesh_io::linear_to_srgb;
-use nelf_scene::metrics::ssim;
 use serde::Serialize;
 
 use crate::config::TrainConfig;
@@ -59,14 +57,6 @@ pub fn first_views(head: &PreparedHead, views: usize) -> Result<PreparedHead, Tr
     Ok(out)
 }
 
-/// 8-bit sRGB values of linear RGB.
-fn srgb8(image: &[[f32; 3]]) -> Vec<[f32; 3]> {
-    image
-        .iter()
-        .map(|c| c.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round()))
-        .collect()
-}
-
 /// The view-count table of `model` over `heads`, one row per count in `counts`.
 pub fn view_count_table(
     model: &Model,
@@ -82,20 +72,14 @@ pub fn view_count_table(
         let mut sum = [0.0f64; 6];
         for head in heads {
             let head = first_views(head, views)?;
-            let view = validate_head(model, &head, config)?;
-            let (w, h) = (view.width as u32, view.height as u32);
-            let truth = srgb8(&view.truth);
-            let score = |image: &[[f32; 3]]| -> Result<f64, TrainError> {
-                ssim(&srgb8(image), &truth, w, h, 255.0).map_err(|e| TrainError::Settings(e.to_string()))
-            };
-            let v = view.validation;
+            let v = validate_head(model, &head, config)?.scores;
             let values = [
                 v.psnr,
                 v.foreground_psnr,
-                score(&view.network)?,
+                v.ssim,
                 v.flat_psnr,
                 v.flat_foreground_psnr,
-                score(&view.flat)?,
+                v.flat_ssim,
             ];
             for (s, x) in sum.iter_mut().zip(values) {
                 *s += x;

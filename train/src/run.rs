@@ -14,8 +14,7 @@ use std::time::Instant;
 use candle_core::{Device, Tensor};
 use indicatif::ProgressBar;
 use nelf_field::Model;
-use nelf_scene::mesh_io::linear_to_srgb;
-use nelf_scene::metrics::{psnr, psnr_masked};
+use nelf_scene::metrics::{Srgb8Scores, flat_colour_baseline, srgb8_scores};
 use serde::Serialize;
 
 use crate::adam::Adam;
@@ -67,6 +66,8 @@ pub struct RunReport {
 pub struct ValidationView {
     /// The scores.
     pub validation: Validation,
+    /// The same with SSIM (8-bit sRGB, beside the flat colour's).
+    pub scores: Srgb8Scores,
     /// Image width, pixels.
     pub width: usize,
     /// Image height, pixels.
@@ -107,42 +108,21 @@ pub fn validate_head(
         let rgb = pass.rgb.detach().to_vec2::<f32>()?;
         rendered.extend(rgb.into_iter().map(|c| [c[0], c[1], c[2]]));
     }
-    let srgb8 = |c: &[f32; 3]| c.map(|v| (linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round());
-    let got: Vec<[f32; 3]> = rendered.iter().map(srgb8).collect();
-    let want: Vec<[f32; 3]> = target.image.iter().map(srgb8).collect();
-    let mask: Vec<f32> = target
-        .alpha
-        .iter()
-        .map(|a| if *a > 0.5 { 1.0 } else { 0.0 })
-        .collect();
-    let score = |image: &[[f32; 3]]| -> Result<(f64, f64), TrainError> {
-        let whole = psnr(image, &want, 255.0).map_err(|e| TrainError::Settings(e.to_string()))?;
-        let fg = psnr_masked(image, &want, &mask, 255.0).map_err(|e| TrainError::Settings(e.to_string()))?;
-        Ok((whole, fg))
-    };
-    let (psnr_all, fg) = score(&got)?;
-    let inside = mask.iter().filter(|m| **m > 0.0).count().max(1) as f32;
-    let mut mean = [0.0f32; 3];
-    for (c, m) in target.image.iter().zip(&mask) {
-        for k in 0..3 {
-            mean[k] += c[k] * m / inside;
-        }
-    }
-    let flat_linear: Vec<[f32; 3]> = mask.iter().map(|m| mean.map(|v| v * m)).collect();
-    let flat: Vec<[f32; 3]> = flat_linear.iter().map(srgb8).collect();
-    let (flat_all, flat_fg) = score(&flat)?;
+    let scores = srgb8_scores(&rendered, &target.image, &target.alpha, w as u32, h as u32)
+        .map_err(|e| TrainError::Settings(e.to_string()))?;
     Ok(ValidationView {
         validation: Validation {
-            psnr: psnr_all,
-            foreground_psnr: fg,
-            flat_psnr: flat_all,
-            flat_foreground_psnr: flat_fg,
+            psnr: scores.psnr,
+            foreground_psnr: scores.foreground_psnr,
+            flat_psnr: scores.flat_psnr,
+            flat_foreground_psnr: scores.flat_foreground_psnr,
         },
+        scores,
         width: w,
         height: h,
         truth: target.image.clone(),
         network: rendered,
-        flat: flat_linear,
+        flat: flat_colour_baseline(&target.image, &target.alpha),
     })
 }
 
