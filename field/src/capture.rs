@@ -119,6 +119,9 @@ pub fn working_factor(width: usize, height: usize, working: Option<usize>) -> us
     }
 }
 
+/// Cameras, linear RGB images (row-major) and masks of a set of views.
+pub type ViewSet = (Vec<PinholeCamera>, Vec<Vec<[f32; 3]>>, Vec<Vec<f32>>);
+
 /// Views reduced by a whole `factor` ([`box_down`] of images and masks, intrinsics
 /// scaled); `factor = 1` returns them as they are.
 pub fn reduce_views(
@@ -126,7 +129,7 @@ pub fn reduce_views(
     images: &[Vec<[f32; 3]>],
     masks: &[Vec<f32>],
     factor: usize,
-) -> (Vec<PinholeCamera>, Vec<Vec<[f32; 3]>>, Vec<Vec<f32>>) {
+) -> ViewSet {
     if factor <= 1 {
         return (cameras.to_vec(), images.to_vec(), masks.to_vec());
     }

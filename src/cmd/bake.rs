@@ -268,7 +268,7 @@ pub fn bake_network(
         &field,
         &provenance,
         config,
-        &progress,
+        progress,
         NETWORK_VOXEL_FILTER,
         None,
     )
@@ -288,11 +288,11 @@ pub fn bake_network_field(
     field: &NelfField,
     provenance: &serde_json::Value,
     config: &BakeConfig,
-    progress: &Progress,
+    progress: Progress,
     voxel_filter: usize,
     view_policy: Option<nelf_scene::field::ViewPolicy>,
 ) -> anyhow::Result<BakeOutput> {
-    let planned = plan_capture(capture, config, field, progress)?;
+    let planned = plan_capture(capture, config, field, &progress)?;
     let view_policy = view_policy.unwrap_or_else(|| field.recommended_view_policy());
     let filtered = VoxelFiltered::new(field, planned.voxel_size_m as f32, voxel_filter)?;
     Ok(bake_capture_field(
@@ -302,7 +302,7 @@ pub fn bake_network_field(
         view_policy,
         provenance,
         config,
-        progress,
+        &progress,
     )?)
 }
 

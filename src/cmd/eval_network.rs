@@ -110,7 +110,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             &field,
             &provenance,
             &config,
-            &progress,
+            progress,
             args.voxel_filter,
             None,
         )
@@ -152,7 +152,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                     &field,
                     &provenance,
                     &config,
-                    &progress,
+                    progress,
                     args.voxel_filter,
                     Some(policy),
                 )?;
