@@ -430,7 +430,7 @@ mod tests {
             .map(|i| [((i % 97 / 3 + i / 97 / 3) % 2) as f32, 0.5, 0.0])
             .collect();
         let mask = vec![1.0f32; 97 * 64];
-        let (cams, images, masks) = reduce_views(&[cam], &[image.clone()], &[mask], 3);
+        let (cams, images, masks) = reduce_views(&[cam], std::slice::from_ref(&image), &[mask], 3);
         // 97 is cropped to 32 whole blocks; the blocks average exactly.
         assert_eq!((cams[0].width, cams[0].height), (32, 21));
         assert_eq!(images[0].len(), 32 * 21);
