@@ -172,10 +172,29 @@ impl NetCapture {
         head_centre_m: DVec3,
         net_from_world: DMat3,
     ) -> Result<Self, NetError> {
-        let (w, h) = cameras
-            .first()
-            .map_or((0, 0), |c| (c.width as usize, c.height as usize));
-        let factor = working_factor(w, h, model.working_image_size());
+        Self::at_working_size(
+            cameras,
+            images,
+            masks,
+            head_centre_m,
+            net_from_world,
+            model.working_image_size(),
+        )
+    }
+
+    /// [`NetCapture::new`] after reducing the views toward a working image side
+    /// ([`working_factor`]; `None`: as they are).
+    fn at_working_size(
+        cameras: &[PinholeCamera],
+        images: &[Vec<[f32; 3]>],
+        masks: &[Vec<f32>],
+        head_centre_m: DVec3,
+        net_from_world: DMat3,
+        working_image_size: Option<usize>,
+    ) -> Result<Self, NetError> {
+        let factor = cameras.first().map_or(1, |c| {
+            working_factor(c.width as usize, c.height as usize, working_image_size)
+        });
         let (cams, imgs, msks) = reduce_views(cameras, images, masks, factor);
         Self::new(&cams, &imgs, &msks, head_centre_m, net_from_world)
     }
@@ -399,11 +418,14 @@ fn load_capture_dir_at(
             "the cameras' optical axes are (nearly) parallel: no head centre",
         )
     })?;
-    let factor = cameras.first().map_or(1, |c| {
-        working_factor(c.width as usize, c.height as usize, working_image_size)
-    });
-    let (cameras, images, masks) = reduce_views(&cameras, &images, &masks, factor);
-    let prepared = NetCapture::new(&cameras, &images, &masks, centre, net_from_world)?;
+    let prepared = NetCapture::at_working_size(
+        &cameras,
+        &images,
+        &masks,
+        centre,
+        net_from_world,
+        working_image_size,
+    )?;
     Ok((prepared, capture))
 }
 

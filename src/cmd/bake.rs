@@ -16,7 +16,7 @@ use nelf_bake::{
 };
 use nelf_field::capture::default_net_from_world;
 use nelf_field::shipped::load_or_shipped;
-use nelf_field::{NelfConfig, NelfField, NetCapture};
+use nelf_field::{Model, NelfConfig, NelfField, NetCapture};
 use nelf_scene::field::VoxelFiltered;
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 
@@ -244,17 +244,9 @@ pub fn bake_network(
     let device = nelf_field::default_device();
     let (model, weights_name) = load_or_shipped(weights, NelfConfig::for_device(&device), &device)
         .context("loading the network's weights")?;
-    let prepared = NetCapture::for_model(
-        &model,
-        &capture.cameras,
-        &capture.images,
-        &capture.masks,
-        capture.head_centre_m,
-        default_net_from_world(),
-    )?;
     let model_size = model.working_image_size();
+    let (prepared, field) = network_field(capture, model)?;
     let encoded_size = prepared.cameras.first().map(|c| [c.width, c.height]);
-    let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
     let provenance = serde_json::json!({
         "kind": "nelf-network",
         "weights": weights_name,
@@ -272,6 +264,21 @@ pub fn bake_network(
         NETWORK_VOXEL_FILTER,
         None,
     )
+}
+
+/// The network over `capture`'s views, reduced toward its working image size: the
+/// prepared views and the field they encode to.
+pub fn network_field(capture: &LoadedCapture, model: Model) -> anyhow::Result<(NetCapture, NelfField)> {
+    let prepared = NetCapture::for_model(
+        &model,
+        &capture.cameras,
+        &capture.images,
+        &capture.masks,
+        capture.head_centre_m,
+        default_net_from_world(),
+    )?;
+    let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
+    Ok((prepared, field))
 }
 
 /// Sub-points per voxel edge where a network's field is baked

@@ -15,10 +15,9 @@ use nelf_bake::eval::load_held_aside;
 use nelf_bake::{
     BakeConfig, CaptureLoadOptions, GroundTruth, Progress, ViewChoice, bake_capture, load_capture, write_bake,
 };
-use nelf_field::capture::default_net_from_world;
+use nelf_field::NelfConfig;
 use nelf_field::render::{ImageSettings, Sampling, render_image};
 use nelf_field::shipped::load_or_shipped;
-use nelf_field::{NelfConfig, NelfField, NetCapture};
 use nelf_format::read_asset;
 use nelf_render::{MarchSettings, render_asset};
 use nelf_scene::metrics::{Srgb8Scores, srgb8_scores};
@@ -95,15 +94,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             .with_context(|| format!("{}: no ground truth (synth_config.json)", dir.display()))?;
 
         // The network, over the capture's views reduced to its working size.
-        let prepared = NetCapture::for_model(
-            &model,
-            &capture.cameras,
-            &capture.images,
-            &capture.masks,
-            capture.head_centre_m,
-            default_net_from_world(),
-        )?;
-        let field = NelfField::new(model.clone(), &prepared).context("encoding the capture's views")?;
+        let (prepared, field) = super::bake::network_field(&capture, model.clone())?;
         let provenance = serde_json::json!({ "kind": "nelf-network", "weights": weights_name });
         let mut network_bake = super::bake::bake_network_field(
             &capture,
