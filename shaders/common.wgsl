@@ -4,8 +4,7 @@
 // * Brick atlas addressing: bricks (and halo cells) live in slots of 10³ texels (8³
 //   voxels + a 1-voxel apron on every side), packed with power-of-two slot counts along
 //   x and y, so slot coordinates are bit operations.
-// * Indirection grid: one u32 per brick cell: a present brick's or a halo cell's slot,
-//   or a far cell's distance to the nearest present brick (see `FAR_FLAG`).
+// * March grid: per cube of voxels, the distance to σ > 0 and the slot of its brick cell.
 // * Writing a voxel into the atlas: the texels (own slot and neighbours' aprons) that
 //   hold it, from its brick's neighbour block; shared by the relight and view passes.
 // * f16 ↔ f32 by hand, the view harmonics of format 1.2 and the per-voxel lobe buffer layout
@@ -33,40 +32,11 @@ fn slot_coords(index: u32, packing: SlotPacking) -> vec3<i32> {
     return vec3<i32>(vec3<u32>(x, y, z));
 }
 
-// Indirection entries (viewer/src/atlas.rs, `Indirection`, builds them), one per brick cell:
-// * present brick: brick index + 1 (its slot is its index);
-// * halo cell (missing, next to a present brick): HALO_FLAG | clear-face mask << 24 |
-//   slot + 1 — its slot holds zeros and, in the apron, the neighbours' border voxels;
-//   mask bit 2a (2a + 1): no present brick on the −a (+a) side;
-// * far cell: FAR_FLAG | Chebyshev distance (≥ 2, in bricks) to the nearest present brick.
-// 0 stands for outside the grid.
-const FAR_FLAG: u32 = 0x80000000u;
-const HALO_FLAG: u32 = 0x40000000u;
-const SLOT_BITS: u32 = 0xffffffu;
-const HALO_MASK_SHIFT: u32 = 24u;
-
-// Indirection entry of brick cell `cell`; 0 outside the grid.
-fn brick_entry(indirection: texture_3d<u32>, cell: vec3<i32>, grid_bricks: vec3<i32>) -> u32 {
-    if any(cell < vec3<i32>(0)) || any(cell >= grid_bricks) {
-        return 0u;
-    }
-    return textureLoad(indirection, cell, 0).x;
-}
-
-// Whether an indirection entry is a present brick (its voxels are stored).
-fn is_present(entry: u32) -> bool {
-    return entry != 0u && (entry & (FAR_FLAG | HALO_FLAG)) == 0u;
-}
-
-// Whether an indirection entry has an atlas slot (a present brick or a halo cell).
-fn has_slot(entry: u32) -> bool {
-    return entry != 0u && (entry & FAR_FLAG) == 0u;
-}
-
-// The atlas slot of an entry with one.
-fn slot_of(entry: u32) -> u32 {
-    return (entry & SLOT_BITS) - 1u;
-}
+// The march grid (viewer/src/atlas.rs, `MarchGrid`): per cube of f³ voxels, bits 0–7 the
+// Chebyshev distance in cubes to the nearest cube with σ > 0 (capped at 255), bits 8–31
+// the atlas slot + 1 of the brick cell holding the cube (a present brick or a halo cell;
+// 0 for none).
+const MARCH_GRID_SLOT_SHIFT: u32 = 8u;
 
 // Brick-cell coordinates of a stored brick, packed by viewer/src/atlas.rs
 // (`pack_brick_cells`): (x | y << 16, z).

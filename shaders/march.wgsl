@@ -12,16 +12,16 @@
 // premultiplied rgb over black and alpha = 1 − T_end.
 //
 // Positions are in lattice coordinates u = (p − bbox_min)/voxel_size − 0.5 (voxel centres
-// at integers); t stays in metres. The march walks brick cells (boxes [8b − 0.5,
-// 8b + 7.5]³), looking a cell up once per run of samples in it:
-// * a present brick or a halo cell (a missing brick next to a present one) has an atlas
-//   slot holding every trilinear corner of every sample in its box — one texture fetch
-//   per sample, no per-corner lookups; in a halo cell the box where all values are 0
-//   (its core, widened on sides with no present brick) is jumped over;
-// * a far cell (nearest present brick d ≥ 2 cells away) starts a jump over the whole
-//   block of cells within d − 2, which is all 0.
-// Jumps resume at the first lattice sample past the box, so the samples taken are the
-// reference's, minus some whose value is exactly 0.
+// at integers); t stays in metres. Each loop iteration fetches the march grid (common.wgsl)
+// at the sample:
+// * where the distance to σ > 0 says every sample within s ≥ 0 voxels (Chebyshev) is 0,
+//   the march jumps to the first lattice sample beyond s (empty-space skipping; on the
+//   shared head scan 96 % of the lattice samples in slots are 0, so this is what pays);
+// * else the sample is one texture fetch in the slot of its brick cell (box [8b − 0.5,
+//   8b + 7.5]³): a present brick's or a halo cell's (a missing brick next to a present
+//   one) slot holds every trilinear corner of a sample in the box, so there are no
+//   per-corner lookups.
+// The samples taken are the reference's, minus some whose σ is exactly 0.
 
 #import "common.wgsl"
 
@@ -39,7 +39,7 @@ struct MarchParams {
     box_max_u: vec4<f32>,
     // xyz: 1 / atlas size in texels; w: minimum transmittance.
     atlas_inv_size: vec4<f32>,
-    // xyz: grid extent in bricks; w: unused.
+    // xyz: grid extent in bricks; w: voxels per march-grid cube edge.
     grid_bricks: vec4<i32>,
     // Image width, height; frame index (jitter seed); flags: bit 0 jitter.
     image: vec4<u32>,
@@ -63,9 +63,10 @@ override COUNT_SAMPLES: bool = false;
 @group(0) @binding(0) var<uniform> params: MarchParams;
 @group(0) @binding(1) var atlas: texture_3d<f32>;
 @group(0) @binding(2) var atlas_sampler: sampler;
-@group(0) @binding(3) var indirection: texture_3d<u32>;
 @group(0) @binding(4) var output: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(5) var<storage, read_write> counters: Counters;
+// The march grid (common.wgsl) at cubes of f³ voxels, f = grid_bricks.w.
+@group(0) @binding(6) var march_grid: texture_3d<u32>;
 
 const VIEW_SHADED: u32 = 0u;
 const VIEW_DENSITY: u32 = 1u;
@@ -106,7 +107,6 @@ struct MarchResult {
 // Marches the ray through the centre of pixel `pixel`.
 fn march_pixel(pixel: vec2<u32>) -> MarchResult {
     let packing = SlotPacking(params.view.y, params.view.z);
-    let grid = params.grid_bricks.xyz;
     // Ray through the pixel centre (OpenCV pinhole), unit length in metres.
     let k = params.intrinsics;
     let d_cam = vec3<f32>((f32(pixel.x) + 0.5 - k.z) / k.x, (f32(pixel.y) + 0.5 - k.w) / k.y, 1.0);
@@ -134,60 +134,39 @@ fn march_pixel(pixel: vec2<u32>) -> MarchResult {
     var acc = Accum(vec3<f32>(0.0), 1.0, 0.0);
     var samples = 0u;
     var steps = 0u;
-    // The brick cell of the previous sample and what the indirection says about it, so
-    // consecutive samples in one cell cost no lookup (one flat loop: SIMD lanes stay in
-    // step, each iteration takes one sample or one jump).
-    var cached_cell = vec3<i32>(-2147483647);
-    var entry = 0u;
-    var shift = vec3<f32>(0.0);
-    var zero_lo = vec3<f32>(1.0);
-    var zero_hi = vec3<f32>(0.0);
+    // The march grid (viewer/src/atlas.rs, `MarchGrid`): per cube of f³ voxels, the
+    // distance D to σ > 0 (σ = 0 within f(D − 1) − ½ voxels, Chebyshev, of a sample in the
+    // cube, so the samples that near are skipped) and the slot of its brick cell. A ray
+    // moves at most `per_sample` lattice units per sample along any axis.
+    let factor_i = params.grid_bricks.w;
+    let factor = f32(factor_i);
+    let inv_factor = 1.0 / factor;
+    let cube_max = vec3<i32>(textureDimensions(march_grid)) - vec3<i32>(1);
+    let per_sample = max(max(abs(du.x), abs(du.y)), abs(du.z)) * step;
+    let samples_per_unit = 1.0 / per_sample;
+    // One flat loop, each iteration one fetch and then one sample or one jump: a CPU
+    // device runs SIMD lanes through every branch masked, so the body is short and the
+    // same for all lanes.
     var i = 0;
     while i < count {
         let t = t_entry + (f32(i) + offset) * step;
         let u = o + t * du;
         steps += 1u;
-        // The brick cell whose box [8b − 0.5, 8b + 7.5]³ holds the sample.
-        let cell = vec3<i32>(floor((u + vec3<f32>(0.5)) * 0.125));
-        if any(cell != cached_cell) {
-            cached_cell = cell;
-            entry = brick_entry(indirection, cell, grid);
-            // The box around this sample where every value is 0 (empty when none):
-            let base = vec3<f32>(cell * BRICK);
-            zero_lo = vec3<f32>(1.0);
-            zero_hi = vec3<f32>(0.0);
-            if has_slot(entry) {
-                shift = vec3<f32>(slot_coords(slot_of(entry), packing) * SLOT - cell * BRICK) + vec3<f32>(1.5);
-                if (entry & HALO_FLAG) != 0u {
-                    // a halo cell: its core [8b, 8b + 7]³, widened to the cell's box on
-                    // sides with no present brick;
-                    let mask = entry >> HALO_MASK_SHIFT;
-                    let clear_low = vec3<bool>((mask & 1u) != 0u, (mask & 4u) != 0u, (mask & 16u) != 0u);
-                    let clear_high = vec3<bool>((mask & 2u) != 0u, (mask & 8u) != 0u, (mask & 32u) != 0u);
-                    zero_lo = base - select(vec3<f32>(0.0), vec3<f32>(0.5), clear_low);
-                    zero_hi = base + select(vec3<f32>(7.0), vec3<f32>(7.5), clear_high);
-                }
-            } else if entry != 0u {
-                // a far cell (no present brick within d − 1 cells): the block of cells
-                // within d − 2 of it (their corners reach one cell out).
-                let r = f32(i32(entry & ~FAR_FLAG) - 2) * f32(BRICK);
-                zero_lo = base - vec3<f32>(r + 0.5);
-                zero_hi = base + vec3<f32>(r + f32(BRICK) - 0.5);
-            }
-        }
-        if all(u >= zero_lo) && all(u <= zero_hi) {
-            // Jump to the first lattice sample past the zero box.
-            let t_exit = ray_box(o, inv_du, zero_lo, zero_hi).y;
-            i = max(i + 1, i32(min(ceil((t_exit - t_entry) / step - offset), f32(count))));
+        let cube = clamp(vec3<i32>(floor((u + vec3<f32>(0.5)) * inv_factor)), vec3<i32>(0), cube_max);
+        let texel = textureLoad(march_grid, cube, 0).x;
+        let safe = factor * (f32(texel & 0xffu) - 1.0) - 0.5;
+        if safe >= 0.0 {
+            // Sample i and every later one within `safe` are 0: jump past them.
+            i += 1 + i32(min(floor((safe - 1e-3) * samples_per_unit), f32(count)));
             continue;
         }
         i += 1;
-        if !has_slot(entry) {
-            // Outside the grid (rounding at the box's faces): nothing there.
-            continue;
-        }
-        // The slot holds every corner of a sample in its cell's box (the apron reaches
-        // half a voxel beyond the box).
+        // Near σ > 0, so in a slot: that of the brick cell holding the cube, whose box
+        // [8b − 0.5, 8b + 7.5]³ holds the sample (up to rounding at the grid box's faces,
+        // which the apron covers) and whose slot holds every trilinear corner of it.
+        let cell = (cube * factor_i) >> vec3<u32>(3u);
+        let shift = vec3<f32>(slot_coords((texel >> MARCH_GRID_SLOT_SHIFT) - 1u, packing) * SLOT - cell * BRICK)
+            + vec3<f32>(1.5);
         let value = textureSampleLevel(atlas, atlas_sampler, (u + shift) * inv_atlas, 0.0);
         samples += 1u;
         if composite(&acc, value, step, view, min_transmittance) {

@@ -77,7 +77,7 @@ pub struct MarchParams {
     pub box_max_u: [f32; 4],
     /// `1 / atlas size` in texels; `w` = minimum transmittance.
     pub atlas_inv_size: [f32; 4],
-    /// Grid extent in bricks, unused.
+    /// Grid extent in bricks; `w` = voxels per march-grid texel edge.
     pub grid_bricks: [i32; 4],
     /// Image width, height, frame index, flags (bit 0: jitter).
     pub image: [u32; 4],

@@ -671,3 +671,43 @@ fn display_pass_and_debug_views() {
         "jittered render too far from the lattice render: {db:.1} dB"
     );
 }
+
+#[test]
+fn empty_space_costs_no_samples() {
+    // The march grid skips every sample whose trilinear σ is 0: an asset with its bricks
+    // but no density anywhere takes no sample at all, and each ray crosses the box in
+    // a jump or two; with density, far fewer samples than lattice points are taken and
+    // the image still equals the reference (gpu_matches_cpu_reference).
+    let mut gpu = renderer();
+    let env = sky(64, 32);
+    let cam = camera(96, 80);
+    let cost = ViewSettings {
+        view: MarchView::Cost,
+        pass: MarchPass::Compute,
+        ..no_jitter()
+    };
+    let mut asset = asset_through_file(40_000, 8, CoefficientEncoding::U8Affine, 5);
+    gpu.load_asset(&asset).unwrap();
+    gpu.set_lighting(&env, rotation_y(0.7)).unwrap();
+    let counts = gpu.render(&cam, &cost).unwrap();
+    let total = |i: usize| counts.rgb.iter().map(|c| f64::from(c[i])).sum::<f64>();
+    let (samples, steps, lattice) = (total(0), total(1), total(2));
+    eprintln!("with density: {samples} samples in {steps} steps of {lattice} lattice samples");
+    assert!(samples > 0.0);
+    assert!(samples <= steps && steps <= lattice);
+    assert!(samples < 0.5 * lattice, "{samples} samples of {lattice}");
+
+    for d in &mut asset.density {
+        *d = half::f16::ZERO;
+    }
+    gpu.load_asset(&asset).unwrap();
+    let counts = gpu.render(&cam, &cost).unwrap();
+    let entering = counts.rgb.iter().filter(|c| c[2] > 0.0).count();
+    assert!(entering > 1000, "{entering} rays enter the grid box");
+    for c in &counts.rgb {
+        assert_eq!(c[0], 0.0, "a sample was taken in empty space");
+        assert!(c[1] <= 2.0, "{} steps through empty space", c[1]);
+    }
+    let image = gpu.render(&cam, &no_jitter()).unwrap();
+    assert!(image.rgb.iter().flatten().all(|&v| v == 0.0));
+}

@@ -13,7 +13,8 @@
 //!
 //! stopping right after `T < min_transmittance`; the output is `C` (premultiplied, over
 //! black) and alpha `1 − T_end` in an RGBA32F target. Empty space is skipped through the
-//! indirection grid without leaving the reference's sample lattice.
+//! march grid (`atlas::MarchGrid`: per cube of voxels the distance to σ > 0 and its
+//! slot) without leaving the reference's sample lattice.
 //!
 //! Two pipelines run the same `march_pixel`: a compute dispatch writing a storage texture
 //! (`march`; a second build with `COUNT_SAMPLES` counts samples into a buffer) and a
@@ -111,9 +112,9 @@ impl MarchPipelines {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
-                texture_entry(3, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
                 storage_texture_entry(4, wgpu::TextureFormat::Rgba32Float, D::D2),
                 storage_entry(5, false, S::COMPUTE),
+                texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
             ],
         });
         let fragment_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -132,7 +133,7 @@ impl MarchPipelines {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
-                texture_entry(3, wgpu::TextureSampleType::Uint, D::D3, S::FRAGMENT),
+                texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, S::FRAGMENT),
             ],
         });
         let module = shader_module(device, "march.wgsl", MARCH_WGSL)?;
@@ -189,7 +190,7 @@ impl MarchPipelines {
     }
 
     /// The bind groups of the compute and the fragment march: uniform `march_params`, the
-    /// relit atlas, the indirection grid, the output `view` (compute only) and the sample
+    /// relit atlas, the march grid, the output `view` (compute only) and the sample
     /// `counters` (compute only).
     pub(super) fn bind_groups(
         &self,
@@ -216,16 +217,16 @@ impl MarchPipelines {
                     resource: wgpu::BindingResource::Sampler(&self.sampler),
                 },
                 wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&asset.indirection_view),
-                },
-                wgpu::BindGroupEntry {
                     binding: 4,
                     resource: wgpu::BindingResource::TextureView(view),
                 },
                 wgpu::BindGroupEntry {
                     binding: 5,
                     resource: counters.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 6,
+                    resource: wgpu::BindingResource::TextureView(&asset.march_grid_view),
                 },
             ],
         });
@@ -246,8 +247,8 @@ impl MarchPipelines {
                     resource: wgpu::BindingResource::Sampler(&self.sampler),
                 },
                 wgpu::BindGroupEntry {
-                    binding: 3,
-                    resource: wgpu::BindingResource::TextureView(&asset.indirection_view),
+                    binding: 6,
+                    resource: wgpu::BindingResource::TextureView(&asset.march_grid_view),
                 },
             ],
         });
@@ -362,7 +363,7 @@ impl GpuRenderer {
                 grid.grid_bricks[0] as i32,
                 grid.grid_bricks[1] as i32,
                 grid.grid_bricks[2] as i32,
-                0,
+                asset.march_grid_factor as i32,
             ],
             image: [
                 camera.width,

@@ -43,7 +43,7 @@ pub use self::march::{MarchPass, MarchView, ViewSettings};
 use self::relight::RelightPipeline;
 use self::view::{GpuView, ViewBindings, ViewPipelines, lobe_buffer_words};
 use crate::atlas::{
-    AtlasLayout, Dequantization, GpuMemory, RelightView, indirection_grid, neighbour_blocks,
+    AtlasLayout, Dequantization, GpuMemory, RelightView, indirection_grid, march_grid, neighbour_blocks,
     pack_brick_cells, pack_coefficients, pack_density,
 };
 use crate::error::ViewerError;
@@ -110,7 +110,10 @@ struct GpuAsset {
     coefficient_encoding: i32,
     atlas: wgpu::Texture,
     atlas_view: wgpu::TextureView,
-    indirection_view: wgpu::TextureView,
+    /// The march grid (`atlas::MarchGrid`): distances for empty-space skipping and slots.
+    march_grid_view: wgpu::TextureView,
+    /// Voxels per march-grid texel edge.
+    march_grid_factor: u32,
     relight_params: wgpu::Buffer,
     light: wgpu::Buffer,
     relight_bind_group: wgpu::BindGroup,
@@ -299,6 +302,13 @@ impl GpuRenderer {
             )));
         }
         let indirection = indirection_grid(grid_bricks, &asset.bricks)?;
+        let march_grid = march_grid(
+            grid_bricks,
+            &indirection,
+            &asset.bricks,
+            &asset.density,
+            limits.max_texture_dimension_3d,
+        )?;
         let layout = AtlasLayout::for_bricks(indirection.slot_cells.len(), limits.max_texture_dimension_3d)?;
         let coefficients = pack_coefficients(&asset.coefficients);
         let density = pack_density(&asset.density);
@@ -356,14 +366,14 @@ impl GpuRenderer {
             usage: wgpu::BufferUsages::UNIFORM | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
-        let indirection_texture = self.device.create_texture_with_data(
+        let march_grid_texture = self.device.create_texture_with_data(
             &self.queue,
             &wgpu::TextureDescriptor {
-                label: Some("indirection"),
+                label: Some("march grid"),
                 size: wgpu::Extent3d {
-                    width: grid_bricks[0],
-                    height: grid_bricks[1],
-                    depth_or_array_layers: grid_bricks[2],
+                    width: march_grid.dims[0],
+                    height: march_grid.dims[1],
+                    depth_or_array_layers: march_grid.dims[2],
                 },
                 mip_level_count: 1,
                 sample_count: 1,
@@ -373,7 +383,7 @@ impl GpuRenderer {
                 view_formats: &[],
             },
             wgpu::util::TextureDataOrder::LayerMajor,
-            bytemuck::cast_slice(&indirection.entries),
+            bytemuck::cast_slice(&march_grid.texels),
         );
         let texels = layout.texels();
         let atlas = self.device.create_texture(&wgpu::TextureDescriptor {
@@ -393,7 +403,7 @@ impl GpuRenderer {
             view_formats: &[],
         });
         let atlas_view = atlas.create_view(&wgpu::TextureViewDescriptor::default());
-        let indirection_view = indirection_texture.create_view(&wgpu::TextureViewDescriptor::default());
+        let march_grid_view = march_grid_texture.create_view(&wgpu::TextureViewDescriptor::default());
         let relight_bind_group = self.pipelines.relight.bind_group(
             &self.device,
             [
@@ -430,7 +440,7 @@ impl GpuRenderer {
             atlas_bytes: u64::from(texels[0]) * u64::from(texels[1]) * u64::from(texels[2]) * 8,
             coefficient_bytes: coefficient_buffer.size(),
             density_bytes: density_buffer.size(),
-            indirection_bytes: indirection.entries.len() as u64 * 4,
+            march_grid_bytes: march_grid.texels.len() as u64 * 4,
             neighbour_bytes: neighbour_buffer.size(),
             view_bytes: view.as_ref().map_or(0, GpuView::bytes),
             other_bytes: light.size() + relight_params.size(),
@@ -459,7 +469,8 @@ impl GpuRenderer {
             coefficient_encoding: coefficients.encoding,
             atlas,
             atlas_view,
-            indirection_view,
+            march_grid_view,
+            march_grid_factor: march_grid.factor,
             relight_params,
             light,
             relight_bind_group,
