@@ -242,7 +242,7 @@ impl GpuTimer {
             jitter: false,
             frame_index: 0,
             view: nelf_viewer::MarchView::Shaded,
-            pass: nelf_viewer::MarchPass::default(),
+            pass: self.renderer.preferred_march_pass(),
         };
         for _ in 0..2 {
             self.renderer.frame_blocking(&camera, &settings)?;

@@ -206,7 +206,7 @@ fn render_gpu(
         jitter: false,
         frame_index: 0,
         view: nelf_viewer::MarchView::Shaded,
-        pass: nelf_viewer::MarchPass::default(),
+        pass: gpu.preferred_march_pass(),
     };
     Ok(gpu.render(camera, &view)?)
 }

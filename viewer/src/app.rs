@@ -259,6 +259,8 @@ struct ViewerApp {
     errors: Vec<String>,
     frame_error: Arc<Mutex<Option<String>>>,
     gpu_ok: bool,
+    /// The march pass faster on the device ([`MarchPass::for_device`]).
+    march_pass: MarchPass,
     screenshots: Screenshots,
     applied: AppliedLighting,
 }
@@ -351,6 +353,7 @@ impl ViewerApp {
             errors: Vec::new(),
             frame_error: Arc::new(Mutex::new(None)),
             gpu_ok: false,
+            march_pass: MarchPass::default(),
             screenshots: Screenshots {
                 path: config.screenshot_path,
                 after_frames: config.screenshot_after_frames,
@@ -366,6 +369,8 @@ impl ViewerApp {
         match &cc.wgpu_render_state {
             Some(state) => match GpuRenderer::from_device(state.device.clone(), state.queue.clone()) {
                 Ok(renderer) => {
+                    let renderer = renderer.with_adapter_info(state.adapter.get_info());
+                    app.march_pass = renderer.preferred_march_pass();
                     state.renderer.write().callback_resources.insert(ViewerGpu {
                         renderer,
                         format: state.target_format,
@@ -734,7 +739,7 @@ impl ViewerApp {
                 jitter: self.rendering.jitter,
                 frame_index: self.frame_index,
                 view,
-                pass: MarchPass::default(),
+                pass: self.march_pass,
             },
             display: DisplaySettings {
                 exposure_ev: self.exposure_ev,

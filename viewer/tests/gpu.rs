@@ -711,3 +711,22 @@ fn empty_space_costs_no_samples() {
     let image = gpu.render(&cam, &no_jitter()).unwrap();
     assert!(image.rgb.iter().flatten().all(|&v| v == 0.0));
 }
+
+#[test]
+fn the_march_pass_follows_the_device() {
+    // Measured: fragment on a CPU device (lavapipe), compute on a GPU.
+    assert_eq!(MarchPass::for_device(wgpu::DeviceType::Cpu), MarchPass::Fragment);
+    for gpu_type in [
+        wgpu::DeviceType::DiscreteGpu,
+        wgpu::DeviceType::IntegratedGpu,
+        wgpu::DeviceType::VirtualGpu,
+    ] {
+        assert_eq!(MarchPass::for_device(gpu_type), MarchPass::Compute);
+    }
+    let gpu = renderer();
+    let info = gpu.adapter_info().unwrap().clone();
+    assert_eq!(
+        gpu.preferred_march_pass(),
+        MarchPass::for_device(info.device_type)
+    );
+}

@@ -79,6 +79,20 @@ pub enum MarchPass {
     Fragment,
 }
 
+impl MarchPass {
+    /// The faster pass on a device of this type, as measured: the fragment pass on a CPU
+    /// device (lavapipe: as fast as the compute pass or faster, its rasteriser writes
+    /// tiles faster than per-invocation storage stores), the compute pass on a GPU (an
+    /// NVIDIA H100 under Vulkan ran the fragment pass 7× slower at 512² and 20× at 1080p;
+    /// docs/measurements/2026-11-26-h100-viewer-bench.md).
+    pub fn for_device(device_type: wgpu::DeviceType) -> Self {
+        match device_type {
+            wgpu::DeviceType::Cpu => Self::Fragment,
+            _ => Self::Compute,
+        }
+    }
+}
+
 /// Format of the march's output: linear premultiplied rgb and alpha.
 pub(super) const MARCH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 

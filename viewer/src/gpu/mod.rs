@@ -264,6 +264,22 @@ impl GpuRenderer {
         self.adapter_info.as_ref()
     }
 
+    /// Records the adapter of a renderer made [`from_device`](Self::from_device), for
+    /// [`preferred_march_pass`](Self::preferred_march_pass).
+    #[must_use]
+    pub fn with_adapter_info(mut self, info: wgpu::AdapterInfo) -> Self {
+        self.adapter_info = Some(info);
+        self
+    }
+
+    /// The march pass that is faster on this renderer's device ([`MarchPass::for_device`];
+    /// the default pass when the adapter is unknown).
+    pub fn preferred_march_pass(&self) -> MarchPass {
+        self.adapter_info
+            .as_ref()
+            .map_or_else(MarchPass::default, |info| MarchPass::for_device(info.device_type))
+    }
+
     /// The device.
     pub fn device(&self) -> &wgpu::Device {
         &self.device
