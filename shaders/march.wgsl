@@ -57,6 +57,10 @@ struct Counters {
     steps: atomic<u32>,
 }
 
+// Whether this march also marks the stored voxels its samples read (viewer/src/gpu/marks.rs:
+// a camera that has not moved then relights only those).
+override MARK_VOXELS: bool = false;
+
 // Whether to count samples (a benchmark pipeline sets it; the counting costs atomics).
 override COUNT_SAMPLES: bool = false;
 
@@ -67,6 +71,8 @@ override COUNT_SAMPLES: bool = false;
 @group(0) @binding(5) var<storage, read_write> counters: Counters;
 // The march grid (common.wgsl) at cubes of f³ voxels, f = grid_bricks.w.
 @group(0) @binding(6) var march_grid: texture_3d<u32>;
+// MARK_VOXELS only: one word per voxel of the grid box (x fastest), 1 where a sample read it.
+@group(0) @binding(7) var<storage, read_write> voxel_marks: array<u32>;
 
 const VIEW_SHADED: u32 = 0u;
 const VIEW_DENSITY: u32 = 1u;
@@ -95,6 +101,18 @@ fn composite(acc: ptr<function, Accum>, value: vec4<f32>, step: f32, view: u32, 
     (*acc).rgb += ((*acc).transmittance * (1.0 - survive)) * value.rgb;
     (*acc).transmittance *= survive;
     return (*acc).transmittance < min_transmittance;
+}
+
+// Marks the 8 trilinear corners of the sample at `u` in the voxel grid (a plain store of
+// 1 per corner: no atomics; `relight.wgsl`'s `list_marked` lists the stored ones).
+fn mark_corners(u: vec3<f32>, voxels: vec3<i32>) {
+    let base = vec3<i32>(floor(u));
+    for (var c = 0u; c < 8u; c++) {
+        let g = base + vec3<i32>(vec3<u32>(c & 1u, (c >> 1u) & 1u, c >> 2u));
+        if all(g >= vec3<i32>(0)) && all(g < voxels) {
+            voxel_marks[u32(g.x + voxels.x * (g.y + voxels.y * g.z))] = 1u;
+        }
+    }
 }
 
 // One pixel's march: its colour and what it cost.
@@ -169,6 +187,9 @@ fn march_pixel(pixel: vec2<u32>) -> MarchResult {
             + vec3<f32>(1.5);
         let value = textureSampleLevel(atlas, atlas_sampler, (u + shift) * inv_atlas, 0.0);
         samples += 1u;
+        if MARK_VOXELS && value.a > 0.0 {
+            mark_corners(u, (cube_max + vec3<i32>(1)) * factor_i);
+        }
         if composite(&acc, value, step, view, min_transmittance) {
             break;
         }

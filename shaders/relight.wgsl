@@ -7,7 +7,8 @@
 // and for f16 coefficients light_mean = P_mean, light[k] = P_k, q_k = c_k. Shading is
 // linear in T = mean + Σ c_k B_k, so this equals shading every sample (DESIGN.md).
 //
-// `relight`: one invocation per stored voxel (brick b, local l ∈ [0, 8)³): its K-term
+// `relight`: one invocation per stored voxel (brick b, local l ∈ [0, 8)³; `relight_marked`:
+// per voxel of the list a marking march made, viewer/src/gpu/marks.rs): its K-term
 // dot product, with its density, is written to every atlas texel that holds it — its own
 // slot and the aprons of the neighbouring slots (common.wgsl, `voxel_texel`). rgb =
 // radiance, a = σ (1/m). Each voxel is shaded once however many texels show it.
@@ -32,7 +33,9 @@ struct RelightParams {
     words: vec4<u32>,
     // Folded mean radiance (rgb).
     light_mean: vec4<f32>,
-    // x: stored voxels; y: invocations per row of the dispatch (workgroups along x · 64).
+    // x: stored voxels; y: invocations per row of a dispatch over them (workgroups along
+    // x · 64); z: invocations of `relight` (⌈voxels / 4⌉), w: invocations per row of its
+    // dispatch.
     dispatch: vec4<u32>,
     // View part (relight_lobes only): lobes J, view rank K_v, u32 words of view
     // coefficients per voxel, their encoding (1 = 8-bit affine, 2 = f16).
@@ -65,6 +68,17 @@ const MAX_RANK: u32 = 384u;
 // The per-voxel lobe buffer (common.wgsl, `lobe_buffer_words`).
 @group(0) @binding(8) var<storage, read_write> voxel_lobes: array<u32>;
 
+// Adds the lighting of one word of 8-bit codes (codes k .. k + 3, lighting l0 .. l3).
+fn add_codes(rgb: vec3<f32>, word: u32, l0: vec3<f32>, l1: vec3<f32>, l2: vec3<f32>, l3: vec3<f32>) -> vec3<f32> {
+    return rgb + f32(word & 0xffu) * l0 + f32((word >> 8u) & 0xffu) * l1 + f32((word >> 16u) & 0xffu) * l2
+        + f32(word >> 24u) * l3;
+}
+
+// Adds the lighting of one word of f16 coefficients (k, k + 1).
+fn add_halves(rgb: vec3<f32>, word: u32, l0: vec3<f32>, l1: vec3<f32>) -> vec3<f32> {
+    return rgb + half_of(word, 0u) * l0 + half_of(word, 1u) * l1;
+}
+
 // Σ_k q_k · light[k] over the components used, a word (4 codes or 2 halves) at a time.
 fn shade_voxel(voxel: u32) -> vec3<f32> {
     let voxels = params.dispatch.x;
@@ -72,19 +86,55 @@ fn shade_voxel(voxel: u32) -> vec3<f32> {
     var rgb = params.light_mean.xyz;
     if params.grid_bricks.w == 1 {
         for (var q = 0u; q < (used + 3u) / 4u; q++) {
-            let word = coefficients[q * voxels + voxel];
             let k = 4u * q;
-            rgb += f32(word & 0xffu) * light[k].xyz + f32((word >> 8u) & 0xffu) * light[k + 1u].xyz
-                + f32((word >> 16u) & 0xffu) * light[k + 2u].xyz + f32(word >> 24u) * light[k + 3u].xyz;
+            rgb = add_codes(rgb, coefficients[q * voxels + voxel], light[k].xyz, light[k + 1u].xyz,
+                light[k + 2u].xyz, light[k + 3u].xyz);
         }
     } else {
         for (var q = 0u; q < (used + 1u) / 2u; q++) {
-            let word = coefficients[q * voxels + voxel];
             let k = 2u * q;
-            rgb += half_of(word, 0u) * light[k].xyz + half_of(word, 1u) * light[k + 1u].xyz;
+            rgb = add_halves(rgb, coefficients[q * voxels + voxel], light[k].xyz, light[k + 1u].xyz);
         }
     }
     return rgb;
+}
+
+// `shade_voxel` of four voxels at once: each load of the folded lighting serves four dot
+// products (a CPU device loads a loop-indexed uniform lane by lane, which was 40–50 % of
+// the pass when shading one voxel per invocation).
+fn shade_four(v: vec4<u32>) -> array<vec3<f32>, 4> {
+    let voxels = params.dispatch.x;
+    let used = params.atlas.w;
+    var a = params.light_mean.xyz;
+    var b = a;
+    var c = a;
+    var d = a;
+    if params.grid_bricks.w == 1 {
+        for (var q = 0u; q < (used + 3u) / 4u; q++) {
+            let k = 4u * q;
+            let l0 = light[k].xyz;
+            let l1 = light[k + 1u].xyz;
+            let l2 = light[k + 2u].xyz;
+            let l3 = light[k + 3u].xyz;
+            let row = q * voxels;
+            a = add_codes(a, coefficients[row + v.x], l0, l1, l2, l3);
+            b = add_codes(b, coefficients[row + v.y], l0, l1, l2, l3);
+            c = add_codes(c, coefficients[row + v.z], l0, l1, l2, l3);
+            d = add_codes(d, coefficients[row + v.w], l0, l1, l2, l3);
+        }
+    } else {
+        for (var q = 0u; q < (used + 1u) / 2u; q++) {
+            let k = 2u * q;
+            let l0 = light[k].xyz;
+            let l1 = light[k + 1u].xyz;
+            let row = q * voxels;
+            a = add_halves(a, coefficients[row + v.x], l0, l1);
+            b = add_halves(b, coefficients[row + v.y], l0, l1);
+            c = add_halves(c, coefficients[row + v.z], l0, l1);
+            d = add_halves(d, coefficients[row + v.w], l0, l1);
+        }
+    }
+    return array<vec3<f32>, 4>(a, b, c, d);
 }
 
 fn voxel_density(voxel: u32) -> f32 {
@@ -97,13 +147,10 @@ fn invocation_voxel(gid: vec3<u32>) -> u32 {
     return select(v, params.dispatch.x, gid.x >= params.dispatch.y || v >= params.dispatch.x);
 }
 
-@compute @workgroup_size(64, 1, 1)
-fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
-    let v = invocation_voxel(gid);
-    if v >= params.dispatch.x {
-        return;
-    }
-    var rgb = shade_voxel(v);
+// Writes stored voxel `v`'s radiance `rgb`, with its density, to every atlas texel that
+// holds it.
+fn store_voxel(v: u32, radiance: vec3<f32>) {
+    var rgb = radiance;
     if params.words.z == 1u {
         rgb = abs(rgb);
     }
@@ -124,6 +171,88 @@ fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
             }
         }
     }
+}
+
+// Shades the voxels `v` (`count` ≤ 4 of them valid; the others repeat a valid one) and
+// stores the valid ones.
+fn relight_four(v: vec4<u32>, count: u32) {
+    let rgb = shade_four(v);
+    for (var j = 0u; j < 4u; j++) {
+        if j < count {
+            store_voxel(v[j], rgb[j]);
+        }
+    }
+}
+
+// One invocation per four stored voxels, i + n·S for n < 4 (S = dispatch.z invocations,
+// so neighbouring invocations read neighbouring words).
+@compute @workgroup_size(64, 1, 1)
+fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let quarter = params.dispatch.z;
+    let i = gid.x + gid.y * params.dispatch.w;
+    if gid.x >= params.dispatch.w || i >= quarter {
+        return;
+    }
+    let voxels = params.dispatch.x;
+    let n = vec4<u32>(0u, 1u, 2u, 3u);
+    let v = vec4<u32>(i) + n * quarter;
+    let count = min((voxels - i + quarter - 1u) / quarter, 4u);
+    relight_four(select(vec4<u32>(i), v, v < vec4<u32>(voxels)), count);
+}
+
+// The marked relight (viewer/src/gpu/marks.rs). Group 1: the list of marked stored voxels,
+// the marks a marking march left in the voxel grid (one word per voxel of the grid box),
+// and each brick's cell (`brick_cell`). `list_marked` (one invocation per stored voxel)
+// lists the marked ones; `relight_marked_args` writes the indirect dispatch size from
+// the count (group 2: the indirect buffer cannot be bound to the dispatch that it sizes);
+// `relight_marked` relights the listed voxels.
+@group(1) @binding(0) var<storage, read_write> marked: VoxelList;
+@group(1) @binding(1) var<storage, read> voxel_marks: array<u32>;
+@group(1) @binding(2) var<storage, read> brick_cells: array<vec2<u32>>;
+@group(2) @binding(0) var<storage, read_write> marked_dispatch: array<u32, 3>;
+
+@compute @workgroup_size(64, 1, 1)
+fn list_marked(@builtin(global_invocation_id) gid: vec3<u32>) {
+    let v = invocation_voxel(gid);
+    if v >= params.dispatch.x {
+        return;
+    }
+    let voxels = vec3<i32>(params.grid_bricks.xyz * BRICK);
+    let g = brick_cell(brick_cells[v / 512u]) * BRICK + voxel_local(v);
+    if voxel_marks[u32(g.x + voxels.x * (g.y + voxels.y * g.z))] != 0u {
+        marked.voxels[atomicAdd(&marked.count, 1u)] = v;
+    }
+}
+
+// Largest workgroup count along x of one dispatch (WebGPU's default limit).
+const MAX_GROUPS_X: u32 = 65535u;
+
+// Listed voxels per invocation of `relight_marked`.
+const MARKED_PER_INVOCATION: u32 = 4u;
+
+@compute @workgroup_size(1, 1, 1)
+fn relight_marked_args() {
+    let groups = (atomicLoad(&marked.count) + 64u * MARKED_PER_INVOCATION - 1u) / (64u * MARKED_PER_INVOCATION);
+    marked_dispatch[0] = min(groups, MAX_GROUPS_X);
+    marked_dispatch[1] = (groups + MAX_GROUPS_X - 1u) / MAX_GROUPS_X;
+    marked_dispatch[2] = 1u;
+}
+
+@compute @workgroup_size(64, 1, 1)
+fn relight_marked(@builtin(global_invocation_id) gid: vec3<u32>, @builtin(num_workgroups) groups: vec3<u32>) {
+    let first = (gid.x + gid.y * groups.x * 64u) * MARKED_PER_INVOCATION;
+    let listed = atomicLoad(&marked.count);
+    if first >= listed {
+        return;
+    }
+    let last = listed - 1u;
+    let v = vec4<u32>(
+        marked.voxels[first],
+        marked.voxels[min(first + 1u, last)],
+        marked.voxels[min(first + 2u, last)],
+        marked.voxels[min(first + 3u, last)],
+    );
+    relight_four(v, min(listed - first, MARKED_PER_INVOCATION));
 }
 
 @compute @workgroup_size(64, 1, 1)

@@ -11,7 +11,9 @@
 //! synthetic view-dependent part (format 1.2: J = 3 lobes, `K_v` = 8, 8-bit coefficients;
 //! `nelf_format::synthetic::synthetic_view`). For each asset it prints, as markdown:
 //! GPU memory, relight-pass ms, frame ms at 512² and 1920×1080 with relighting every
-//! frame and without (the march alone over the precomputed RGBA atlas) and their ratio,
+//! frame and without (the march alone over the precomputed RGBA atlas) and their ratio
+//! (at a held camera, so relighting runs on the voxels it reads; the first lighting
+//! change there, which marks them, is timed below the table),
 //! jitter on and off, trilinear samples per frame and per second, and — as the ceiling
 //! of a texture march on this device — the bare dense march of PLATFORM.md (128³
 //! RGBA16F, 512² rays × 128 steps, every ray taking all its steps) measured in the same
@@ -431,6 +433,31 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
             frame += 1;
             Ok(gpu.frame_blocking(&camera, &jittered(frame))?)
         })?;
+        // The first lighting change at a held camera relights in full and marks the voxels
+        // the march reads (for the marked relight of the next changes): its cost against a
+        // full relight plus a march, the camera alternating between two nearby orbits so
+        // that each is unmarked.
+        let nearby = orbit_camera(asset, w, h, 21.0);
+        let mut marking_ms = Vec::with_capacity(reps.max(1));
+        for rep in 0..reps.max(1) + 2 {
+            let cam = if rep % 2 == 0 { &nearby } else { &camera };
+            gpu.frame_blocking(cam, &settings)?;
+            gpu.invalidate_lighting();
+            let start = Instant::now();
+            gpu.frame_blocking(cam, &settings)?;
+            if rep >= 2 {
+                marking_ms.push(start.elapsed().as_secs_f64() * 1e3);
+            }
+        }
+        marking_ms.sort_by(f64::total_cmp);
+        notes.push(format!(
+            "{w}×{h}: first lighting change at a held camera (full relight + marking march) {:.1} (median {:.1}) ms, \
+             {:.2}× a full relight ({:.1} ms) plus a march",
+            marking_ms[0],
+            marking_ms[marking_ms.len() / 2],
+            marking_ms[0] / (relight.min + march.min),
+            relight.min
+        ));
         let counters = gpu.count_samples(&camera, &settings)?;
         let rate = f64::from(counters.samples) / (march.min * 1e-3) / 1e6;
         println!(

@@ -1,9 +1,10 @@
 //! `nelf-viewer`: real-time viewing of `.nelf` light-transport assets.
 //!
 //! * [`gpu::GpuRenderer`] — the wgpu renderer, usable without a window: a brick atlas
-//!   with 1-voxel aprons and an indirection grid ([`atlas`]), a relight compute pass run
-//!   once per lighting change (the environment map projected onto the asset's PCA basis,
-//!   then a `K`-term dot product per voxel), and a ray-march compute pass per frame that
+//!   with 1-voxel aprons and a march grid for empty-space skipping ([`atlas`]), a relight
+//!   compute pass run once per lighting change (the environment map projected onto the
+//!   asset's PCA basis, then a `K`-term dot product per voxel; at a held camera only for
+//!   the voxels it reads), and a ray-march pass per frame that
 //!   mirrors the CPU reference renderer `nelf_render` (same rays, sample lattice,
 //!   trilinear interpolation, compositing and early termination). A view-dependent asset
 //!   (format 1.2) adds a per-voxel view pass between them, run when the eye or the
@@ -25,6 +26,6 @@ pub use app::{NamedEnvmap, ViewerConfig, run_viewer};
 pub use atlas::{GpuMemory, RelightView};
 pub use error::ViewerError;
 pub use gpu::{
-    AssetInfo, DisplayImage, DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewInfo,
-    ViewSettings,
+    AssetInfo, DisplayImage, DisplaySettings, GpuRenderer, MarchPass, MarchView, RelightKind, ToneMap,
+    ViewInfo, ViewSettings,
 };

@@ -37,7 +37,8 @@ pub struct RelightParams {
     pub words: [u32; 4],
     /// Folded mean radiance (rgb), unused.
     pub light_mean: [f32; 4],
-    /// Stored voxels, invocations per row of the dispatch, unused ×2.
+    /// Stored voxels, invocations per row of a dispatch over them; invocations of
+    /// `relight` (four voxels each), invocations per row of its dispatch.
     pub dispatch: [u32; 4],
     /// View part (`relight_lobes` only): lobes `J`, view rank `K_v`, u32 words of view
     /// coefficients per voxel, their encoding (1 = 8-bit affine, 2 = f16).

@@ -7,7 +7,8 @@
 //!   opposite sides, for 8-bit and f16 view coefficients; its image differs from the
 //!   view-independent asset's and from the one with the view direction reversed by far
 //!   more than the GPU's error.
-//! * Relighting after an environment rotation equals a fresh relight with the rotated map.
+//! * Relighting after an environment rotation equals a fresh relight with the rotated map;
+//!   at a held camera only the voxels it reads are relit, with the same image.
 //! * A damaged or invalid asset is an error value, and the renderer keeps working.
 
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
@@ -20,7 +21,8 @@ use nelf_format::{
 };
 use nelf_render::{Image, MarchSettings, render_asset};
 use nelf_viewer::{
-    DisplaySettings, GpuRenderer, MarchPass, MarchView, RelightView, ToneMap, ViewSettings, ViewerError,
+    DisplaySettings, GpuRenderer, MarchPass, MarchView, RelightKind, RelightView, ToneMap, ViewSettings,
+    ViewerError,
 };
 
 fn renderer() -> GpuRenderer {
@@ -729,4 +731,94 @@ fn the_march_pass_follows_the_device() {
         gpu.preferred_march_pass(),
         MarchPass::for_device(info.device_type)
     );
+}
+
+#[test]
+fn a_held_camera_relights_only_what_it_reads() {
+    // An asset with holes (aprons next to missing bricks matter) and a held camera: the
+    // first lighting change there relights in full and marks the voxels the camera reads,
+    // the next ones relight only those, and the image is bit for bit a fresh renderer's
+    // (full relight) and matches the CPU reference; moving the camera then relights in
+    // full, and reading the atlas back gives the fully relit atlas.
+    let asset = without_bricks(
+        &asset_through_file(40_000, 8, CoefficientEncoding::U8Affine, 5),
+        |b| (b[0] + b[1] + 2 * b[2]) % 3 == 0,
+    );
+    let env = sky(64, 32);
+    let cam = camera(96, 80);
+    let moved = PinholeCamera::look_at(
+        DVec3::new(-0.3, 0.05, 0.3),
+        DVec3::new(0.0, 0.01, 0.0),
+        DVec3::Y,
+        96,
+        80,
+        0.65,
+    );
+    let fresh = |camera: &PinholeCamera, angle: f64| {
+        let mut gpu = renderer();
+        gpu.load_asset(&asset).unwrap();
+        gpu.set_lighting(&env, rotation_y(angle)).unwrap();
+        let image = gpu.render(camera, &no_jitter()).unwrap();
+        assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
+        (image, gpu.read_atlas().unwrap())
+    };
+    let mut gpu = renderer();
+    gpu.load_asset(&asset).unwrap();
+    gpu.set_lighting(&env, rotation_y(0.7)).unwrap();
+    gpu.render(&cam, &no_jitter()).unwrap();
+    assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
+    gpu.set_light_rotation(rotation_y(1.2)).unwrap();
+    let got = gpu.render(&cam, &no_jitter()).unwrap();
+    assert_eq!(
+        gpu.last_relight(),
+        Some(RelightKind::Full),
+        "the first change at a held camera"
+    );
+    assert_eq!(got, fresh(&cam, 1.2).0);
+    for angle in [1.9, 3.4] {
+        gpu.set_light_rotation(rotation_y(angle)).unwrap();
+        let got = gpu.render(&cam, &no_jitter()).unwrap();
+        assert_eq!(gpu.last_relight(), Some(RelightKind::Marked));
+        assert_eq!(got, fresh(&cam, angle).0, "marked relight at {angle} rad");
+        let want = render_asset(
+            &asset,
+            &cam,
+            &env,
+            rotation_y(angle),
+            None,
+            &MarchSettings::default(),
+        )
+        .unwrap();
+        let db = psnr(&want, &got);
+        assert!(db >= 45.0, "marked relight at {angle} rad: PSNR {db:.2} dB");
+    }
+    // Jitter moves the samples every frame: always a full relight.
+    gpu.set_light_rotation(rotation_y(3.0)).unwrap();
+    let jittered = ViewSettings {
+        jitter: true,
+        frame_index: 7,
+        ..no_jitter()
+    };
+    gpu.render(&cam, &jittered).unwrap();
+    assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
+    // The held camera's marks are still good once jitter is off.
+    gpu.set_light_rotation(rotation_y(3.4)).unwrap();
+    gpu.render(&cam, &no_jitter()).unwrap();
+    assert_eq!(gpu.last_relight(), Some(RelightKind::Marked));
+    // The atlas was left stale elsewhere: a new camera relights everything.
+    let got = gpu.render(&moved, &no_jitter()).unwrap();
+    assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
+    let (want, want_atlas) = fresh(&moved, 3.4);
+    assert_eq!(got, want);
+    gpu.set_light_rotation(rotation_y(1.0)).unwrap();
+    gpu.render(&moved, &no_jitter()).unwrap();
+    assert_eq!(
+        gpu.last_relight(),
+        Some(RelightKind::Full),
+        "the moved camera is marked now"
+    );
+    gpu.set_light_rotation(rotation_y(3.4)).unwrap();
+    gpu.render(&moved, &no_jitter()).unwrap();
+    assert_eq!(gpu.last_relight(), Some(RelightKind::Marked));
+    assert_eq!(gpu.read_atlas().unwrap(), want_atlas);
 }

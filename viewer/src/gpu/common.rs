@@ -91,9 +91,30 @@ pub(super) fn compute_pipeline(
     entry: &str,
     constants: &[(&str, f64)],
 ) -> wgpu::ComputePipeline {
+    compute_pipeline_layouts(device, &[layout], module, entry, constants)
+}
+
+/// A compute pipeline of `entry` over bind groups 0, 1, … of `layouts` (no constants).
+pub(super) fn compute_pipeline_with_groups(
+    device: &wgpu::Device,
+    layouts: &[&wgpu::BindGroupLayout],
+    module: &wgpu::ShaderModule,
+    entry: &str,
+) -> wgpu::ComputePipeline {
+    compute_pipeline_layouts(device, layouts, module, entry, &[])
+}
+
+fn compute_pipeline_layouts(
+    device: &wgpu::Device,
+    layouts: &[&wgpu::BindGroupLayout],
+    module: &wgpu::ShaderModule,
+    entry: &str,
+    constants: &[(&str, f64)],
+) -> wgpu::ComputePipeline {
+    let groups: Vec<Option<&wgpu::BindGroupLayout>> = layouts.iter().map(|&l| Some(l)).collect();
     let pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
         label: Some(entry),
-        bind_group_layouts: &[Some(layout)],
+        bind_group_layouts: &groups,
         immediate_size: 0,
     });
     device.create_compute_pipeline(&wgpu::ComputePipelineDescriptor {

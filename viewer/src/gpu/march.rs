@@ -100,9 +100,13 @@ pub(super) const MARCH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32
 pub(super) struct MarchPipelines {
     layout: wgpu::BindGroupLayout,
     compute: wgpu::ComputePipeline,
+    /// The compute march with `MARK_VOXELS` (`marks.rs`).
+    compute_marking: wgpu::ComputePipeline,
     counting: wgpu::ComputePipeline,
     fragment_layout: wgpu::BindGroupLayout,
     fragment: wgpu::RenderPipeline,
+    /// The fragment march with `MARK_VOXELS`.
+    fragment_marking: wgpu::RenderPipeline,
     sampler: wgpu::Sampler,
 }
 
@@ -129,6 +133,7 @@ impl MarchPipelines {
                 storage_texture_entry(4, wgpu::TextureFormat::Rgba32Float, D::D2),
                 storage_entry(5, false, S::COMPUTE),
                 texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
+                storage_entry(7, false, S::COMPUTE),
             ],
         });
         let fragment_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
@@ -148,41 +153,50 @@ impl MarchPipelines {
                     count: None,
                 },
                 texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, S::FRAGMENT),
+                storage_entry(7, false, S::FRAGMENT),
             ],
         });
         let module = shader_module(device, "march.wgsl", MARCH_WGSL)?;
         let compute = compute_pipeline(device, &layout, &module, "march", &[]);
         let counting = compute_pipeline(device, &layout, &module, "march", &[("COUNT_SAMPLES", 1.0)]);
+        let compute_marking = compute_pipeline(device, &layout, &module, "march", &[("MARK_VOXELS", 1.0)]);
         let fragment_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("march (fragment)"),
             bind_group_layouts: &[Some(&fragment_layout)],
             immediate_size: 0,
         });
-        let fragment = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-            label: Some("march (fragment)"),
-            layout: Some(&fragment_pipeline_layout),
-            vertex: wgpu::VertexState {
-                module: &module,
-                entry_point: Some("march_vs"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                buffers: &[],
-            },
-            primitive: wgpu::PrimitiveState::default(),
-            depth_stencil: None,
-            multisample: wgpu::MultisampleState::default(),
-            fragment: Some(wgpu::FragmentState {
-                module: &module,
-                entry_point: Some("march_fs"),
-                compilation_options: wgpu::PipelineCompilationOptions::default(),
-                targets: &[Some(wgpu::ColorTargetState {
-                    format: MARCH_FORMAT,
-                    blend: None,
-                    write_mask: wgpu::ColorWrites::ALL,
-                })],
-            }),
-            multiview_mask: None,
-            cache: None,
-        });
+        let fragment_pipeline = |constants: &[(&str, f64)]| {
+            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
+                label: Some("march (fragment)"),
+                layout: Some(&fragment_pipeline_layout),
+                vertex: wgpu::VertexState {
+                    module: &module,
+                    entry_point: Some("march_vs"),
+                    compilation_options: wgpu::PipelineCompilationOptions::default(),
+                    buffers: &[],
+                },
+                primitive: wgpu::PrimitiveState::default(),
+                depth_stencil: None,
+                multisample: wgpu::MultisampleState::default(),
+                fragment: Some(wgpu::FragmentState {
+                    module: &module,
+                    entry_point: Some("march_fs"),
+                    compilation_options: wgpu::PipelineCompilationOptions {
+                        constants,
+                        zero_initialize_workgroup_memory: false,
+                    },
+                    targets: &[Some(wgpu::ColorTargetState {
+                        format: MARCH_FORMAT,
+                        blend: None,
+                        write_mask: wgpu::ColorWrites::ALL,
+                    })],
+                }),
+                multiview_mask: None,
+                cache: None,
+            })
+        };
+        let fragment = fragment_pipeline(&[]);
+        let fragment_marking = fragment_pipeline(&[("MARK_VOXELS", 1.0)]);
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("atlas"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -196,9 +210,11 @@ impl MarchPipelines {
         Ok(Self {
             layout,
             compute,
+            compute_marking,
             counting,
             fragment_layout,
             fragment,
+            fragment_marking,
             sampler,
         })
     }
@@ -242,6 +258,10 @@ impl MarchPipelines {
                     binding: 6,
                     resource: wgpu::BindingResource::TextureView(&asset.march_grid_view),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: asset.marks.voxel_marks.as_entire_binding(),
+                },
             ],
         });
         let march_fragment_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
@@ -264,6 +284,10 @@ impl MarchPipelines {
                     binding: 6,
                     resource: wgpu::BindingResource::TextureView(&asset.march_grid_view),
                 },
+                wgpu::BindGroupEntry {
+                    binding: 7,
+                    resource: asset.marks.voxel_marks.as_entire_binding(),
+                },
             ],
         });
         (march_bind_group, march_fragment_bind_group)
@@ -271,13 +295,15 @@ impl MarchPipelines {
 
     /// Encodes the march into `target` (its uniform already written): the fragment
     /// pipeline for [`MarchPass::Fragment`] unless counting samples, else a compute
-    /// dispatch of 8 × 8 workgroups over the target.
+    /// dispatch of 8 × 8 workgroups over the target; with `mark`, the pipeline that also
+    /// marks the voxels it reads (`marks.rs`; not when counting).
     pub(super) fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
         target: &Target,
         pass_kind: MarchPass,
         count_samples: bool,
+        mark: bool,
     ) {
         if pass_kind == MarchPass::Fragment && !count_samples {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
@@ -296,7 +322,11 @@ impl MarchPipelines {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(&self.fragment);
+            pass.set_pipeline(if mark {
+                &self.fragment_marking
+            } else {
+                &self.fragment
+            });
             pass.set_bind_group(0, &target.march_fragment_bind_group, &[]);
             pass.draw(0..3, 0..1);
             return;
@@ -307,6 +337,8 @@ impl MarchPipelines {
         });
         pass.set_pipeline(if count_samples {
             &self.counting
+        } else if mark {
+            &self.compute_marking
         } else {
             &self.compute
         });

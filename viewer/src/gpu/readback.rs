@@ -184,7 +184,11 @@ impl GpuRenderer {
     /// [`AssetInfo::atlas_texels`]: super::AssetInfo::atlas_texels
     pub fn read_atlas(&mut self) -> Result<Vec<[f32; 4]>, ViewerError> {
         let mut encoder = self.encoder("relight");
-        self.encode_relight_if_needed(&mut encoder)?;
+        // The whole atlas, not only the voxels the last camera reads.
+        if self.atlas_stale {
+            self.relight_dirty = true;
+        }
+        self.encode_relight_if_needed(&mut encoder, false)?;
         if let Some(eye) = self.last_eye {
             self.encode_view_if_needed(&mut encoder, eye)?;
         }

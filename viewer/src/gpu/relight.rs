@@ -20,9 +20,9 @@
 
 use nelf_format::conventions::LT_DIM;
 
-use super::GpuRenderer;
 use super::common::{compute_pipeline, shader_module, storage_entry, storage_texture_entry, uniform_entry};
 use super::view::{VIEW_LIGHT_ENTRIES, voxel_dispatch};
+use super::{GpuRenderer, RelightKind};
 use crate::atlas::{MAX_LOBES, RelightView, fold_light, fold_view_light};
 use crate::error::ViewerError;
 use crate::shaders::{RELIGHT_WGSL, RelightParams};
@@ -51,6 +51,11 @@ impl RelightPipeline {
         let module = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
         let pipeline = compute_pipeline(device, &layout, &module, "relight", &[]);
         Ok(Self { layout, pipeline })
+    }
+
+    /// The layout of the relight bind group (group 0 of the marked relight too).
+    pub(super) fn layout(&self) -> &wgpu::BindGroupLayout {
+        &self.layout
     }
 
     /// The bind group of an asset: `buffers` = (relight params, light, coefficients,
@@ -105,12 +110,16 @@ impl GpuRenderer {
     /// Encodes the relight pass if the lighting, rank or view changed since the last one:
     /// `relight` into the atlas, or for a view-dependent asset showing radiance
     /// `relight_lobes` into its lobe buffer (the view pass then fills the atlas).
+    ///
+    /// With `marked` (the current camera's read voxels are marked, `marks.rs`), only those
+    /// are relit and the rest of the atlas is left stale. Returns how it relit, if it did.
     pub(super) fn encode_relight_if_needed(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
-    ) -> Result<(), ViewerError> {
+        marked: bool,
+    ) -> Result<Option<RelightKind>, ViewerError> {
         if !self.relight_dirty {
-            return Ok(());
+            return Ok(None);
         }
         let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
         let lighting = self.lighting.as_ref().ok_or(ViewerError::NoLighting)?;
@@ -131,6 +140,9 @@ impl GpuRenderer {
             .write_buffer(&asset.light, 0, bytemuck::cast_slice(&components));
         let g = asset.grid.grid_bricks;
         let (groups, per_row) = voxel_dispatch(asset.voxel_count);
+        // `relight` shades four voxels per invocation.
+        let quarter = asset.voxel_count.div_ceil(4);
+        let (quarter_groups, quarter_per_row) = voxel_dispatch(quarter);
         // The view part, when the atlas is to show radiance: its pipeline, bind group and
         // (lobes, rank, words, encoding).
         let lobes = match (&asset.view, &self.pipelines.view, &lighting.view_projected) {
@@ -166,11 +178,18 @@ impl GpuRenderer {
                 0,
             ],
             light_mean: [folded.mean_rgb[0], folded.mean_rgb[1], folded.mean_rgb[2], 0.0],
-            dispatch: [asset.voxel_count as u32, per_row, 0, 0],
+            dispatch: [asset.voxel_count as u32, per_row, quarter as u32, quarter_per_row],
             view: lobes.map_or([0; 4], |(_, _, shape)| shape),
         };
         self.queue
             .write_buffer(&asset.relight_params, 0, bytemuck::bytes_of(&params));
+        if marked && lobes.is_none() {
+            self.encode_marked_relight(encoder)?;
+            self.relight_dirty = false;
+            self.atlas_stale = true;
+            self.last_relight = Some(RelightKind::Marked);
+            return Ok(self.last_relight);
+        }
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("relight"),
             timestamp_writes: None,
@@ -178,15 +197,18 @@ impl GpuRenderer {
         if let Some((pipeline, bind_group, _)) = lobes {
             pass.set_bind_group(0, bind_group, &[]);
             pass.set_pipeline(pipeline);
+            pass.dispatch_workgroups(groups[0], groups[1], 1);
         } else {
             pass.set_bind_group(0, &asset.relight_bind_group, &[]);
             pass.set_pipeline(&self.pipelines.relight.pipeline);
+            pass.dispatch_workgroups(quarter_groups[0], quarter_groups[1], 1);
         }
-        pass.dispatch_workgroups(groups[0], groups[1], 1);
         drop(pass);
         self.relight_dirty = false;
+        self.atlas_stale = false;
+        self.last_relight = Some(RelightKind::Full);
         // The atlas no longer shows radiance toward any eye.
         self.view_eye = None;
-        Ok(())
+        Ok(self.last_relight)
     }
 }
