@@ -254,6 +254,8 @@ struct ViewerApp {
     component: usize,
     rendering: Rendering,
     frame_index: u32,
+    /// The camera the jitter pattern (`frame_index`) was drawn for.
+    jitter_camera: Option<PinholeCamera>,
     frame_ms_smoothed: f32,
     march_size: [u32; 2],
     errors: Vec<String>,
@@ -348,6 +350,7 @@ impl ViewerApp {
                 continuous: false,
             },
             frame_index: 0,
+            jitter_camera: None,
             frame_ms_smoothed: 0.0,
             march_size: [0, 0],
             errors: Vec::new(),
@@ -731,7 +734,13 @@ impl ViewerApp {
             },
             DebugView::Alpha => MarchView::Alpha,
         };
-        self.frame_index = self.frame_index.wrapping_add(1);
+        // A new jitter pattern per camera, not per frame: there is no temporal
+        // accumulation, so a held camera keeps one pattern (no flicker while the lighting
+        // changes) and its relights can stay on the voxels it reads (gpu/marks.rs).
+        if self.jitter_camera != Some(camera) {
+            self.jitter_camera = Some(camera);
+            self.frame_index = self.frame_index.wrapping_add(1);
+        }
         let callback = FrameCallback {
             camera,
             settings: ViewSettings {

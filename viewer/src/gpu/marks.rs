@@ -16,8 +16,9 @@
 //! only on grids of at most [`MAX_MARKED_GRID_VOXELS`] voxels (the marks take 4 bytes a
 //! voxel of the grid box).
 //!
-//! Not for jittered frames (their samples move every frame), debug views, or
-//! view-dependent assets (their view pass rewrites the atlas): those always relight in full.
+//! Jittered frames qualify when the seed stays (the app draws one jitter pattern per
+//! camera); not debug views or view-dependent assets (their view pass rewrites the
+//! atlas): those always relight in full.
 
 use wgpu::util::DeviceExt as _;
 
@@ -180,12 +181,13 @@ impl GpuMarks {
 
 impl GpuRenderer {
     /// The key of the voxels a march of `params` reads, when the marked relight may serve
-    /// it: a view-independent asset, shaded, without jitter; `None` otherwise.
+    /// it: a view-independent asset, shaded; `None` otherwise. The key holds the camera,
+    /// the march settings and the jitter seed (a jittered frame with another seed reads
+    /// other voxels).
     pub(super) fn mark_key(&self, params: &MarchParams, settings: &ViewSettings) -> Option<MarchParams> {
         let asset = self.asset.as_ref()?;
         let eligible = asset.marks.enabled
             && asset.view.is_none()
-            && !settings.jitter
             && settings.view == MarchView::Shaded
             && self.relight_view == RelightView::Shaded;
         eligible.then_some(*params)
