@@ -194,9 +194,9 @@ impl GpuRenderer {
     }
 
     /// Encodes the marked relight (the relight uniform and lighting already written):
-    /// after a marking march the list of marked stored voxels, then the dispatch size from
-    /// the list's count, then one invocation per listed voxel; separate passes, each
-    /// reading what the one before wrote.
+    /// after a marking march the list of marked stored voxels and the dispatch size from
+    /// its count (once per marking), then four listed voxels per invocation; separate
+    /// passes, each reading what the one before wrote.
     pub(super) fn encode_marked_relight(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -212,14 +212,15 @@ impl GpuRenderer {
             pass.set_bind_group(1, &asset.marks.bind_group, &[]);
             pass.forget_lifetime()
         };
+        // The list and its dispatch size change only with the marks.
         if !self.marks_listed {
             encoder.clear_buffer(&asset.marks.list, 0, Some(4));
             let (groups, _) = voxel_dispatch(asset.voxel_count);
-            let mut pass = begin(encoder, "list marked voxels");
-            pass.set_pipeline(&pipelines.list);
-            pass.dispatch_workgroups(groups[0], groups[1], 1);
-        }
-        {
+            {
+                let mut pass = begin(encoder, "list marked voxels");
+                pass.set_pipeline(&pipelines.list);
+                pass.dispatch_workgroups(groups[0], groups[1], 1);
+            }
             let mut pass = begin(encoder, "marked relight size");
             pass.set_bind_group(2, &asset.marks.dispatch_bind_group, &[]);
             pass.set_pipeline(&pipelines.args);
