@@ -220,8 +220,8 @@ impl MarchPipelines {
     }
 
     /// The bind groups of the compute and the fragment march: uniform `march_params`, the
-    /// relit atlas, the march grid, the output `view` (compute only) and the sample
-    /// `counters` (compute only).
+    /// relit atlas, the march grid, the voxel marks (`marks.rs`), the output `view`
+    /// (compute only) and the sample `counters` (compute only).
     pub(super) fn bind_groups(
         &self,
         device: &wgpu::Device,
@@ -230,65 +230,50 @@ impl MarchPipelines {
         view: &wgpu::TextureView,
         counters: &wgpu::Buffer,
     ) -> (wgpu::BindGroup, wgpu::BindGroup) {
+        // Both read the uniform, atlas, sampler, march grid and marks; the compute march
+        // also writes the output view and the counters.
+        let shared = [
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: march_params.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: wgpu::BindingResource::TextureView(&asset.atlas_view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 2,
+                resource: wgpu::BindingResource::Sampler(&self.sampler),
+            },
+            wgpu::BindGroupEntry {
+                binding: 6,
+                resource: wgpu::BindingResource::TextureView(&asset.march_grid_view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 7,
+                resource: asset.marks.voxel_marks.as_entire_binding(),
+            },
+        ];
+        let mut compute_entries = shared.to_vec();
+        compute_entries.extend([
+            wgpu::BindGroupEntry {
+                binding: 4,
+                resource: wgpu::BindingResource::TextureView(view),
+            },
+            wgpu::BindGroupEntry {
+                binding: 5,
+                resource: counters.as_entire_binding(),
+            },
+        ]);
         let march_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("march"),
             layout: &self.layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: march_params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&asset.atlas_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 4,
-                    resource: wgpu::BindingResource::TextureView(view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 5,
-                    resource: counters.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: wgpu::BindingResource::TextureView(&asset.march_grid_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: asset.marks.voxel_marks.as_entire_binding(),
-                },
-            ],
+            entries: &compute_entries,
         });
         let march_fragment_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("march (fragment)"),
             layout: &self.fragment_layout,
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: march_params.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: wgpu::BindingResource::TextureView(&asset.atlas_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 2,
-                    resource: wgpu::BindingResource::Sampler(&self.sampler),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 6,
-                    resource: wgpu::BindingResource::TextureView(&asset.march_grid_view),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 7,
-                    resource: asset.marks.voxel_marks.as_entire_binding(),
-                },
-            ],
+            entries: &shared,
         });
         (march_bind_group, march_fragment_bind_group)
     }
