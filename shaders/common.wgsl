@@ -38,13 +38,6 @@ fn slot_coords(index: u32, packing: SlotPacking) -> vec3<i32> {
 // 0 for none).
 const MARCH_GRID_SLOT_SHIFT: u32 = 8u;
 
-// Stored voxels (brick · 512 + local) a marking march read, each once, and how many
-// (viewer/src/gpu/marks.rs): the relight pass then shades only those.
-struct VoxelList {
-    count: atomic<u32>,
-    voxels: array<u32>,
-}
-
 // Brick-cell coordinates of a stored brick, packed by viewer/src/atlas.rs
 // (`pack_brick_cells`): (x | y << 16, z).
 fn brick_cell(packed: vec2<u32>) -> vec3<i32> {

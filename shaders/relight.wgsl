@@ -206,6 +206,12 @@ fn relight(@builtin(global_invocation_id) gid: vec3<u32>) {
 // lists the marked ones; `relight_marked_args` writes the indirect dispatch size from
 // the count (group 2: the indirect buffer cannot be bound to the dispatch that it sizes);
 // `relight_marked` relights the listed voxels.
+// The marked stored voxels (brick · 512 + local), each once, and how many.
+struct VoxelList {
+    count: atomic<u32>,
+    voxels: array<u32>,
+}
+
 @group(1) @binding(0) var<storage, read_write> marked: VoxelList;
 @group(1) @binding(1) var<storage, read> voxel_marks: array<u32>;
 @group(1) @binding(2) var<storage, read> brick_cells: array<vec2<u32>>;

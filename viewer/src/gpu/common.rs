@@ -82,29 +82,9 @@ pub(super) fn shader_module(
     }))
 }
 
-/// A compute pipeline on one bind group (`layout`) running `entry` of `module`, with
-/// pipeline-overridable `constants`.
+/// A compute pipeline on bind groups 0, 1, … of `layouts` running `entry` of `module`,
+/// with pipeline-overridable `constants`.
 pub(super) fn compute_pipeline(
-    device: &wgpu::Device,
-    layout: &wgpu::BindGroupLayout,
-    module: &wgpu::ShaderModule,
-    entry: &str,
-    constants: &[(&str, f64)],
-) -> wgpu::ComputePipeline {
-    compute_pipeline_layouts(device, &[layout], module, entry, constants)
-}
-
-/// A compute pipeline of `entry` over bind groups 0, 1, … of `layouts` (no constants).
-pub(super) fn compute_pipeline_with_groups(
-    device: &wgpu::Device,
-    layouts: &[&wgpu::BindGroupLayout],
-    module: &wgpu::ShaderModule,
-    entry: &str,
-) -> wgpu::ComputePipeline {
-    compute_pipeline_layouts(device, layouts, module, entry, &[])
-}
-
-fn compute_pipeline_layouts(
     device: &wgpu::Device,
     layouts: &[&wgpu::BindGroupLayout],
     module: &wgpu::ShaderModule,

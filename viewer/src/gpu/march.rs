@@ -157,9 +157,9 @@ impl MarchPipelines {
             ],
         });
         let module = shader_module(device, "march.wgsl", MARCH_WGSL)?;
-        let compute = compute_pipeline(device, &layout, &module, "march", &[]);
-        let counting = compute_pipeline(device, &layout, &module, "march", &[("COUNT_SAMPLES", 1.0)]);
-        let compute_marking = compute_pipeline(device, &layout, &module, "march", &[("MARK_VOXELS", 1.0)]);
+        let compute = compute_pipeline(device, &[&layout], &module, "march", &[]);
+        let counting = compute_pipeline(device, &[&layout], &module, "march", &[("COUNT_SAMPLES", 1.0)]);
+        let compute_marking = compute_pipeline(device, &[&layout], &module, "march", &[("MARK_VOXELS", 1.0)]);
         let fragment_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("march (fragment)"),
             bind_group_layouts: &[Some(&fragment_layout)],

@@ -20,12 +20,10 @@
 //! camera); not debug views or view-dependent assets (their view pass rewrites the
 //! atlas): those always relight in full.
 
-use wgpu::util::DeviceExt as _;
-
-use super::common::{compute_pipeline_with_groups, shader_module, storage_entry};
+use super::common::{compute_pipeline, shader_module, storage_entry};
 use super::view::voxel_dispatch;
 use super::{GpuRenderer, MarchView, RelightPipeline, ViewSettings};
-use crate::atlas::{RelightView, pack_brick_cells};
+use crate::atlas::RelightView;
 use crate::error::ViewerError;
 use crate::shaders::{MarchParams, RELIGHT_WGSL};
 
@@ -68,14 +66,15 @@ impl MarkPipelines {
         });
         let module = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
         let two = [relight.layout(), &layout];
-        let list = compute_pipeline_with_groups(device, &two, &module, "list_marked");
-        let args = compute_pipeline_with_groups(
+        let list = compute_pipeline(device, &two, &module, "list_marked", &[]);
+        let args = compute_pipeline(
             device,
             &[relight.layout(), &layout, &dispatch_layout],
             &module,
             "relight_marked_args",
+            &[],
         );
-        let relight = compute_pipeline_with_groups(device, &two, &module, "relight_marked");
+        let relight = compute_pipeline(device, &two, &module, "relight_marked", &[]);
         Ok(Self {
             layout,
             dispatch_layout,
@@ -87,25 +86,27 @@ impl MarkPipelines {
 }
 
 /// An asset's marks: a word per voxel of the grid box (1 where a marking march read it),
-/// the list of marked stored voxels (a count, then the indices), the bricks' cells and the
-/// indirect dispatch of the marked relight.
+/// the list of marked stored voxels (a count, then the indices) and the indirect dispatch
+/// of the marked relight; its bind group also holds the asset's brick-cell buffer.
 pub(super) struct GpuMarks {
     /// Whether the grid is small enough to mark ([`MAX_MARKED_GRID_VOXELS`]).
     pub(super) enabled: bool,
     pub(super) voxel_marks: wgpu::Buffer,
     list: wgpu::Buffer,
-    brick_cells: wgpu::Buffer,
     dispatch: wgpu::Buffer,
     bind_group: wgpu::BindGroup,
     dispatch_bind_group: wgpu::BindGroup,
 }
 
 impl GpuMarks {
+    /// The marks of an asset of `voxels` stored voxels on a grid of `grid_bricks`, with its
+    /// brick-cell buffer (`crate::atlas::pack_brick_cells`).
     pub(super) fn new(
         device: &wgpu::Device,
         pipelines: &MarkPipelines,
         grid_bricks: [u32; 3],
-        bricks: &[[u16; 3]],
+        voxels: usize,
+        brick_cells: &wgpu::Buffer,
     ) -> Self {
         let grid_voxels = grid_bricks.iter().map(|&n| u64::from(n) * 8).product::<u64>();
         let enabled = grid_voxels <= MAX_MARKED_GRID_VOXELS;
@@ -119,17 +120,8 @@ impl GpuMarks {
         };
         let marked_words = if enabled { grid_voxels } else { 0 };
         let voxel_marks = buffer("voxel marks", marked_words * 4, wgpu::BufferUsages::COPY_DST);
-        let stored = if enabled { bricks.len() as u64 * 512 } else { 0 };
+        let stored = if enabled { voxels as u64 } else { 0 };
         let list = buffer("marked voxels", (stored + 1) * 4, wgpu::BufferUsages::COPY_DST);
-        let mut cells = pack_brick_cells(bricks);
-        if cells.is_empty() {
-            cells.push([0, 0]);
-        }
-        let brick_cells = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("brick cells (marks)"),
-            contents: bytemuck::cast_slice(&cells),
-            usage: wgpu::BufferUsages::STORAGE,
-        });
         let dispatch = buffer("marked dispatch", 12, wgpu::BufferUsages::INDIRECT);
         let bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("marked voxels"),
@@ -161,7 +153,6 @@ impl GpuMarks {
             enabled,
             voxel_marks,
             list,
-            brick_cells,
             dispatch,
             bind_group,
             dispatch_bind_group,
@@ -170,7 +161,7 @@ impl GpuMarks {
 
     /// GPU memory of the marks.
     pub(super) fn bytes(&self) -> u64 {
-        self.voxel_marks.size() + self.list.size() + self.brick_cells.size() + self.dispatch.size()
+        self.voxel_marks.size() + self.list.size() + self.dispatch.size()
     }
 
     /// Clears the marks before a marking march.

@@ -457,14 +457,19 @@ impl GpuRenderer {
             ],
             &atlas_view,
         );
+        // Read by the view pass and the marked relight's listing.
+        let brick_cells = storage(
+            "brick cells",
+            bytemuck::cast_slice(&pack_brick_cells(&asset.bricks)),
+        );
         let view = match (&asset.view, &view_coefficients) {
             (Some(v), Some(packed)) => {
                 if self.pipelines.view.is_none() {
                     self.pipelines.view = Some(ViewPipelines::new(&self.device)?);
                 }
                 let pipelines = self.pipelines.view.as_ref().ok_or(ViewerError::NoAsset)?;
-                let brick_cells = pack_brick_cells(&asset.bricks);
-                let mut view = GpuView::upload(&self.device, v, packed, &brick_cells, voxel_count, storage);
+                let mut view =
+                    GpuView::upload(&self.device, v, packed, brick_cells.clone(), voxel_count, storage);
                 view.bind(
                     &self.device,
                     pipelines,
@@ -478,7 +483,13 @@ impl GpuRenderer {
             }
             _ => None,
         };
-        let marks = GpuMarks::new(&self.device, &self.pipelines.marks, grid_bricks, &asset.bricks);
+        let marks = GpuMarks::new(
+            &self.device,
+            &self.pipelines.marks,
+            grid_bricks,
+            voxel_count,
+            &brick_cells,
+        );
         let memory = GpuMemory {
             atlas_bytes: u64::from(texels[0]) * u64::from(texels[1]) * u64::from(texels[2]) * 8,
             coefficient_bytes: coefficient_buffer.size(),
@@ -486,7 +497,7 @@ impl GpuRenderer {
             march_grid_bytes: march_grid.texels.len() as u64 * 4,
             neighbour_bytes: neighbour_buffer.size(),
             view_bytes: view.as_ref().map_or(0, GpuView::bytes),
-            other_bytes: light.size() + relight_params.size() + marks.bytes(),
+            other_bytes: light.size() + relight_params.size() + brick_cells.size() + marks.bytes(),
         };
         let max_density_per_m = asset.density.iter().map(|d| d.to_f32()).fold(0.0f32, f32::max);
         let info = AssetInfo {

@@ -49,7 +49,7 @@ impl RelightPipeline {
             ],
         });
         let module = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
-        let pipeline = compute_pipeline(device, &layout, &module, "relight", &[]);
+        let pipeline = compute_pipeline(device, &[&layout], &module, "relight", &[]);
         Ok(Self { layout, pipeline })
     }
 

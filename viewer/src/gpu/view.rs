@@ -72,7 +72,7 @@ impl ViewPipelines {
             ],
         });
         let relight = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
-        let lobes = compute_pipeline(device, &lobes_layout, &relight, "relight_lobes", &[]);
+        let lobes = compute_pipeline(device, &[&lobes_layout], &relight, "relight_lobes", &[]);
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("view"),
             entries: &[
@@ -84,7 +84,7 @@ impl ViewPipelines {
             ],
         });
         let module = shader_module(device, "view.wgsl", VIEW_WGSL)?;
-        let view = compute_pipeline(device, &layout, &module, "view", &[]);
+        let view = compute_pipeline(device, &[&layout], &module, "view", &[]);
         Ok(Self {
             lobes_layout,
             lobes,
@@ -119,7 +119,8 @@ pub(super) struct GpuView {
     pub view_params: wgpu::Buffer,
     pub coefficients: wgpu::Buffer,
     pub voxel_lobes: wgpu::Buffer,
-    /// Brick-cell coordinates (`crate::atlas::pack_brick_cells`), for voxel centres.
+    /// Brick-cell coordinates (`crate::atlas::pack_brick_cells`), for voxel centres (the
+    /// asset's one buffer, shared with the marked relight and counted with it).
     pub brick_cells: wgpu::Buffer,
     pub lobes_bind_group: Option<wgpu::BindGroup>,
     pub view_bind_group: Option<wgpu::BindGroup>,
@@ -127,12 +128,13 @@ pub(super) struct GpuView {
 
 impl GpuView {
     /// Uploads `view`'s coefficients (packed as `packed`) and creates the lobe buffer and
-    /// uniforms for `voxels` voxels; the bind groups come with [`GpuView::bind`].
+    /// uniforms for `voxels` voxels (`brick_cells`: the asset's brick-cell buffer); the
+    /// bind groups come with [`GpuView::bind`].
     pub(super) fn upload(
         device: &wgpu::Device,
         view: &ViewDependence,
         packed: &PackedCoefficients,
-        brick_cells: &[[u32; 2]],
+        brick_cells: wgpu::Buffer,
         voxels: usize,
         storage: impl Fn(&str, &[u8]) -> wgpu::Buffer,
     ) -> Self {
@@ -177,7 +179,7 @@ impl GpuView {
             view_params: uniform("view params", size_of::<ViewParams>()),
             coefficients: storage("view coefficients", bytemuck::cast_slice(&packed.words)),
             voxel_lobes,
-            brick_cells: storage("brick cells", bytemuck::cast_slice(brick_cells)),
+            brick_cells,
             lobes_bind_group: None,
             view_bind_group: None,
         }
@@ -185,11 +187,7 @@ impl GpuView {
 
     /// Bytes of GPU memory the view part takes.
     pub(super) fn bytes(&self) -> u64 {
-        self.view_light.size()
-            + self.view_params.size()
-            + self.coefficients.size()
-            + self.voxel_lobes.size()
-            + self.brick_cells.size()
+        self.view_light.size() + self.view_params.size() + self.coefficients.size() + self.voxel_lobes.size()
     }
 
     /// Creates the bind groups of `relight_lobes` and of the view pass.
