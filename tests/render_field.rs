@@ -103,6 +103,7 @@ fn render_field_matches_the_library() {
 
     // Without --weights, --field renders with the shipped network; an asset and
     // --field exclude each other.
+    let shipped_png = dir.path().join("shipped.png");
     succeed(&[
         "render",
         "--field",
@@ -112,8 +113,9 @@ fn render_field_matches_the_library() {
         "--height",
         "8",
         "-o",
-        png.to_str().unwrap(),
+        shipped_png.to_str().unwrap(),
     ]);
+    assert!(shipped_png.is_file());
     let out = nelf(&["render", "some.nelf", "--field", cap, "--weights", weights]);
     assert!(!out.status.success());
 }

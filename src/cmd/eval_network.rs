@@ -96,23 +96,28 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         // The network, over the capture's views reduced to its working size.
         let (prepared, field) = super::bake::network_field(&capture, model.clone())?;
         let provenance = serde_json::json!({ "kind": "nelf-network", "weights": weights_name });
-        let mut network_bake = super::bake::bake_network_field(
-            &capture,
-            &field,
-            &provenance,
-            &config,
-            progress,
-            args.voxel_filter,
-            None,
-        )
-        .with_context(|| format!("baking {} with the network", dir.display()))?;
-        let network_path = args.out.join(format!("capture{index}_network.nelf"));
-        write_bake(&mut network_bake, &config, &network_path)?;
+        // The network's bake with a view policy (`None`: its recommended one), written to
+        // `name` and read back as a viewer would.
+        let network_bake = |view_policy, name: String| -> anyhow::Result<nelf_format::Asset> {
+            let mut output = super::bake::bake_network_field(
+                &capture,
+                &field,
+                &provenance,
+                &config,
+                progress,
+                args.voxel_filter,
+                view_policy,
+            )
+            .with_context(|| format!("baking {} with the network", dir.display()))?;
+            let path = args.out.join(name);
+            write_bake(&mut output, &config, &path)?;
+            Ok(read_asset(&path)?)
+        };
+        let network_asset = network_bake(None, format!("capture{index}_network.nelf"))?;
         let mut truth_bake = bake_capture(&capture, &truth, &config, &progress)
             .with_context(|| format!("baking {} from its ground truth", dir.display()))?;
         let truth_path = args.out.join(format!("capture{index}_truth.nelf"));
         write_bake(&mut truth_bake, &config, &truth_path)?;
-        let network_asset = read_asset(&network_path)?;
         let truth_asset = read_asset(&truth_path)?;
 
         for t in 0..held.len() {
@@ -138,20 +143,11 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             };
             let oracle_view_bake = if args.oracle_view {
                 let policy = nelf_scene::field::ViewPolicy::TowardPoint(camera.centre().as_vec3());
-                let mut output = super::bake::bake_network_field(
-                    &capture,
-                    &field,
-                    &provenance,
-                    &config,
-                    progress,
-                    args.voxel_filter,
+                let asset = network_bake(
                     Some(policy),
+                    format!("capture{index}_network_{}.nelf", held.names[t]),
                 )?;
-                let path = args
-                    .out
-                    .join(format!("capture{index}_network_{}.nelf", held.names[t]));
-                write_bake(&mut output, &config, &path)?;
-                Some(score(&baked(&read_asset(&path)?)?.rgb)?)
+                Some(score(&baked(&asset)?.rgb)?)
             } else {
                 None
             };
