@@ -8,6 +8,7 @@ pub mod atomic;
 pub mod capture;
 pub mod colmap;
 pub mod conventions;
+pub mod envmap_file;
 pub mod error;
 pub mod inspect;
 pub mod read;

@@ -12,88 +12,30 @@
 use std::path::Path;
 
 use nelf_format::conventions::{ENV_H, ENV_W, LatLong, project_envmap, rotation_y};
+use nelf_format::envmap_file::{EnvmapKind, decode_envmap};
 
 use crate::error::SceneError;
 use crate::mesh_io::linear_to_srgb8;
 
-/// A radiance value made usable: NaN, ±∞ and negatives become 0.
-pub fn sanitize_radiance(value: f32) -> f32 {
-    if value.is_finite() && value > 0.0 {
-        value
-    } else {
-        0.0
-    }
-}
+pub use nelf_format::envmap_file::sanitize_radiance;
 
 /// Loads a lat-long environment map from `.exr` (first layer with R, G, B
 /// channels, largest resolution level; any compression the `exr` crate reads,
 /// DWAB included) or `.hdr` (Radiance RGBE), sanitising every texel
-/// ([`sanitize_radiance`]). The extension chooses the reader (any case).
+/// ([`sanitize_radiance`]). The extension chooses the reader (any case); the bytes
+/// are decoded by [`nelf_format::envmap_file::decode_envmap`], as in the web viewer.
 pub fn load_envmap(path: impl AsRef<Path>) -> Result<LatLong, SceneError> {
     let path = path.as_ref();
-    let extension = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
-    let (width, height, texels) = match extension.as_deref() {
-        Some("exr") => read_exr(path)?,
-        Some("hdr") => read_radiance_hdr(path)?,
-        _ => {
-            return Err(SceneError::UnsupportedExtension {
-                path: path.to_path_buf(),
-                expected: ".exr or .hdr",
-            });
-        }
-    };
-    LatLong::new(width, height, texels)
-        .map_err(|e| SceneError::format(path, format!("not a usable lat-long image: {e}")))
-}
-
-/// Pixels of an EXR being read: width, height, row-major RGB.
-struct ExrPixels {
-    width: usize,
-    texels: Vec<[f32; 3]>,
-}
-
-/// Reads the first RGB(A) layer of an OpenEXR file.
-fn read_exr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), SceneError> {
-    let image = exr::prelude::read_first_rgba_layer_from_file(
-        path,
-        |resolution, _channels| ExrPixels {
-            width: resolution.width(),
-            texels: vec![[0.0; 3]; resolution.width() * resolution.height()],
-        },
-        |pixels: &mut ExrPixels, position, (r, g, b, _a): (f32, f32, f32, f32)| {
-            let index = position.y() * pixels.width + position.x();
-            if let Some(texel) = pixels.texels.get_mut(index) {
-                *texel = [r, g, b].map(sanitize_radiance);
-            }
-        },
-    )
-    .map_err(|source| SceneError::Exr {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_default();
+    let kind = EnvmapKind::from_name(&name).map_err(|_| SceneError::UnsupportedExtension {
         path: path.to_path_buf(),
-        source,
+        expected: ".exr or .hdr",
     })?;
-    let size = image.layer_data.size;
-    let pixels = image.layer_data.channel_data.pixels;
-    Ok((size.width(), size.height(), pixels.texels))
-}
-
-/// Reads a Radiance RGBE (`.hdr`) file with the `image` crate.
-fn read_radiance_hdr(path: &Path) -> Result<(usize, usize, Vec<[f32; 3]>), SceneError> {
-    let image = image::ImageReader::open(path)
-        .map_err(|e| SceneError::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| SceneError::io(path, e))?
-        .decode()
-        .map_err(|source| SceneError::Image {
-            path: path.to_path_buf(),
-            source,
-        })?
-        .into_rgb32f();
-    let (width, height) = (image.width() as usize, image.height() as usize);
-    let texels = image.pixels().map(|p| p.0.map(sanitize_radiance)).collect();
-    Ok((width, height, texels))
+    let bytes = std::fs::read(path).map_err(|e| SceneError::io(path, e))?;
+    decode_envmap(&bytes, kind).map_err(|e| SceneError::format(path, e.to_string()))
 }
 
 /// Projects `env` (any resolution, in the world frame) into the 8 × 16 basis of a

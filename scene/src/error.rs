@@ -51,14 +51,6 @@ pub enum SceneError {
         /// The image crate's error.
         source: image::ImageError,
     },
-    /// An OpenEXR file could not be read.
-    #[error("{path}: {source}")]
-    Exr {
-        /// The file.
-        path: PathBuf,
-        /// The exr crate's error.
-        source: exr::error::Error,
-    },
     /// The file parsed but the mesh it describes is invalid.
     #[error("{path}: {source}")]
     Mesh {
