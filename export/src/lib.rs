@@ -14,6 +14,7 @@ pub mod openvdb;
 pub mod shaders;
 pub mod unreal;
 pub mod vdb;
+pub mod web;
 
 use std::path::Path;
 

@@ -45,15 +45,13 @@ pub enum EnvmapKind {
 impl EnvmapKind {
     /// The kind a file name's extension names (any case).
     pub fn from_name(name: &str) -> Result<Self, EnvmapFileError> {
-        let lower = name.to_ascii_lowercase();
-        if lower.ends_with(".exr") {
-            Ok(Self::Exr)
-        } else if lower.ends_with(".hdr") {
-            Ok(Self::RadianceHdr)
-        } else {
-            Err(EnvmapFileError::UnsupportedExtension {
+        let extension = std::path::Path::new(name).extension().and_then(|e| e.to_str());
+        match extension {
+            Some(e) if e.eq_ignore_ascii_case("exr") => Ok(Self::Exr),
+            Some(e) if e.eq_ignore_ascii_case("hdr") => Ok(Self::RadianceHdr),
+            _ => Err(EnvmapFileError::UnsupportedExtension {
                 name: name.to_owned(),
-            })
+            }),
         }
     }
 }

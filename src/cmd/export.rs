@@ -1,5 +1,10 @@
 //! `nelf export shaders -o DIR`: the engine shaders (`nelf_export::shaders`).
 //!
+//! `nelf export web ASSET -o DIR`: a web page showing the asset (`nelf_export::web`):
+//! the embedded web viewer, the asset, its environment map (`--envmap`, default the
+//! built-in studio map) and the start view (`--orbit`, `--rotate-deg`, `--exposure`);
+//! options and report saved as `DIR/export.json`.
+//!
 //! `nelf export vdb ASSET -o head.vdb`: writes a `.nelf` asset as one OpenVDB file
 //! (`nelf_export::write_vdb`): the `density` grid, a colour grid relit under an
 //! environment map (`color` for Blender, `--color-name Cd` for Houdini), and the PCA
@@ -17,6 +22,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Context;
+use nelf_export::web::{WebEnvmap, WebPageOptions};
 use nelf_export::{Compression, Lighting, VdbOptions, VdbReport, write_vdb};
 use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
 use nelf_scene::shot::{LightingArgs, load_lighting};
@@ -37,6 +43,33 @@ pub enum ExportCommand {
     /// The relight, march and display passes as GLSL 4.50 and HLSL (translated from our
     /// WGSL by naga), with `shaders.json` naming entry points and bindings.
     Shaders(ShadersArgs),
+    /// A self-contained web page (the viewer built for WebGPU, the asset, its map) that
+    /// any static file server can host.
+    Web(WebArgs),
+}
+
+/// Options of `nelf export web`.
+#[derive(Debug, Clone, clap::Args, Serialize, Deserialize)]
+pub struct WebArgs {
+    /// The .nelf asset.
+    pub asset: PathBuf,
+    /// Folder to write into (created if needed).
+    #[arg(short, long, default_value = "web-out")]
+    pub out: PathBuf,
+    /// Environment map (.exr or .hdr) the page starts with; default: the built-in studio
+    /// map (`nelf view`'s "studio (procedural)"), written as studio.exr.
+    #[arg(long)]
+    pub envmap: Option<PathBuf>,
+    /// Turn the lighting about +y by this many degrees at start.
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub rotate_deg: f32,
+    /// Orbit camera `AZ,EL[,DIST]` (degrees, degrees, metres) at start; default: the
+    /// viewer's framing of the asset's box.
+    #[arg(long, value_name = "AZ,EL[,DIST]", allow_hyphen_values = true)]
+    pub orbit: Option<String>,
+    /// Exposure at start (stops).
+    #[arg(long, default_value_t = 0.0, allow_hyphen_values = true)]
+    pub exposure: f32,
 }
 
 /// Options of `nelf export shaders`.
@@ -117,7 +150,70 @@ pub fn run(args: &ExportArgs) -> anyhow::Result<()> {
     match &args.command {
         ExportCommand::Vdb(vdb) => run_vdb(vdb),
         ExportCommand::Shaders(shaders) => run_shaders(shaders),
+        ExportCommand::Web(web) => run_web(web),
     }
+}
+
+fn run_web(args: &WebArgs) -> anyhow::Result<()> {
+    let mut start_query = Vec::new();
+    if let Some(orbit) = &args.orbit {
+        start_query.push(format!("orbit={}", nelf_export::web::url_encode(orbit)));
+    }
+    if args.rotate_deg != 0.0 {
+        start_query.push(format!("rotate={}", args.rotate_deg));
+    }
+    if args.exposure != 0.0 {
+        start_query.push(format!("exposure={}", args.exposure));
+    }
+    let start_query = start_query.join("&");
+    // The page parses its parameters the same way: refuse here what it would refuse.
+    nelf_web::params::WebParams::parse(&start_query).context("nelf export web: start view")?;
+    let envmap = match &args.envmap {
+        Some(path) => WebEnvmap::File(path.clone()),
+        None => WebEnvmap::Generated {
+            name: "studio".into(),
+            env: studio_envmap(),
+        },
+    };
+    let options = WebPageOptions {
+        asset: args.asset.clone(),
+        envmap,
+        start_query,
+    };
+    let report = nelf_export::web::write_web_page(&options, &args.out).with_context(|| {
+        format!(
+            "cannot write the web page of {} to {}",
+            args.asset.display(),
+            args.out.display()
+        )
+    })?;
+    let record_path = args.out.join("export.json");
+    let record = serde_json::json!({ "config": args, "report": &report });
+    let text = serde_json::to_string_pretty(&record).context("export record")?;
+    nelf_export::write_atomic(&record_path, text.as_bytes())?;
+    for (name, bytes) in &report.files {
+        println!("  {name}: {bytes} bytes");
+    }
+    println!(
+        "web page written to {} (viewer {} bytes; start: ?{}); serve the folder, e.g. \
+         `python3 -m http.server -d {}`, and open index.html in a WebGPU browser",
+        args.out.display(),
+        report.viewer_bytes,
+        report.defaults,
+        args.out.display()
+    );
+    Ok(())
+}
+
+/// The built-in studio map (`nelf view`'s "studio (procedural)", seed 1).
+fn studio_envmap() -> nelf_format::conventions::LatLong {
+    procedural_envmap(
+        1,
+        &EnvGenParams {
+            family: Some(EnvFamily::Studio),
+            ..EnvGenParams::default()
+        },
+    )
 }
 
 fn run_shaders(args: &ShadersArgs) -> anyhow::Result<()> {
@@ -221,15 +317,8 @@ fn lighting(args: &VdbArgs, asset: &nelf_format::Asset) -> anyhow::Result<Lighti
     {
         return Ok(stored);
     }
-    let studio = procedural_envmap(
-        1,
-        &EnvGenParams {
-            family: Some(EnvFamily::Studio),
-            ..EnvGenParams::default()
-        },
-    );
     Ok(Lighting::world(
-        studio,
+        studio_envmap(),
         rotate_deg,
         "built-in studio map (procedural, seed 1)",
     ))

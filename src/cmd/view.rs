@@ -100,10 +100,7 @@ fn builtin_envmaps(dir: Option<&PathBuf>) -> anyhow::Result<Vec<NamedEnvmap>> {
 
 /// Runs `nelf view`.
 pub fn run(args: &ViewArgs) -> anyhow::Result<()> {
-    let mut config = ViewerConfig::new(
-        args.asset.clone(),
-        Box::new(|path| load_envmap(path).map_err(|e| e.to_string())),
-    );
+    let mut config = ViewerConfig::new(args.asset.clone());
     config.envmap_path.clone_from(&args.envmap);
     config.builtin_envmaps = builtin_envmaps(args.envmap_dir.as_ref())?;
     config.screenshot_path.clone_from(&args.screenshot);

@@ -15,21 +15,28 @@
 //! the `envmap` of a capture folder (`cameras.json`) that holds the asset; else the
 //! first built-in map; else a uniform white sky.
 //!
+//! **Files as bytes.** Assets and maps are read from bytes (`read_asset_bytes`,
+//! `decode_envmap`), so the same app runs natively (paths, dropped files) and in a
+//! browser, where files arrive by fetch or drag-and-drop through
+//! [`ViewerConfig::incoming`]; [`StartView`] sets camera and lighting at start (the web
+//! page's URL parameters) and [`ViewerConfig::on_frame`] reports each frame to the host
+//! (the page writes it into the DOM for tests and timings).
+//!
 //! **Errors never end the app**: an unreadable or damaged asset or environment map, or
 //! a GPU error, is shown in the window (red text) and the app keeps running.
 
 use std::path::{Path, PathBuf};
-use std::sync::mpsc::{Receiver, Sender, channel};
+use std::sync::mpsc::{Receiver, Sender, TryRecvError, channel};
 use std::sync::{Arc, Mutex};
 
 use eframe::egui;
 use eframe::egui_wgpu::{self, CallbackResources, CallbackTrait};
 use glam::DVec3;
 use nelf_format::conventions::{LatLong, PinholeCamera, rotation_y};
+use nelf_format::envmap_file::{EnvmapKind, decode_envmap};
 use nelf_render::MarchSettings;
 
 use crate::atlas::RelightView;
-use crate::error::ViewerError;
 use crate::gpu::{DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewInfo, ViewSettings};
 
 /// A named environment map offered in the picker.
@@ -41,9 +48,80 @@ pub struct NamedEnvmap {
     pub env: LatLong,
 }
 
-/// Loads an environment map file (EXR/HDR) into a lat-long map, or says why not.
-/// The `nelf` command passes `nelf_scene::envmap::load_envmap`.
-pub type EnvmapLoader = Box<dyn Fn(&Path) -> Result<LatLong, String> + Send>;
+/// A file reaching the viewer as bytes after start (the web page's fetches): a `.nelf`
+/// replaces the asset, an `.exr`/`.hdr` becomes the lighting.
+#[derive(Debug, Clone)]
+pub struct IncomingFile {
+    /// File name (its extension says what it is) or URL, shown in messages.
+    pub name: String,
+    /// The bytes, or why they could not be had (e.g. an HTTP error).
+    pub bytes: Result<Vec<u8>, String>,
+}
+
+/// Camera, lighting and display at start (the web page's URL parameters).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StartView {
+    /// Orbit of the first asset: azimuth and elevation (degrees, 0/0 looks from +z at
+    /// the box centre) and distance (metres; `None`: the framing distance).
+    pub orbit: Option<OrbitStart>,
+    /// Rotation of the environment about +y (degrees).
+    pub rotation_deg: f32,
+    /// Exposure (stops).
+    pub exposure_ev: f32,
+    /// Tone curve.
+    pub tone_map: ToneMap,
+    /// Background radiance behind the asset (linear rgb).
+    pub background: [f32; 3],
+    /// Jitter the first sample of each ray.
+    pub jitter: bool,
+    /// Redraw every frame.
+    pub continuous: bool,
+}
+
+impl Default for StartView {
+    fn default() -> Self {
+        Self {
+            orbit: None,
+            rotation_deg: 0.0,
+            exposure_ev: 0.0,
+            tone_map: ToneMap::Aces,
+            background: DisplaySettings::default().background,
+            jitter: true,
+            continuous: false,
+        }
+    }
+}
+
+/// An orbit camera around the asset's box centre, as [`StartView::orbit`] gives it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct OrbitStart {
+    /// Azimuth about +y (degrees; positive moves the eye toward +x).
+    pub azimuth_deg: f64,
+    /// Elevation (degrees; positive looks from above).
+    pub elevation_deg: f64,
+    /// Distance from the box centre (metres); `None`: the framing distance.
+    pub distance_m: Option<f64>,
+}
+
+/// What a frame showed, for the host ([`ViewerConfig::on_frame`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrameReport {
+    /// Frames drawn with an asset so far (0 until an asset and lighting are shown).
+    pub frames_with_asset: u32,
+    /// The 3D view's rectangle in physical pixels: x, y, width, height.
+    pub view_rect_px: [f32; 4],
+    /// The march resolution.
+    pub march_size: [u32; 2],
+    /// The camera of the 3D view, if an asset is shown.
+    pub camera: Option<PinholeCamera>,
+    /// Smoothed frame interval (ms).
+    pub frame_ms: f32,
+    /// Errors shown in the window, oldest first.
+    pub errors: Vec<String>,
+}
+
+/// Called once per frame with its [`FrameReport`].
+pub type FrameHook = Box<dyn FnMut(&FrameReport)>;
 
 /// How to start the viewer.
 pub struct ViewerConfig {
@@ -53,8 +131,12 @@ pub struct ViewerConfig {
     pub envmap_path: Option<PathBuf>,
     /// Built-in maps for the picker (e.g. procedural skies).
     pub builtin_envmaps: Vec<NamedEnvmap>,
-    /// Loader for EXR/HDR files.
-    pub load_envmap: EnvmapLoader,
+    /// Files arriving after start (the web page's fetches).
+    pub incoming: Option<Receiver<IncomingFile>>,
+    /// Camera, lighting and display at start.
+    pub start: StartView,
+    /// Called after every frame (the web page reports frames to the DOM).
+    pub on_frame: Option<FrameHook>,
     /// Save a screenshot of the window here after [`ViewerConfig::screenshot_after_frames`] frames.
     pub screenshot_path: Option<PathBuf>,
     /// Frames drawn before the screenshot is taken.
@@ -71,6 +153,9 @@ impl std::fmt::Debug for ViewerConfig {
             .field("asset_path", &self.asset_path)
             .field("envmap_path", &self.envmap_path)
             .field("builtin_envmaps", &self.builtin_envmaps.len())
+            .field("incoming", &self.incoming.is_some())
+            .field("start", &self.start)
+            .field("on_frame", &self.on_frame.is_some())
             .field("screenshot_path", &self.screenshot_path)
             .field("screenshot_after_frames", &self.screenshot_after_frames)
             .field("exit_after_screenshot", &self.exit_after_screenshot)
@@ -80,13 +165,15 @@ impl std::fmt::Debug for ViewerConfig {
 }
 
 impl ViewerConfig {
-    /// A configuration showing `asset_path` with `load_envmap` as the file loader.
-    pub fn new(asset_path: Option<PathBuf>, load_envmap: EnvmapLoader) -> Self {
+    /// A configuration showing `asset_path` (a file) with the default start view.
+    pub fn new(asset_path: Option<PathBuf>) -> Self {
         Self {
             asset_path,
             envmap_path: None,
             builtin_envmaps: Vec::new(),
-            load_envmap,
+            incoming: None,
+            start: StartView::default(),
+            on_frame: None,
             screenshot_path: None,
             screenshot_after_frames: 3,
             exit_after_screenshot: false,
@@ -96,7 +183,8 @@ impl ViewerConfig {
 }
 
 /// Opens the viewer window and runs until it is closed.
-pub fn run_viewer(config: ViewerConfig) -> Result<(), ViewerError> {
+#[cfg(not(target_arch = "wasm32"))]
+pub fn run_viewer(config: ViewerConfig) -> Result<(), crate::ViewerError> {
     let options = eframe::NativeOptions {
         viewport: egui::ViewportBuilder::default()
             .with_title("nelf view")
@@ -108,9 +196,14 @@ pub fn run_viewer(config: ViewerConfig) -> Result<(), ViewerError> {
     eframe::run_native(
         "nelf view",
         options,
-        Box::new(move |cc| Ok(Box::new(ViewerApp::new(cc, config)))),
+        Box::new(move |cc| Ok(create_app(cc, config))),
     )
-    .map_err(|e| ViewerError::App(e.to_string()))
+    .map_err(|e| crate::ViewerError::App(e.to_string()))
+}
+
+/// Creates the app on eframe's context (the web page's `WebRunner` calls this).
+pub fn create_app(cc: &eframe::CreationContext<'_>, config: ViewerConfig) -> Box<dyn eframe::App> {
+    Box::new(ViewerApp::new(cc, config))
 }
 
 /// GPU state kept in `egui_wgpu`'s callback resources (shared with the paint callback).
@@ -206,6 +299,17 @@ impl Orbit {
         }
     }
 
+    /// The framing of the box, turned and moved as `start` says.
+    fn started(min: [f64; 3], max: [f64; 3], start: OrbitStart) -> Self {
+        let mut orbit = Self::framing(min, max);
+        orbit.yaw_rad = start.azimuth_deg.to_radians();
+        orbit.pitch_rad = start.elevation_deg.to_radians().clamp(-1.5, 1.5);
+        if let Some(d) = start.distance_m.filter(|d| d.is_finite() && *d > 0.0) {
+            orbit.distance_m = d;
+        }
+        orbit
+    }
+
     fn eye(&self) -> DVec3 {
         let (sy, cy) = self.yaw_rad.sin_cos();
         let (sp, cp) = self.pitch_rad.sin_cos();
@@ -235,10 +339,21 @@ struct CurrentEnv {
 struct ViewerApp {
     builtin: Vec<NamedEnvmap>,
     loaded_envs: Vec<NamedEnvmap>,
-    load_envmap: EnvmapLoader,
     env: Option<CurrentEnv>,
+    /// The path field's text (natively; a browser has no paths).
+    #[cfg_attr(target_arch = "wasm32", allow(dead_code))]
     env_path_text: String,
-    asset_path: Option<PathBuf>,
+    /// The shown asset's name (file name or URL).
+    asset_name: Option<String>,
+    incoming: Option<Receiver<IncomingFile>>,
+    /// The orbit of the first asset, until one is shown.
+    start_orbit: Option<OrbitStart>,
+    on_frame: Option<FrameHook>,
+    /// Dropped files read asynchronously (in a browser) arrive here.
+    dropped_sender: Sender<IncomingFile>,
+    dropped_receiver: Receiver<IncomingFile>,
+    frames_with_asset: u32,
+    view_rect_px: [f32; 4],
     asset_rank: usize,
     /// The loaded asset's view-dependent part, if any (shown in the stats line).
     asset_view: Option<ViewInfo>,
@@ -249,6 +364,7 @@ struct ViewerApp {
     auto_rotate_deg_per_s: f32,
     exposure_ev: f32,
     tone_map: ToneMap,
+    background: [f32; 3],
     rank: usize,
     debug_view: DebugView,
     component: usize,
@@ -325,29 +441,37 @@ struct AppliedLighting {
 impl ViewerApp {
     fn new(cc: &eframe::CreationContext<'_>, config: ViewerConfig) -> Self {
         let (screenshot_sender, screenshot_receiver) = channel();
+        let (dropped_sender, dropped_receiver) = channel();
         let mut app = Self {
             builtin: config.builtin_envmaps,
             loaded_envs: Vec::new(),
-            load_envmap: config.load_envmap,
             env: None,
             env_path_text: String::new(),
-            asset_path: None,
+            asset_name: None,
+            incoming: config.incoming,
+            start_orbit: config.start.orbit,
+            on_frame: config.on_frame,
+            dropped_sender,
+            dropped_receiver,
+            frames_with_asset: 0,
+            view_rect_px: [0.0; 4],
             asset_rank: 0,
             asset_view: None,
             max_density_per_m: 1.0,
             orbit: None,
-            rotation_deg: 0.0,
+            rotation_deg: config.start.rotation_deg,
             auto_rotate: false,
             auto_rotate_deg_per_s: 30.0,
-            exposure_ev: 0.0,
-            tone_map: ToneMap::Aces,
+            exposure_ev: config.start.exposure_ev,
+            tone_map: config.start.tone_map,
+            background: config.start.background,
             rank: 0,
             debug_view: DebugView::Shaded,
             component: 0,
             rendering: Rendering {
                 scale: 1.0,
-                jitter: true,
-                continuous: false,
+                jitter: config.start.jitter,
+                continuous: config.start.continuous,
             },
             frame_index: 0,
             jitter_camera: None,
@@ -388,14 +512,18 @@ impl ViewerApp {
                 .errors
                 .push("no wgpu render state: the viewer needs eframe's wgpu renderer".into()),
         }
-        if let Some(path) = config.asset_path {
-            app.load_asset(cc.wgpu_render_state.as_ref(), &path);
+        let mut asset_loaded = false;
+        if let Some(path) = &config.asset_path {
+            asset_loaded = app.load_asset_file(cc.wgpu_render_state.as_ref(), path);
         }
         // Lighting at start: --envmap, else the capture's light beside the asset, else a built-in.
-        let start_env = config
-            .envmap_path
-            .clone()
-            .or_else(|| app.asset_path.as_deref().and_then(capture_light_beside));
+        let start_env = config.envmap_path.clone().or_else(|| {
+            config
+                .asset_path
+                .as_deref()
+                .filter(|_| asset_loaded)
+                .and_then(capture_light_beside)
+        });
         let mut have_env = false;
         if let Some(path) = start_env {
             have_env = app.load_env_file(cc.wgpu_render_state.as_ref(), &path);
@@ -416,46 +544,81 @@ impl ViewerApp {
         renderer.callback_resources.get_mut::<ViewerGpu>().map(f)
     }
 
-    /// Reads and uploads an asset; on any failure keeps the previous one and shows why.
-    fn load_asset(&mut self, state: Option<&egui_wgpu::RenderState>, path: &Path) {
-        let asset = match nelf_format::read_asset(path) {
+    /// Reads a file's bytes, or shows why not.
+    fn read_file(&mut self, path: &Path) -> Option<Vec<u8>> {
+        match std::fs::read(path) {
+            Ok(bytes) => Some(bytes),
+            Err(e) => {
+                self.errors.push(format!("cannot read {}: {e}", path.display()));
+                None
+            }
+        }
+    }
+
+    /// Reads and shows the asset in a file; true on success.
+    fn load_asset_file(&mut self, state: Option<&egui_wgpu::RenderState>, path: &Path) -> bool {
+        self.read_file(path)
+            .is_some_and(|bytes| self.load_asset(state, &path.display().to_string(), &bytes))
+    }
+
+    /// Reads and uploads an asset from its file's bytes; on any failure keeps the
+    /// previous one and shows why. True on success.
+    fn load_asset(&mut self, state: Option<&egui_wgpu::RenderState>, name: &str, bytes: &[u8]) -> bool {
+        let asset = match nelf_format::read_asset_bytes(bytes) {
             Ok(a) => a,
             Err(e) => {
-                self.errors.push(format!("cannot load {}: {e}", path.display()));
-                return;
+                self.errors.push(format!("cannot load {name}: {e}"));
+                return false;
             }
         };
         let result = Self::with_gpu(state, |gpu| gpu.renderer.load_asset(&asset));
         match result {
             Some(Ok(info)) => {
-                self.asset_path = Some(path.to_path_buf());
+                self.asset_name = Some(name.to_owned());
                 self.asset_rank = info.rank;
                 self.asset_view = info.view;
                 self.rank = info.rank;
                 self.component = self.component.min(info.rank.saturating_sub(1));
                 self.max_density_per_m = info.max_density_per_m.max(1e-6);
-                self.orbit = Some(Orbit::framing(asset.grid.bbox_min_m, asset.grid.bbox_max_m()));
+                let (min, max) = (asset.grid.bbox_min_m, asset.grid.bbox_max_m());
+                self.orbit = Some(match self.start_orbit.take() {
+                    Some(start) => Orbit::started(min, max, start),
+                    None => Orbit::framing(min, max),
+                });
                 self.applied = AppliedLighting::default();
                 if let Some(env) = &self.env {
                     let (name, env) = (env.name.clone(), env.env.clone());
                     self.set_env(state, name, env);
                 }
+                true
             }
-            Some(Err(e)) => self.errors.push(format!("cannot show {}: {e}", path.display())),
-            None => self
-                .errors
-                .push(format!("cannot show {}: no GPU renderer", path.display())),
+            Some(Err(e)) => {
+                self.errors.push(format!("cannot show {name}: {e}"));
+                false
+            }
+            None => {
+                self.errors.push(format!("cannot show {name}: no GPU renderer"));
+                false
+            }
         }
     }
 
-    /// Loads an EXR/HDR map with the caller's loader; true on success.
+    /// Loads an EXR/HDR map file; true on success.
     fn load_env_file(&mut self, state: Option<&egui_wgpu::RenderState>, path: &Path) -> bool {
-        match (self.load_envmap)(path) {
+        let name = path.file_name().map_or_else(
+            || path.display().to_string(),
+            |n| n.to_string_lossy().into_owned(),
+        );
+        self.read_file(path)
+            .is_some_and(|bytes| self.load_env(state, &name, &bytes))
+    }
+
+    /// Decodes an EXR/HDR map (`name`'s extension says which) and makes it the
+    /// lighting; true on success.
+    fn load_env(&mut self, state: Option<&egui_wgpu::RenderState>, name: &str, bytes: &[u8]) -> bool {
+        match EnvmapKind::from_name(name).and_then(|kind| decode_envmap(bytes, kind)) {
             Ok(env) => {
-                let name = path.file_name().map_or_else(
-                    || path.display().to_string(),
-                    |n| n.to_string_lossy().into_owned(),
-                );
+                let name = name.rsplit('/').next().unwrap_or(name).to_owned();
                 self.loaded_envs.retain(|e| e.name != name);
                 self.loaded_envs.push(NamedEnvmap {
                     name: name.clone(),
@@ -465,7 +628,7 @@ impl ViewerApp {
             }
             Err(e) => {
                 self.errors
-                    .push(format!("cannot load environment map {}: {e}", path.display()));
+                    .push(format!("cannot load environment map {name}: {e}"));
                 false
             }
         }
@@ -474,7 +637,7 @@ impl ViewerApp {
     /// Makes `env` the lighting (projected at the current rotation); true on success.
     fn set_env(&mut self, state: Option<&egui_wgpu::RenderState>, name: String, env: LatLong) -> bool {
         let rotation = rotation_y(f64::from(self.rotation_deg).to_radians());
-        let has_asset = self.asset_path.is_some();
+        let has_asset = self.asset_name.is_some();
         let result = if has_asset {
             Self::with_gpu(state, |gpu| gpu.renderer.set_lighting(&env, rotation))
         } else {
@@ -497,7 +660,7 @@ impl ViewerApp {
 
     /// Sends rotation, rank and relight-view changes to the renderer.
     fn apply_lighting_changes(&mut self, state: Option<&egui_wgpu::RenderState>) {
-        if self.asset_path.is_none() || self.env.is_none() {
+        if self.asset_name.is_none() || self.env.is_none() {
             return;
         }
         let view = if self.debug_view == DebugView::Component {
@@ -531,38 +694,69 @@ impl ViewerApp {
         self.applied = wanted;
     }
 
-    fn handle_dropped_files(&mut self, ctx: &egui::Context, state: Option<&egui_wgpu::RenderState>) {
-        let dropped: Vec<PathBuf> = ctx.input(|i| {
-            i.raw
-                .dropped_files
-                .iter()
-                .map(|f| f.path().to_path_buf())
-                .collect()
-        });
-        for path in dropped {
-            let ext = path
-                .extension()
-                .map(|e| e.to_string_lossy().to_ascii_lowercase())
-                .unwrap_or_default();
-            if ext == "nelf" {
-                self.load_asset(state, &path);
-            } else {
-                self.load_env_file(state, &path);
+    /// Files dropped on the window (natively paths, in a browser bytes) and files the
+    /// host sent ([`ViewerConfig::incoming`]).
+    fn handle_new_files(&mut self, ctx: &egui::Context, state: Option<&egui_wgpu::RenderState>) {
+        let dropped: Vec<egui::DroppedFileHandle> = ctx.input(|i| i.raw.dropped_files.clone());
+        for file in dropped {
+            let name = file.path().display().to_string();
+            #[cfg(not(target_arch = "wasm32"))]
+            let _ = self.dropped_sender.send(IncomingFile {
+                name,
+                bytes: file.bytes(),
+            });
+            // A browser reads a dropped file asynchronously: it arrives on a later frame.
+            #[cfg(target_arch = "wasm32")]
+            {
+                let sender = self.dropped_sender.clone();
+                let waker = ctx.clone();
+                wasm_bindgen_futures::spawn_local(async move {
+                    let bytes = file.bytes_async().await;
+                    let _ = sender.send(IncomingFile { name, bytes });
+                    waker.request_repaint();
+                });
+            }
+        }
+        let mut files: Vec<IncomingFile> = self.dropped_receiver.try_iter().collect();
+        if let Some(receiver) = &self.incoming {
+            loop {
+                match receiver.try_recv() {
+                    Ok(file) => files.push(file),
+                    Err(TryRecvError::Empty) => {
+                        // More may come (a fetch in flight): look again soon.
+                        ctx.request_repaint_after(std::time::Duration::from_millis(50));
+                        break;
+                    }
+                    Err(TryRecvError::Disconnected) => {
+                        self.incoming = None;
+                        break;
+                    }
+                }
+            }
+        }
+        for file in files {
+            match file.bytes {
+                Err(e) => self.errors.push(format!("cannot load {}: {e}", file.name)),
+                Ok(bytes) if file.name.to_ascii_lowercase().ends_with(".nelf") => {
+                    self.load_asset(state, &file.name, &bytes);
+                }
+                Ok(bytes) => {
+                    self.load_env(state, &file.name, &bytes);
+                }
             }
         }
     }
 
     fn controls(&mut self, ui: &mut egui::Ui, state: Option<&egui_wgpu::RenderState>) {
         ui.heading("nelf view");
-        match &self.asset_path {
-            Some(p) => ui.label(format!(
+        match &self.asset_name {
+            Some(name) => ui.label(format!(
                 "asset: {}",
-                p.file_name()
-                    .map_or_else(String::new, |n| n.to_string_lossy().into_owned())
+                name.rsplit(['/', '\\']).next().unwrap_or(name)
             )),
             None => ui.label("no asset: drop a .nelf file here"),
         };
-        if self.asset_path.is_some() {
+        if self.asset_name.is_some() {
             ui.label(asset_stats(self.asset_rank, self.asset_view));
         }
         ui.label(format!(
@@ -593,6 +787,7 @@ impl ViewerApp {
         if let Some(e) = choice {
             self.set_env(state, e.name, e.env);
         }
+        #[cfg(not(target_arch = "wasm32"))]
         ui.horizontal(|ui| {
             ui.add(
                 egui::TextEdit::singleline(&mut self.env_path_text)
@@ -653,6 +848,7 @@ impl ViewerApp {
         ui.add(egui::Slider::new(&mut self.rendering.scale, 0.25..=1.0).text("resolution scale"));
         ui.checkbox(&mut self.rendering.jitter, "jitter samples");
         ui.checkbox(&mut self.rendering.continuous, "redraw continuously (frame time)");
+        #[cfg(not(target_arch = "wasm32"))]
         if ui.button("Screenshot (F12)").clicked() {
             self.request_screenshot(ui.ctx(), None);
         }
@@ -665,6 +861,26 @@ impl ViewerApp {
                 self.errors.clear();
             }
         }
+    }
+
+    /// Tells the host what this frame showed.
+    fn report_frame(&mut self) {
+        let shown = self.gpu_ok && self.asset_name.is_some() && self.env.is_some() && self.orbit.is_some();
+        if shown {
+            self.frames_with_asset = self.frames_with_asset.saturating_add(1);
+        }
+        let Some(hook) = self.on_frame.as_mut() else {
+            return;
+        };
+        let [width, height] = self.march_size;
+        hook(&FrameReport {
+            frames_with_asset: self.frames_with_asset,
+            view_rect_px: self.view_rect_px,
+            march_size: self.march_size,
+            camera: self.orbit.filter(|_| shown).map(|o| o.camera(width, height)),
+            frame_ms: self.frame_ms_smoothed,
+            errors: self.errors.clone(),
+        });
     }
 
     fn request_screenshot(&mut self, ctx: &egui::Context, path: Option<PathBuf>) {
@@ -699,6 +915,13 @@ impl ViewerApp {
 
     fn viewport(&mut self, ui: &mut egui::Ui) {
         let rect = ui.available_rect_before_wrap();
+        let ppp = ui.ctx().pixels_per_point();
+        self.view_rect_px = [
+            rect.min.x * ppp,
+            rect.min.y * ppp,
+            rect.width() * ppp,
+            rect.height() * ppp,
+        ];
         let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
         let Some(orbit) = self.orbit.as_mut() else {
             ui.centered_and_justified(|ui| {
@@ -722,7 +945,6 @@ impl ViewerApp {
             let zoom = ui.input(egui::InputState::zoom_delta);
             orbit.distance_m *= (-f64::from(scroll) * 0.002).exp() / f64::from(zoom.max(1e-3));
         }
-        let ppp = ui.ctx().pixels_per_point();
         let width = ((rect.width() * ppp * self.rendering.scale).round() as u32).max(1);
         let height = ((rect.height() * ppp * self.rendering.scale).round() as u32).max(1);
         self.march_size = [width, height];
@@ -753,7 +975,7 @@ impl ViewerApp {
             display: DisplaySettings {
                 exposure_ev: self.exposure_ev,
                 tone_map: self.tone_map,
-                ..DisplaySettings::default()
+                background: self.background,
             },
         };
         ui.painter()
@@ -779,7 +1001,7 @@ impl eframe::App for ViewerApp {
         if self.rendering.continuous {
             ctx.request_repaint();
         }
-        self.handle_dropped_files(&ctx, state);
+        self.handle_new_files(&ctx, state);
         if self.auto_rotate {
             self.rotation_deg += self.auto_rotate_deg_per_s * dt.min(0.1);
             if self.rotation_deg > 180.0 {
@@ -815,6 +1037,7 @@ impl eframe::App for ViewerApp {
             }
         });
         self.save_screenshots(&ctx);
+        self.report_frame();
         self.screenshots.frames_shown = self.screenshots.frames_shown.saturating_add(1);
         if let Some(path) = self.screenshots.path.clone()
             && !self.screenshots.requested

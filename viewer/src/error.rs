@@ -43,6 +43,12 @@ pub enum ViewerError {
     /// The window or event loop failed.
     #[error("viewer window: {0}")]
     App(String),
+    /// The device cannot run the viewer's passes (WebGL2).
+    #[error(
+        "this GPU device has no compute shaders or storage buffers (WebGL2 gives none): the \
+         viewer's relight and march passes need them; use a WebGPU browser or the native viewer"
+    )]
+    NoCompute,
     /// A shader failed to preprocess (a bug: shaders are embedded).
     #[error("shader: {0}")]
     Shader(#[from] crate::shaders::PreprocessError),

@@ -22,7 +22,11 @@ pub mod error;
 pub mod gpu;
 pub mod shaders;
 
-pub use app::{NamedEnvmap, ViewerConfig, run_viewer};
+#[cfg(not(target_arch = "wasm32"))]
+pub use app::run_viewer;
+pub use app::{
+    FrameHook, FrameReport, IncomingFile, NamedEnvmap, OrbitStart, StartView, ViewerConfig, create_app,
+};
 pub use atlas::{GpuMemory, RelightView};
 pub use error::ViewerError;
 pub use gpu::{

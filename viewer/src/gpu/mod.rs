@@ -243,7 +243,17 @@ impl GpuRenderer {
 
     /// A renderer on an existing device (the app passes eframe's). Needs only WebGPU's
     /// default features and limits.
+    ///
+    /// A device without compute shaders or storage buffers (WebGL2) is refused with
+    /// [`ViewerError::NoCompute`] before any pipeline is made: creating a compute pipeline
+    /// there is a fatal validation error.
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Result<Self, ViewerError> {
+        let limits = device.limits();
+        if limits.max_compute_invocations_per_workgroup == 0
+            || limits.max_storage_buffers_per_shader_stage == 0
+        {
+            return Err(ViewerError::NoCompute);
+        }
         let pipelines = Pipelines::new(&device)?;
         let uniform = |label: &str, size: usize| {
             device.create_buffer(&wgpu::BufferDescriptor {

@@ -1,0 +1,277 @@
+//! The web viewer in a real browser. `nelf export web` writes the page of the shared head
+//! scan (a real scan: open neck, holes, thin parts; baked small) under a real HDRI; a
+//! local static server hosts it; headless Chromium, driven by Playwright
+//! (`web/tests/shoot.mjs`), opens it and waits for its frames:
+//!
+//! * on WebGPU the page's frame equals `nelf render` (the CPU reference) of the same
+//!   camera (the page reports it) and lighting: PSNR ≥ 35 dB on 8-bit sRGB;
+//! * on WebGL2 (WebGPU off) the page says that it needs WebGPU (no compute shaders);
+//! * a damaged asset shows its error on the page;
+//! * the committed page (`web/dist`, which `nelf` embeds) is what `scripts/build_web.sh`
+//!   builds from these sources.
+//!
+//! Needs Chromium (`/usr/bin/chromium` or `$CHROMIUM`), Node with `web/tests`'s packages
+//! (`npm ci` there), the wasm32 target and wasm-bindgen-cli; `.ci/run` installs them.
+#![allow(clippy::unwrap_used, clippy::expect_used)]
+
+use std::io::{BufRead as _, BufReader, Write as _};
+use std::net::TcpListener;
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Serves `dir` over HTTP on a free loopback port (one thread per connection, GET
+/// only); returns the base URL.
+fn serve(dir: PathBuf) -> String {
+    let listener = TcpListener::bind("127.0.0.1:0").unwrap();
+    let port = listener.local_addr().unwrap().port();
+    std::thread::spawn(move || {
+        for stream in listener.incoming().flatten() {
+            let dir = dir.clone();
+            std::thread::spawn(move || {
+                let mut reader = BufReader::new(&stream);
+                let mut request = String::new();
+                if reader.read_line(&mut request).is_err() {
+                    return;
+                }
+                let mut line = String::new();
+                while reader.read_line(&mut line).is_ok_and(|n| n > 2) {
+                    line.clear();
+                }
+                let target = request.split_whitespace().nth(1).unwrap_or("/");
+                let path = target
+                    .split(['?', '#'])
+                    .next()
+                    .unwrap_or("/")
+                    .trim_start_matches('/');
+                let file = dir.join(if path.is_empty() { "index.html" } else { path });
+                let mut out = &stream;
+                match std::fs::read(&file) {
+                    Ok(body) if !path.contains("..") => {
+                        let kind = match file.extension().and_then(|e| e.to_str()) {
+                            Some("html") => "text/html; charset=utf-8",
+                            Some("js") => "text/javascript",
+                            Some("wasm") => "application/wasm",
+                            _ => "application/octet-stream",
+                        };
+                        let head = format!(
+                            "HTTP/1.1 200 OK\r\nContent-Type: {kind}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+                            body.len()
+                        );
+                        let _ = out.write_all(head.as_bytes()).and_then(|()| out.write_all(&body));
+                    }
+                    _ => {
+                        let _ = out.write_all(
+                            b"HTTP/1.1 404 Not Found\r\nContent-Length: 0\r\nConnection: close\r\n\r\n",
+                        );
+                    }
+                }
+            });
+        }
+    });
+    format!("http://127.0.0.1:{port}")
+}
+
+/// Runs `shoot.mjs` on `url` with `backend`; returns its report (JSON) and output folder.
+fn shoot(url: &str, backend: &str, out: &Path) -> serde_json::Value {
+    let tests = repo().join("web/tests");
+    assert!(
+        tests.join("node_modules/playwright-core").is_dir(),
+        "Playwright is missing: run `npm ci` in {} (.ci/run does)",
+        tests.display()
+    );
+    let result = Command::new("node")
+        .arg(tests.join("shoot.mjs"))
+        .args([url, &out.display().to_string(), backend])
+        .output()
+        .expect("cannot run node (Node.js is needed for the browser tests)");
+    assert!(
+        result.status.success(),
+        "shoot.mjs {backend} {url}: {}\n{}",
+        String::from_utf8_lossy(&result.stdout),
+        String::from_utf8_lossy(&result.stderr)
+    );
+    let text = std::fs::read_to_string(out.join("report.json")).unwrap();
+    serde_json::from_str(&text).unwrap()
+}
+
+fn nelf(args: &[&std::ffi::OsStr]) {
+    let out = Command::new(env!("CARGO_BIN_EXE_nelf"))
+        .args(args)
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "nelf {args:?}: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
+/// PSNR (dB) of two 8-bit RGB images over the pixels `keep` selects.
+fn psnr_u8(a: &image::RgbImage, b: &image::RgbImage, keep: impl Fn(&[u8; 3], &[u8; 3]) -> bool) -> f64 {
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (p, q) in a.pixels().zip(b.pixels()) {
+        if keep(&p.0, &q.0) {
+            for c in 0..3 {
+                let d = f64::from(p.0[c]) - f64::from(q.0[c]);
+                sum += d * d;
+            }
+            n += 3;
+        }
+    }
+    let mse = sum / n.max(1) as f64;
+    10.0 * (255.0 * 255.0 / mse.max(1e-12)).log10()
+}
+
+#[test]
+fn the_exported_page_draws_the_scan_like_nelf_render_on_webgpu_and_explains_webgl2() {
+    let data = repo().join("data");
+    let mesh = data.join("meshes/head.off");
+    let env_path = data.join("envmaps/studio.exr");
+    for path in [&mesh, &env_path] {
+        assert!(
+            path.is_file(),
+            "missing test data {} (see data/README.md)",
+            path.display()
+        );
+    }
+    let dir = tempfile::tempdir().unwrap();
+    let asset = dir.path().join("scan.nelf");
+    nelf(&[
+        "bake".as_ref(),
+        "mesh".as_ref(),
+        mesh.as_os_str(),
+        "--resolution".as_ref(),
+        "40".as_ref(),
+        "--view-dependence".as_ref(),
+        "off".as_ref(),
+        "--render-size".as_ref(),
+        "32".as_ref(),
+        "--rank".as_ref(),
+        "8".as_ref(),
+        "--quiet".as_ref(),
+        "-o".as_ref(),
+        asset.as_os_str(),
+    ]);
+    let site = dir.path().join("site");
+    nelf(&[
+        "export".as_ref(),
+        "web".as_ref(),
+        asset.as_os_str(),
+        "--envmap".as_ref(),
+        env_path.as_os_str(),
+        "--rotate-deg".as_ref(),
+        "40".as_ref(),
+        "--orbit".as_ref(),
+        "25,10".as_ref(),
+        "-o".as_ref(),
+        site.as_os_str(),
+    ]);
+    for name in [
+        "index.html",
+        "nelf_web.js",
+        "nelf_web_bg.wasm",
+        "scan.nelf",
+        "studio.exr",
+        "export.json",
+    ] {
+        assert!(site.join(name).is_file(), "export web wrote no {name}");
+    }
+    // A damaged copy of the asset (truncated) beside it, for the error check.
+    let bytes = std::fs::read(&asset).unwrap();
+    std::fs::write(site.join("damaged.nelf"), &bytes[..bytes.len() / 2]).unwrap();
+    let base = serve(site.clone());
+
+    // WebGPU: the page's defaults (asset, map, rotation, orbit) plus a linear tone curve,
+    // a black background and no jitter, so that the frame is what `nelf render` writes.
+    let shots = dir.path().join("webgpu");
+    let report = shoot(
+        &format!("{base}/index.html?tonemap=linear&background=0,0,0&jitter=0"),
+        "webgpu",
+        &shots,
+    );
+    let page = &report["data"];
+    assert_eq!(page["nelfError"], "", "the page reported an error: {report:#}");
+    let camera = page["nelfCamera"].as_str().expect("the page reported no camera");
+    let camera_path = dir.path().join("camera.json");
+    std::fs::write(&camera_path, camera).unwrap();
+    let reference = dir.path().join("reference.png");
+    nelf(&[
+        "render".as_ref(),
+        asset.as_os_str(),
+        "--camera".as_ref(),
+        camera_path.as_os_str(),
+        "--envmap".as_ref(),
+        env_path.as_os_str(),
+        "--rotate-deg".as_ref(),
+        "40".as_ref(),
+        "-o".as_ref(),
+        reference.as_os_str(),
+    ]);
+    let want = image::open(&reference).unwrap().to_rgb8();
+    let got = image::open(shots.join("view.png")).unwrap().to_rgb8();
+    assert_eq!(got.dimensions(), want.dimensions(), "screenshot vs render size");
+    let whole = psnr_u8(&got, &want, |_, _| true);
+    let foreground = psnr_u8(&got, &want, |p, q| p.iter().chain(q).any(|&v| v > 0));
+    // The trivial baseline on the same view: black everywhere.
+    let black = image::RgbImage::new(want.width(), want.height());
+    let baseline = psnr_u8(&black, &want, |_, _| true);
+    eprintln!(
+        "web (WebGPU, SwiftShader) vs nelf render: {whole:.2} dB whole image, {foreground:.2} dB \
+         foreground; black image {baseline:.2} dB; first frame {} ms after start",
+        page["nelfFirstFrameMs"]
+    );
+    assert!(
+        whole >= 35.0 && foreground >= 35.0,
+        "web vs nelf render: {whole:.2} / {foreground:.2} dB"
+    );
+
+    // WebGL2: no compute shaders, so the page says it needs WebGPU instead of drawing.
+    let report = shoot(
+        &format!("{base}/index.html"),
+        "webgl2",
+        &dir.path().join("webgl2"),
+    );
+    let error = format!("{} {}", report["data"]["nelfError"], report["message"]);
+    assert!(error.contains("WebGPU"), "WebGL2 page: {report:#}");
+
+    // A damaged asset: its error is on the page.
+    let report = shoot(
+        &format!("{base}/index.html?asset=damaged.nelf"),
+        "webgpu",
+        &dir.path().join("damaged"),
+    );
+    let error = report["data"]["nelfError"]
+        .as_str()
+        .unwrap_or_default()
+        .to_owned();
+    assert!(error.contains("damaged.nelf"), "damaged asset: {report:#}");
+}
+
+#[test]
+fn the_committed_web_page_is_built_from_these_sources() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = Command::new("bash")
+        .arg(repo().join("scripts/build_web.sh"))
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(
+        out.status.success(),
+        "scripts/build_web.sh failed:\n{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for name in ["index.html", "nelf_web.js", "nelf_web_bg.wasm"] {
+        let built = std::fs::read(dir.path().join(name)).unwrap();
+        let committed = std::fs::read(repo().join("web/dist").join(name)).unwrap();
+        assert!(
+            built == committed,
+            "web/dist/{name} differs from a fresh build ({} vs {} bytes): run scripts/build_web.sh and commit web/dist",
+            committed.len(),
+            built.len()
+        );
+    }
+}

@@ -1,0 +1,67 @@
+// Opens a page of the web viewer in headless Chromium, waits for its first frames (or an
+// error) and writes what it saw: `<out>/report.json` (the page's data-nelf-* report, the
+// backend, timings) and `<out>/view.png` (a screenshot of the 3D view's rectangle).
+//
+//   node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS]
+//
+// webgpu: Chromium's WebGPU on SwiftShader (Vulkan); webgl2: WebGPU off, so the page
+// gets WebGL2 only. --fps: after the screenshot, count frames for SECONDS of real time
+// (the URL should say continuous=1).
+import { chromium } from "playwright-core";
+import { mkdirSync, writeFileSync } from "node:fs";
+import { join } from "node:path";
+
+const [url, outDir, backend, ...rest] = process.argv.slice(2);
+if (!url || !outDir || !["webgpu", "webgl2"].includes(backend)) {
+  console.error("usage: node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS]");
+  process.exit(2);
+}
+const fpsSeconds = rest[0] === "--fps" ? Number(rest[1]) : 0;
+const base = [
+  "--headless", "--no-sandbox", "--disable-quic", "--no-first-run",
+  "--disable-background-networking", "--disable-component-update", "--disable-sync",
+  "--window-size=1024,768",
+];
+const gpu = backend === "webgpu"
+  ? ["--enable-unsafe-webgpu", "--enable-features=Vulkan", "--use-vulkan=swiftshader", "--use-angle=swiftshader"]
+  : ["--disable-features=WebGPU", "--use-angle=swiftshader"];
+const browser = await chromium.launch({
+  executablePath: process.env.CHROMIUM || "/usr/bin/chromium",
+  args: [...base, ...gpu],
+});
+const report = { url, backend };
+try {
+  const page = await browser.newPage({ viewport: { width: 1024, height: 768 }, deviceScaleFactor: 1 });
+  const console_lines = [];
+  page.on("console", (m) => console_lines.push(`${m.type()}: ${m.text()}`));
+  page.on("pageerror", (e) => console_lines.push(`pageerror: ${e.message}`));
+  const t0 = Date.now();
+  await page.goto(url);
+  // Three frames with the asset shown, or an error on the page.
+  await page.waitForFunction(
+    () => Number(document.body.dataset.nelfFrames || 0) >= 3 || (document.body.dataset.nelfError || "") !== "",
+    null,
+    { timeout: 240000, polling: 100 },
+  );
+  report.wait_ms = Date.now() - t0;
+  report.data = await page.evaluate(() => ({ ...document.body.dataset }));
+  report.message = await page.evaluate(() => document.getElementById("nelf_message")?.textContent || "");
+  if (report.data.nelfRect && !report.data.nelfError) {
+    const [x, y, width, height] = report.data.nelfRect.split(",").map(Number);
+    await page.screenshot({ path: join(outDir, "view.png"), clip: { x, y, width, height } });
+    if (fpsSeconds > 0) {
+      const before = Number(await page.evaluate(() => document.body.dataset.nelfFrames));
+      const start = Date.now();
+      await page.waitForTimeout(fpsSeconds * 1000);
+      const after = Number(await page.evaluate(() => document.body.dataset.nelfFrames));
+      report.fps = (after - before) / ((Date.now() - start) / 1000);
+      report.frame_ms = await page.evaluate(() => document.body.dataset.nelfFrameMs);
+    }
+  }
+  report.console = console_lines;
+} finally {
+  await browser.close();
+}
+mkdirSync(outDir, { recursive: true });
+writeFileSync(join(outDir, "report.json"), JSON.stringify(report, null, 2));
+console.log(JSON.stringify(report.data || {}));
