@@ -19,11 +19,15 @@ if [ "$have_version" != "$lock_version" ]; then
     "run: cargo install wasm-bindgen-cli --version =$lock_version" >&2
   exit 1
 fi
-export CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUSTFLAGS="--remap-path-prefix=$root=/nelf --remap-path-prefix=$cargo_home=/cargo"
+remap="--remap-path-prefix=$root=/nelf --remap-path-prefix=$cargo_home=/cargo"
+if [ -n "${CARGO_TARGET_DIR:-}" ]; then
+  remap="$remap --remap-path-prefix=$(cd "$CARGO_TARGET_DIR" 2>/dev/null && pwd || echo "$CARGO_TARGET_DIR")=/nelf/target"
+fi
+export CARGO_TARGET_WASM32_UNKNOWN_UNKNOWN_RUSTFLAGS="$remap"
 export CC_wasm32_unknown_unknown="${CC_wasm32_unknown_unknown:-clang}"
 cargo build --release --locked --target wasm32-unknown-unknown -p nelf-web
 mkdir -p "$out"
 wasm-bindgen --target web --no-typescript --remove-name-section --out-dir "$out" \
-  target/wasm32-unknown-unknown/release/nelf_web.wasm
+  "${CARGO_TARGET_DIR:-$root/target}/wasm32-unknown-unknown/release/nelf_web.wasm"
 cp web/index.html "$out/index.html"
 ls -l "$out"
