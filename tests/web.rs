@@ -75,8 +75,9 @@ fn serve(dir: PathBuf) -> String {
     format!("http://127.0.0.1:{port}")
 }
 
-/// Runs `shoot.mjs` on `url` with `backend`; returns its report (JSON) and output folder.
-fn shoot(url: &str, backend: &str, out: &Path) -> serde_json::Value {
+/// Runs `shoot.mjs` on `url` with `backend` (and its further options); returns its
+/// report (JSON).
+fn shoot(url: &str, backend: &str, out: &Path, options: &[&str]) -> serde_json::Value {
     let tests = repo().join("web/tests");
     assert!(
         tests.join("node_modules/playwright-core").is_dir(),
@@ -86,6 +87,7 @@ fn shoot(url: &str, backend: &str, out: &Path) -> serde_json::Value {
     let result = Command::new("node")
         .arg(tests.join("shoot.mjs"))
         .args([url, &out.display().to_string(), backend])
+        .args(options)
         .output()
         .expect("cannot run node (Node.js is needed for the browser tests)");
     assert!(
@@ -192,6 +194,7 @@ fn the_exported_page_draws_the_scan_like_nelf_render_on_webgpu_and_explains_webg
         &format!("{base}/index.html?tonemap=linear&background=0,0,0&jitter=0"),
         "webgpu",
         &shots,
+        &[],
     );
     let page = &report["data"];
     assert_eq!(page["nelfError"], "", "the page reported an error: {report:#}");
@@ -234,21 +237,77 @@ fn the_exported_page_draws_the_scan_like_nelf_render_on_webgpu_and_explains_webg
         &format!("{base}/index.html"),
         "webgl2",
         &dir.path().join("webgl2"),
+        &[],
     );
     let error = format!("{} {}", report["data"]["nelfError"], report["message"]);
     assert!(error.contains("WebGPU"), "WebGL2 page: {report:#}");
 
-    // A damaged asset: its error is on the page.
+    // A damaged asset, named by the link or dropped on the page: its error is on the page.
+    let page_error = |report: &serde_json::Value| {
+        report["data"]["nelfError"]
+            .as_str()
+            .unwrap_or_default()
+            .to_owned()
+    };
     let report = shoot(
         &format!("{base}/index.html?asset=damaged.nelf"),
         "webgpu",
         &dir.path().join("damaged"),
+        &[],
     );
-    let error = report["data"]["nelfError"]
-        .as_str()
-        .unwrap_or_default()
-        .to_owned();
-    assert!(error.contains("damaged.nelf"), "damaged asset: {report:#}");
+    assert!(
+        page_error(&report).contains("damaged.nelf"),
+        "damaged asset by URL: {report:#}"
+    );
+    let damaged = site.join("damaged.nelf").display().to_string();
+    let report = shoot(
+        &format!("{base}/index.html?continuous=1"),
+        "webgpu",
+        &dir.path().join("dropped"),
+        &["--drop", &damaged],
+    );
+    assert!(
+        report["dropped"] == "damaged.nelf" && page_error(&report).contains("damaged.nelf"),
+        "damaged asset dropped on the page: {report:#}"
+    );
+
+    // A real HDRI dropped on the page relights it: the same view now equals `nelf render`
+    // under that map (and no longer the studio one).
+    let hdri = data.join("envmaps/sunset.exr");
+    let relit_shots = dir.path().join("hdri");
+    let report = shoot(
+        &format!("{base}/index.html?tonemap=linear&background=0,0,0&jitter=0&continuous=1"),
+        "webgpu",
+        &relit_shots,
+        &["--drop", &hdri.display().to_string()],
+    );
+    assert_eq!(report["data"]["nelfError"], "", "dropped HDRI: {report:#}");
+    assert_eq!(report["dropped"], "sunset.exr", "{report:#}");
+    let relit_reference = dir.path().join("reference_sunset.png");
+    nelf(&[
+        "render".as_ref(),
+        asset.as_os_str(),
+        "--camera".as_ref(),
+        camera_path.as_os_str(),
+        "--envmap".as_ref(),
+        hdri.as_os_str(),
+        "--rotate-deg".as_ref(),
+        "40".as_ref(),
+        "-o".as_ref(),
+        relit_reference.as_os_str(),
+    ]);
+    let relit = image::open(relit_shots.join("view.png")).unwrap().to_rgb8();
+    let relit_want = image::open(&relit_reference).unwrap().to_rgb8();
+    let relit_psnr = psnr_u8(&relit, &relit_want, |_, _| true);
+    let studio_psnr = psnr_u8(&relit_want, &want, |_, _| true);
+    eprintln!(
+        "the page after dropping the sunset HDRI vs nelf render under it: {relit_psnr:.2} dB \
+         (the two references differ by {studio_psnr:.2} dB)"
+    );
+    assert!(
+        relit_psnr >= 35.0 && studio_psnr < relit_psnr - 10.0,
+        "dropped HDRI: {relit_psnr:.2} dB"
+    );
 }
 
 #[test]

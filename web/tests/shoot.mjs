@@ -2,21 +2,25 @@
 // error) and writes what it saw: `<out>/report.json` (the page's data-nelf-* report, the
 // backend, timings) and `<out>/view.png` (a screenshot of the 3D view's rectangle).
 //
-//   node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS]
+//   node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS] [--drop FILE]
 //
 // webgpu: Chromium's WebGPU on SwiftShader (Vulkan); webgl2: WebGPU off, so the page
 // gets WebGL2 only. --fps: after the screenshot, count frames for SECONDS of real time
-// (the URL should say continuous=1).
+// (the URL should say continuous=1). --drop: after the first frames, drop FILE on the
+// canvas as a person would (a DragEvent carrying the file) and wait for the page to show
+// an error or draw three more frames; the report is written after that.
 import { chromium } from "playwright-core";
-import { mkdirSync, writeFileSync } from "node:fs";
-import { join } from "node:path";
+import { mkdirSync, readFileSync, writeFileSync } from "node:fs";
+import { basename, join } from "node:path";
 
 const [url, outDir, backend, ...rest] = process.argv.slice(2);
 if (!url || !outDir || !["webgpu", "webgl2"].includes(backend)) {
   console.error("usage: node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS]");
   process.exit(2);
 }
-const fpsSeconds = rest[0] === "--fps" ? Number(rest[1]) : 0;
+const option = (name) => { const i = rest.indexOf(name); return i >= 0 ? rest[i + 1] : undefined; };
+const fpsSeconds = Number(option("--fps") || 0);
+const dropFile = option("--drop");
 const base = [
   "--headless", "--no-sandbox", "--disable-quic", "--no-first-run",
   "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -44,6 +48,25 @@ try {
     { timeout: 240000, polling: 100 },
   );
   report.wait_ms = Date.now() - t0;
+  if (dropFile && !(await page.evaluate(() => document.body.dataset.nelfError))) {
+    const bytes = [...readFileSync(dropFile)];
+    const name = basename(dropFile);
+    const frames = await page.evaluate(([data, fileName]) => {
+      const transfer = new DataTransfer();
+      transfer.items.add(new File([new Uint8Array(data)], fileName));
+      const canvas = document.getElementById("nelf_canvas");
+      for (const type of ["dragenter", "dragover", "drop"]) {
+        canvas.dispatchEvent(new DragEvent(type, { dataTransfer: transfer, bubbles: true, cancelable: true }));
+      }
+      return Number(document.body.dataset.nelfFrames || 0);
+    }, [bytes, name]);
+    await page.waitForFunction(
+      (before) => Number(document.body.dataset.nelfFrames || 0) >= before + 3 || (document.body.dataset.nelfError || "") !== "",
+      frames,
+      { timeout: 120000, polling: 100 },
+    );
+    report.dropped = name;
+  }
   report.data = await page.evaluate(() => ({ ...document.body.dataset }));
   report.message = await page.evaluate(() => document.getElementById("nelf_message")?.textContent || "");
   if (report.data.nelfRect && !report.data.nelfError) {
