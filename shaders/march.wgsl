@@ -1,54 +1,10 @@
 // march.wgsl — the ray-march pass, one invocation per pixel: a compute entry (`march`,
 // which can also count samples) and a fragment entry over a full-screen triangle
-// (`march_vs`/`march_fs`); both run `march_pixel`.
-//
-// Mirrors nelf_render::march (the CPU reference; its module docs define every step):
-// a ray per pixel centre of an OpenCV pinhole camera, clipped against the grid box,
-// samples at t_i = t_entry + (i + o)·Δ with o = 0.5 (o ∈ [0, 1) per pixel and frame
-// when jitter is on, against banding), trilinear σ and radiance from the relit atlas
-// (hardware filtering inside a brick's slot; the 1-voxel apron makes it equal to the
-// reference's trilinear across brick borders), α_i = 1 − exp(−σ_i Δ), front-to-back
-// compositing (Max 1995), termination right after T < min_transmittance. Output: linear
-// premultiplied rgb over black and alpha = 1 − T_end.
-//
-// Positions are in lattice coordinates u = (p − bbox_min)/voxel_size − 0.5 (voxel centres
-// at integers); t stays in metres. Each loop iteration fetches the march grid (common.wgsl)
-// at the sample:
-// * where the distance to σ > 0 says every sample within s ≥ 0 voxels (Chebyshev) is 0,
-//   the march jumps to the first lattice sample beyond s (empty-space skipping; on the
-//   shared head scan 96 % of the lattice samples in slots are 0, so this is what pays);
-// * else the sample is one texture fetch in the slot of its brick cell (box [8b − 0.5,
-//   8b + 7.5]³): a present brick's or a halo cell's (a missing brick next to a present
-//   one) slot holds every trilinear corner of a sample in the box, so there are no
-//   per-corner lookups.
-// The samples taken are the reference's, minus some whose σ is exactly 0.
+// (`march_vs`/`march_fs`); both run `march_pixel` (march_core.wgsl, which documents the
+// march), and either can mark the voxels its samples read.
 
 #import "common.wgsl"
-
-// Mirrors `MarchParams` in viewer/src/shaders.rs.
-struct MarchParams {
-    // Rows of the camera's world-to-camera rotation R as columns of Rᵀ (xyz).
-    world_from_camera_x: vec4<f32>,
-    world_from_camera_y: vec4<f32>,
-    world_from_camera_z: vec4<f32>,
-    // Camera centre in lattice coordinates (xyz); w: 1 / voxel size (1/m).
-    origin_u: vec4<f32>,
-    // fx, fy, cx, cy in pixels.
-    intrinsics: vec4<f32>,
-    // xyz: upper corner of the grid box in lattice coordinates (8·grid_bricks − 0.5); w: step Δ (m).
-    box_max_u: vec4<f32>,
-    // xyz: 1 / atlas size in texels; w: minimum transmittance.
-    atlas_inv_size: vec4<f32>,
-    // xyz: grid extent in bricks; w: voxels per march-grid cube edge.
-    grid_bricks: vec4<i32>,
-    // Image width, height; frame index (jitter seed); flags: bit 0 jitter.
-    image: vec4<u32>,
-    // x: view (0 shaded, 1 density maximum, 2 alpha, 3 cost: samples, loop steps and
-    // lattice samples in rgb); y, z: slot packing x_bits, y_bits; w: unused.
-    view: vec4<u32>,
-    // x: density view scale (1 / σ shown as white); yzw: unused.
-    scales: vec4<f32>,
-}
+#import "march_core.wgsl"
 
 // Counts for benchmarks: trilinear atlas samples taken, and loop iterations (samples
 // plus jumps).
@@ -64,44 +20,10 @@ override MARK_VOXELS: bool = false;
 // Whether to count samples (a benchmark pipeline sets it; the counting costs atomics).
 override COUNT_SAMPLES: bool = false;
 
-@group(0) @binding(0) var<uniform> params: MarchParams;
-@group(0) @binding(1) var atlas: texture_3d<f32>;
-@group(0) @binding(2) var atlas_sampler: sampler;
 @group(0) @binding(4) var output: texture_storage_2d<rgba32float, write>;
 @group(0) @binding(5) var<storage, read_write> counters: Counters;
-// The march grid (common.wgsl) at cubes of f³ voxels, f = grid_bricks.w.
-@group(0) @binding(6) var march_grid: texture_3d<u32>;
 // MARK_VOXELS only: one word per voxel of the grid box (x fastest), 1 where a sample read it.
 @group(0) @binding(7) var<storage, read_write> voxel_marks: array<u32>;
-
-const VIEW_SHADED: u32 = 0u;
-const VIEW_DENSITY: u32 = 1u;
-const VIEW_ALPHA: u32 = 2u;
-const VIEW_COST: u32 = 3u;
-
-// Compositing state of one ray.
-struct Accum {
-    rgb: vec3<f32>,
-    transmittance: f32,
-    max_sigma: f32,
-}
-
-// Composites one sample (σ in alpha); true once the ray may stop (T < min_transmittance).
-fn composite(acc: ptr<function, Accum>, value: vec4<f32>, step: f32, view: u32, min_transmittance: f32) -> bool {
-    let sigma = value.a;
-    if sigma <= 0.0 {
-        return false;
-    }
-    (*acc).max_sigma = max((*acc).max_sigma, sigma);
-    if view == VIEW_DENSITY {
-        return false;
-    }
-    // As the reference: s = exp(−σΔ), α = 1 − s, T ← T·s.
-    let survive = exp(-sigma * step);
-    (*acc).rgb += ((*acc).transmittance * (1.0 - survive)) * value.rgb;
-    (*acc).transmittance *= survive;
-    return (*acc).transmittance < min_transmittance;
-}
 
 // Marks the 8 trilinear corners of the sample at `u` in the voxel grid (a plain store of
 // 1 per corner: no atomics; `relight.wgsl`'s `list_marked` lists the stored ones).
@@ -115,94 +37,12 @@ fn mark_corners(u: vec3<f32>, voxels: vec3<i32>) {
     }
 }
 
-// One pixel's march: its colour and what it cost.
-struct MarchResult {
-    color: vec4<f32>,
-    samples: u32,
-    steps: u32,
-}
-
-// Marches the ray through the centre of pixel `pixel`.
-fn march_pixel(pixel: vec2<u32>) -> MarchResult {
-    let packing = SlotPacking(params.view.y, params.view.z);
-    // Ray through the pixel centre (OpenCV pinhole), unit length in metres.
-    let k = params.intrinsics;
-    let d_cam = vec3<f32>((f32(pixel.x) + 0.5 - k.z) / k.x, (f32(pixel.y) + 0.5 - k.w) / k.y, 1.0);
-    let dir = normalize(
-        d_cam.x * params.world_from_camera_x.xyz + d_cam.y * params.world_from_camera_y.xyz
-            + d_cam.z * params.world_from_camera_z.xyz,
-    );
-    let o = params.origin_u.xyz;
-    let du = dir * params.origin_u.w;
-    let inv_du = safe_inverse(du);
-    let span = ray_box(o, inv_du, vec3<f32>(-0.5), params.box_max_u.xyz);
-    let step = params.box_max_u.w;
-    let t_entry = max(span.x, 0.0);
-    var offset = 0.5;
-    if (params.image.w & 1u) != 0u {
-        offset = jitter_01(pixel, params.image.z);
+// march_core.wgsl's per-sample hook: with MARK_VOXELS, marks the voxels a sample with
+// σ > 0 reads.
+fn on_sample(u: vec3<f32>, value: vec4<f32>, voxels: vec3<i32>) {
+    if MARK_VOXELS && value.a > 0.0 {
+        mark_corners(u, voxels);
     }
-    var count = 0;
-    if span.x < span.y && span.y > 0.0 {
-        count = i32(max(ceil((span.y - t_entry) / step - offset), 0.0));
-    }
-    let view = params.view.x;
-    let min_transmittance = params.atlas_inv_size.w;
-    let inv_atlas = params.atlas_inv_size.xyz;
-    var acc = Accum(vec3<f32>(0.0), 1.0, 0.0);
-    var samples = 0u;
-    var steps = 0u;
-    // The march grid (viewer/src/atlas.rs, `MarchGrid`): per cube of f³ voxels, the
-    // distance D to σ > 0 (σ = 0 within f(D − 1) − ½ voxels, Chebyshev, of a sample in the
-    // cube, so the samples that near are skipped) and the slot of its brick cell. A ray
-    // moves at most `per_sample` lattice units per sample along any axis.
-    let factor_i = params.grid_bricks.w;
-    let factor = f32(factor_i);
-    let inv_factor = 1.0 / factor;
-    let cube_max = vec3<i32>(textureDimensions(march_grid)) - vec3<i32>(1);
-    let per_sample = max(max(abs(du.x), abs(du.y)), abs(du.z)) * step;
-    let samples_per_unit = 1.0 / per_sample;
-    // One flat loop, each iteration one fetch and then one sample or one jump: a CPU
-    // device runs SIMD lanes through every branch masked, so the body is short and the
-    // same for all lanes.
-    var i = 0;
-    while i < count {
-        let t = t_entry + (f32(i) + offset) * step;
-        let u = o + t * du;
-        steps += 1u;
-        let cube = clamp(vec3<i32>(floor((u + vec3<f32>(0.5)) * inv_factor)), vec3<i32>(0), cube_max);
-        let texel = textureLoad(march_grid, cube, 0).x;
-        let safe = factor * (f32(texel & 0xffu) - 1.0) - 0.5;
-        if safe >= 0.0 {
-            // Sample i and every later one within `safe` are 0: jump past them.
-            i += 1 + i32(min(floor((safe - 1e-3) * samples_per_unit), f32(count)));
-            continue;
-        }
-        i += 1;
-        // Near σ > 0, so in a slot: that of the brick cell holding the cube, whose box
-        // [8b − 0.5, 8b + 7.5]³ holds the sample (up to rounding at the grid box's faces,
-        // which the apron covers) and whose slot holds every trilinear corner of it.
-        let cell = (cube * factor_i) >> vec3<u32>(3u);
-        let shift = vec3<f32>(slot_coords((texel >> MARCH_GRID_SLOT_SHIFT) - 1u, packing) * SLOT - cell * BRICK)
-            + vec3<f32>(1.5);
-        let value = textureSampleLevel(atlas, atlas_sampler, (u + shift) * inv_atlas, 0.0);
-        samples += 1u;
-        if MARK_VOXELS && value.a > 0.0 {
-            mark_corners(u, (cube_max + vec3<i32>(1)) * factor_i);
-        }
-        if composite(&acc, value, step, view, min_transmittance) {
-            break;
-        }
-    }
-    var out = vec4<f32>(acc.rgb, 1.0 - acc.transmittance);
-    if view == VIEW_DENSITY {
-        out = vec4<f32>(vec3<f32>(acc.max_sigma * params.scales.x), 1.0);
-    } else if view == VIEW_ALPHA {
-        out = vec4<f32>(vec3<f32>(1.0 - acc.transmittance), 1.0);
-    } else if view == VIEW_COST {
-        out = vec4<f32>(f32(samples), f32(steps), f32(count), 1.0);
-    }
-    return MarchResult(out, samples, steps);
 }
 
 // The compute march: one invocation per pixel, into the `output` storage texture.
@@ -217,13 +57,6 @@ fn march(@builtin(global_invocation_id) gid: vec3<u32>) {
         atomicAdd(&counters.steps, result.steps);
     }
     textureStore(output, vec2<i32>(gid.xy), result.color);
-}
-
-// The fragment march: a full-screen triangle over a colour target of the image's size
-// (llvmpipe's rasteriser writes its tiles faster than per-invocation storage stores).
-@vertex
-fn march_vs(@builtin(vertex_index) index: u32) -> @builtin(position) vec4<f32> {
-    return fullscreen_position(fullscreen_uv(index));
 }
 
 @fragment

@@ -19,7 +19,9 @@ use std::collections::HashSet;
 pub const COMMON_WGSL: &str = include_str!("../../shaders/common.wgsl");
 /// The relight pass (compute: `shade` per voxel, then `fill` per atlas texel).
 pub const RELIGHT_WGSL: &str = include_str!("../../shaders/relight.wgsl");
-/// The ray-march pass (compute).
+/// The ray march of one pixel, shared by the march passes (imported).
+pub const MARCH_CORE_WGSL: &str = include_str!("../../shaders/march_core.wgsl");
+/// The ray-march pass (compute and fragment entries).
 pub const MARCH_WGSL: &str = include_str!("../../shaders/march.wgsl");
 /// The display pass (tone mapping, sRGB; full-screen triangle).
 pub const DISPLAY_WGSL: &str = include_str!("../../shaders/display.wgsl");
@@ -27,7 +29,7 @@ pub const DISPLAY_WGSL: &str = include_str!("../../shaders/display.wgsl");
 pub const DENSE_MARCH_WGSL: &str = include_str!("../../shaders/dense_march.wgsl");
 
 /// Files that `#import` may name, with their text.
-pub const LIBRARY: &[(&str, &str)] = &[("common.wgsl", COMMON_WGSL)];
+pub const LIBRARY: &[(&str, &str)] = &[("common.wgsl", COMMON_WGSL), ("march_core.wgsl", MARCH_CORE_WGSL)];
 
 /// The entry shaders: (file name, text).
 pub const PASSES: &[(&str, &str)] = &[

@@ -116,6 +116,9 @@ pub struct FrameReport {
     pub camera: Option<PinholeCamera>,
     /// Smoothed frame interval (ms).
     pub frame_ms: f32,
+    /// The GPU backend and adapter, and where the relight runs (e.g. `Gl (…), relight on
+    /// the CPU` on WebGL2).
+    pub gpu: String,
     /// Errors shown in the window, oldest first.
     pub errors: Vec<String>,
 }
@@ -379,6 +382,8 @@ struct ViewerApp {
     gpu_ok: bool,
     /// The march pass faster on the device ([`MarchPass::for_device`]).
     march_pass: MarchPass,
+    /// The backend and adapter, and where the relight runs (stats line, frame reports).
+    gpu_description: String,
     screenshots: Screenshots,
     applied: AppliedLighting,
 }
@@ -481,6 +486,7 @@ impl ViewerApp {
             frame_error: Arc::new(Mutex::new(None)),
             gpu_ok: false,
             march_pass: MarchPass::default(),
+            gpu_description: String::new(),
             screenshots: Screenshots {
                 path: config.screenshot_path,
                 after_frames: config.screenshot_after_frames,
@@ -496,7 +502,14 @@ impl ViewerApp {
         match &cc.wgpu_render_state {
             Some(state) => match GpuRenderer::from_device(state.device.clone(), state.queue.clone()) {
                 Ok(renderer) => {
-                    let renderer = renderer.with_adapter_info(state.adapter.get_info());
+                    let info = state.adapter.get_info();
+                    app.gpu_description = format!(
+                        "{:?} ({}), relight on the {}",
+                        info.backend,
+                        info.name,
+                        if renderer.uses_storage() { "GPU" } else { "CPU" }
+                    );
+                    let renderer = renderer.with_adapter_info(info);
                     app.march_pass = renderer.preferred_march_pass();
                     state.renderer.write().callback_resources.insert(ViewerGpu {
                         renderer,
@@ -759,6 +772,7 @@ impl ViewerApp {
         if self.asset_name.is_some() {
             ui.label(asset_stats(self.asset_rank, self.asset_view));
         }
+        ui.label(&self.gpu_description);
         ui.label(format!(
             "frame interval {:.1} ms ({:.0} fps), march {}×{}",
             self.frame_ms_smoothed,
@@ -879,6 +893,7 @@ impl ViewerApp {
             march_size: self.march_size,
             camera: self.orbit.filter(|_| shown).map(|o| o.camera(width, height)),
             frame_ms: self.frame_ms_smoothed,
+            gpu: self.gpu_description.clone(),
             errors: self.errors.clone(),
         });
     }

@@ -525,6 +525,87 @@ pub fn fold_light(
     }
 }
 
+/// The relit atlas computed on the CPU, texel for texel what the relight pass
+/// (`relight.wgsl`, `relight`) writes, for devices that cannot run it (no compute
+/// shaders: WebGL2). Every stored voxel is shaded as `shade_voxel` does (`folded`'s mean
+/// plus its codes or halves times `folded`'s per-code radiance, `|rgb|` with
+/// `magnitude`, the component view), with its density in alpha; then every texel of
+/// every slot (present brick or halo cell: its 8³ voxels and the 1-voxel apron) takes the
+/// value of the grid voxel it mirrors, 0 where no brick stores that voxel. Texels x
+/// fastest, in the atlas's `layout.texels()` extent.
+pub fn relight_atlas_cpu(
+    layout: &AtlasLayout,
+    indirection: &Indirection,
+    grid_bricks: [u32; 3],
+    coefficients: &PackedCoefficients,
+    density: &[half::f16],
+    folded: &FoldedLight,
+    magnitude: bool,
+) -> Vec<[half::f16; 4]> {
+    let voxels = density.len();
+    let bricks = voxels / BRICK_VOXELS;
+    let used = folded.components.len();
+    let light = |k: usize| folded.components.get(k).copied().unwrap_or([0.0; 4]);
+    let words_used = if coefficients.encoding == 1 {
+        used.div_ceil(4)
+    } else {
+        used.div_ceil(2)
+    };
+    let mut values = vec![[half::f16::ZERO; 4]; voxels];
+    for (v, value) in values.iter_mut().enumerate() {
+        let mut rgb = folded.mean_rgb;
+        for q in 0..words_used {
+            let word = coefficients.words.get(q * voxels + v).copied().unwrap_or(0);
+            if coefficients.encoding == 1 {
+                for j in 0..4 {
+                    let code = ((word >> (8 * j)) & 0xff) as f32;
+                    let l = light(4 * q + j);
+                    rgb = std::array::from_fn(|c| rgb[c] + code * l[c]);
+                }
+            } else {
+                for j in 0..2 {
+                    let x = half::f16::from_bits((word >> (16 * j)) as u16).to_f32();
+                    let l = light(2 * q + j);
+                    rgb = std::array::from_fn(|c| rgb[c] + x * l[c]);
+                }
+            }
+        }
+        if magnitude {
+            rgb = rgb.map(f32::abs);
+        }
+        *value = [rgb[0], rgb[1], rgb[2], density[v].to_f32()].map(half::f16::from_f32);
+    }
+    let texels = layout.texels().map(|n| n as usize);
+    let mut atlas = vec![[half::f16::ZERO; 4]; texels[0] * texels[1] * texels[2]];
+    let n = grid_bricks.map(i64::from);
+    let brick = BRICK_SIZE as i64;
+    for (slot, cell) in indirection.slot_cells.iter().enumerate() {
+        for lz in -1..=brick as i32 {
+            for ly in -1..=brick as i32 {
+                for lx in -1..=brick as i32 {
+                    let local = [lx, ly, lz];
+                    let g: [i64; 3] =
+                        std::array::from_fn(|a| i64::from(cell[a]) * brick + i64::from(local[a]));
+                    let c = g.map(|x| x.div_euclid(brick));
+                    if (0..3).any(|a| c[a] < 0 || c[a] >= n[a]) {
+                        continue;
+                    }
+                    let entry = indirection.entries[(c[0] + n[0] * (c[1] + n[1] * c[2])) as usize];
+                    let Some(source) = entry.checked_sub(1).map(|s| s as usize).filter(|&s| s < bricks)
+                    else {
+                        continue;
+                    };
+                    let l = g.map(|x| x.rem_euclid(brick) as usize);
+                    let v = source * BRICK_VOXELS + l[0] + 8 * l[1] + 64 * l[2];
+                    let t = layout.texel_of(slot as u32, local).map(|x| x as usize);
+                    atlas[t[0] + texels[0] * (t[1] + texels[1] * t[2])] = values[v];
+                }
+            }
+        }
+    }
+    atlas
+}
+
 /// Lobe count the view lighting buffer and the shaders have room for: the 9 real
 /// spherical harmonics of degrees 0–2, the most [`nelf_format::conventions::VIEW_HARMONICS`]
 /// allows.

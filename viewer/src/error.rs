@@ -43,12 +43,13 @@ pub enum ViewerError {
     /// The window or event loop failed.
     #[error("viewer window: {0}")]
     App(String),
-    /// The device cannot run the viewer's passes (WebGL2).
+    /// Something needs compute shaders and storage bindings, which the device (WebGL2)
+    /// lacks.
     #[error(
-        "this GPU device has no compute shaders or storage buffers (WebGL2 gives none): the \
-         viewer's relight and march passes need them; use a WebGPU browser or the native viewer"
+        "{0} needs compute shaders and storage buffers, which this GPU device lacks (WebGL2): \
+         use a WebGPU browser or the native viewer"
     )]
-    NoCompute,
+    NoCompute(&'static str),
     /// A shader failed to preprocess (a bug: shaders are embedded).
     #[error("shader: {0}")]
     Shader(#[from] crate::shaders::PreprocessError),

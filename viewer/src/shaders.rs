@@ -16,10 +16,16 @@ pub use nelf_render::wgsl::{
 /// The view pass of view-dependent assets (format 1.2; compute, one invocation per voxel).
 pub const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
 
-/// Every entry shader the viewer compiles: `nelf_render::wgsl::PASSES` and the view pass.
+/// The march pass for devices without storage bindings or compute (WebGL2): a fragment
+/// entry only, no counters, no marks.
+pub const MARCH_NOSTORAGE_WGSL: &str = include_str!("../../shaders/march_nostorage.wgsl");
+
+/// Every entry shader the viewer compiles: `nelf_render::wgsl::PASSES`, the view pass and
+/// the storage-free march.
 pub const VIEWER_PASSES: &[(&str, &str)] = &[
     ("relight.wgsl", RELIGHT_WGSL),
     ("march.wgsl", MARCH_WGSL),
+    ("march_nostorage.wgsl", MARCH_NOSTORAGE_WGSL),
     ("display.wgsl", DISPLAY_WGSL),
     ("dense_march.wgsl", DENSE_MARCH_WGSL),
     ("view.wgsl", VIEW_WGSL),

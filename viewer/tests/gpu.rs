@@ -839,3 +839,74 @@ fn a_held_camera_relights_only_what_it_reads() {
     assert_eq!(gpu.last_relight(), Some(RelightKind::Marked));
     assert_eq!(gpu.read_atlas().unwrap(), want_atlas);
 }
+
+#[test]
+fn the_storage_free_path_of_webgl2_draws_the_same_atlas_and_image() {
+    // WebGL2 has no compute shaders and no storage bindings: there the renderer relights
+    // on the CPU (atlas::relight_atlas_cpu, uploaded) and marches with
+    // march_nostorage.wgsl. Run on this device beside the compute path, it must give the
+    // same atlas (to f16 rounding) and the same image, with holes in the brick set, f16
+    // coefficients, a truncated rank and the component view, and after a rotation.
+    let mut gpu = renderer();
+    let mut plain =
+        GpuRenderer::from_device_without_storage(gpu.device().clone(), gpu.queue().clone()).unwrap();
+    assert!(gpu.uses_storage() && !plain.uses_storage());
+    let env = sky(64, 32);
+    let cam = camera(96, 80);
+    for (encoding, rank, truncate, holes, view) in [
+        (CoefficientEncoding::U8Affine, 8, None, true, RelightView::Shaded),
+        (CoefficientEncoding::F16, 6, Some(3), false, RelightView::Shaded),
+        (
+            CoefficientEncoding::U8Affine,
+            8,
+            None,
+            false,
+            RelightView::Component(2),
+        ),
+    ] {
+        let mut asset = asset_through_file(30_000, rank, encoding, 9);
+        if holes {
+            asset = without_bricks(&asset, |b| (b[0] + 2 * b[1] + b[2]) % 3 == 0);
+        }
+        for turn in [0.4, -1.1] {
+            for r in [&mut gpu, &mut plain] {
+                r.load_asset(&asset).unwrap();
+                r.set_lighting(&env, rotation_y(turn)).unwrap();
+                r.set_rank(truncate);
+                r.set_relight_view(view);
+            }
+            let want = gpu.render(&cam, &no_jitter()).unwrap();
+            let got = plain.render(&cam, &no_jitter()).unwrap();
+            let (want_atlas, got_atlas) = (gpu.read_atlas().unwrap(), plain.read_atlas().unwrap());
+            assert_eq!(want_atlas.len(), got_atlas.len());
+            let worst = want_atlas
+                .iter()
+                .zip(&got_atlas)
+                .flat_map(|(a, b)| (0..4).map(move |c| (a[c] - b[c]).abs() / a[c].abs().max(1e-3)))
+                .fold(0.0f32, f32::max);
+            let db = psnr(&want, &got);
+            eprintln!(
+                "{encoding:?} {view:?} holes {holes} turn {turn}: atlas within {worst:.1e}, image {db:.1} dB"
+            );
+            assert!(
+                worst <= 2e-3,
+                "{encoding:?} {view:?}: CPU relight differs by {worst} (relative)"
+            );
+            assert!(
+                db >= 60.0,
+                "{encoding:?} {view:?}: storage-free image {db:.1} dB from the compute path's"
+            );
+        }
+    }
+    // A view-dependent asset needs the view pass (compute): a clear error, and the
+    // renderer keeps its asset.
+    let view_asset = with_view(
+        &asset_through_file(20_000, 6, CoefficientEncoding::U8Affine, 4),
+        CoefficientEncoding::U8Affine,
+        4,
+    );
+    let err = plain.load_asset(&view_asset).unwrap_err();
+    assert!(matches!(err, ViewerError::NoCompute(_)), "{err}");
+    assert!(err.to_string().contains("WebGPU"), "{err}");
+    assert!(plain.render(&cam, &no_jitter()).is_ok());
+}

@@ -153,6 +153,7 @@ fn write_report(document: &web_sys::Document, report: &FrameReport, first_frame_
         &format!("{},{}", report.march_size[0], report.march_size[1]),
     );
     set_data(document, "nelfFrameMs", &format!("{:.2}", report.frame_ms));
+    set_data(document, "nelfGpu", &report.gpu);
     if let Some(ms) = first_frame_ms {
         set_data(document, "nelfFirstFrameMs", &format!("{ms:.0}"));
     }

@@ -29,7 +29,7 @@ use super::common::{
 };
 use super::{GpuAsset, GpuRenderer, Target};
 use crate::error::ViewerError;
-use crate::shaders::{MARCH_WGSL, MarchParams};
+use crate::shaders::{MARCH_NOSTORAGE_WGSL, MARCH_WGSL, MarchParams};
 
 /// What the march shows.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
@@ -96,70 +96,83 @@ impl MarchPass {
 /// Format of the march's output: linear premultiplied rgb and alpha.
 pub(super) const MARCH_FORMAT: wgpu::TextureFormat = wgpu::TextureFormat::Rgba32Float;
 
-/// The march's bind group layouts, pipelines and atlas sampler, created once per device.
+/// The march's bind group layouts, pipelines and atlas sampler, created once per device:
+/// `march.wgsl`'s compute and fragment entries, or on a device without storage bindings
+/// (WebGL2) only `march_nostorage.wgsl`'s fragment entry.
 pub(super) struct MarchPipelines {
-    layout: wgpu::BindGroupLayout,
-    compute: wgpu::ComputePipeline,
-    /// The compute march with `MARK_VOXELS` (`marks.rs`).
-    compute_marking: wgpu::ComputePipeline,
-    counting: wgpu::ComputePipeline,
+    /// The compute march and its variants (`None` without storage bindings).
+    compute: Option<ComputeMarch>,
     fragment_layout: wgpu::BindGroupLayout,
     fragment: wgpu::RenderPipeline,
-    /// The fragment march with `MARK_VOXELS`.
-    fragment_marking: wgpu::RenderPipeline,
+    /// The fragment march with `MARK_VOXELS` (`None` without storage bindings).
+    fragment_marking: Option<wgpu::RenderPipeline>,
     sampler: wgpu::Sampler,
 }
 
+/// The compute march: plain, marking the voxels it reads (`marks.rs`), counting samples.
+struct ComputeMarch {
+    layout: wgpu::BindGroupLayout,
+    plain: wgpu::ComputePipeline,
+    marking: wgpu::ComputePipeline,
+    counting: wgpu::ComputePipeline,
+}
+
 impl MarchPipelines {
-    pub(super) fn new(device: &wgpu::Device) -> Result<Self, ViewerError> {
+    pub(super) fn new(device: &wgpu::Device, storage: bool) -> Result<Self, ViewerError> {
         use wgpu::ShaderStages as S;
         use wgpu::TextureViewDimension as D;
-        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
-            label: Some("march"),
-            entries: &[
-                uniform_entry(0, S::COMPUTE),
+        // The bindings every march reads: uniform, atlas, sampler, march grid.
+        let read_entries = |stage: S| {
+            vec![
+                uniform_entry(0, stage),
                 texture_entry(
                     1,
                     wgpu::TextureSampleType::Float { filterable: true },
                     D::D3,
-                    S::COMPUTE,
+                    stage,
                 ),
                 wgpu::BindGroupLayoutEntry {
                     binding: 2,
-                    visibility: S::COMPUTE,
+                    visibility: stage,
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, stage),
+            ]
+        };
+        let (module, compute) = if storage {
+            let module = shader_module(device, "march.wgsl", MARCH_WGSL)?;
+            let mut entries = read_entries(S::COMPUTE);
+            entries.extend([
                 storage_texture_entry(4, wgpu::TextureFormat::Rgba32Float, D::D2),
                 storage_entry(5, false, S::COMPUTE),
-                texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, S::COMPUTE),
                 storage_entry(7, false, S::COMPUTE),
-            ],
-        });
+            ]);
+            let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+                label: Some("march"),
+                entries: &entries,
+            });
+            let compute = ComputeMarch {
+                plain: compute_pipeline(device, &[&layout], &module, "march", &[]),
+                counting: compute_pipeline(device, &[&layout], &module, "march", &[("COUNT_SAMPLES", 1.0)]),
+                marking: compute_pipeline(device, &[&layout], &module, "march", &[("MARK_VOXELS", 1.0)]),
+                layout,
+            };
+            (module, Some(compute))
+        } else {
+            (
+                shader_module(device, "march_nostorage.wgsl", MARCH_NOSTORAGE_WGSL)?,
+                None,
+            )
+        };
+        let mut fragment_entries = read_entries(S::FRAGMENT);
+        if storage {
+            fragment_entries.push(storage_entry(7, false, S::FRAGMENT));
+        }
         let fragment_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("march (fragment)"),
-            entries: &[
-                uniform_entry(0, S::FRAGMENT),
-                texture_entry(
-                    1,
-                    wgpu::TextureSampleType::Float { filterable: true },
-                    D::D3,
-                    S::FRAGMENT,
-                ),
-                wgpu::BindGroupLayoutEntry {
-                    binding: 2,
-                    visibility: S::FRAGMENT,
-                    ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
-                    count: None,
-                },
-                texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, S::FRAGMENT),
-                storage_entry(7, false, S::FRAGMENT),
-            ],
+            entries: &fragment_entries,
         });
-        let module = shader_module(device, "march.wgsl", MARCH_WGSL)?;
-        let compute = compute_pipeline(device, &[&layout], &module, "march", &[]);
-        let counting = compute_pipeline(device, &[&layout], &module, "march", &[("COUNT_SAMPLES", 1.0)]);
-        let compute_marking = compute_pipeline(device, &[&layout], &module, "march", &[("MARK_VOXELS", 1.0)]);
         let fragment_pipeline_layout = device.create_pipeline_layout(&wgpu::PipelineLayoutDescriptor {
             label: Some("march (fragment)"),
             bind_group_layouts: &[Some(&fragment_layout)],
@@ -196,7 +209,7 @@ impl MarchPipelines {
             })
         };
         let fragment = fragment_pipeline(&[]);
-        let fragment_marking = fragment_pipeline(&[("MARK_VOXELS", 1.0)]);
+        let fragment_marking = storage.then(|| fragment_pipeline(&[("MARK_VOXELS", 1.0)]));
         let sampler = device.create_sampler(&wgpu::SamplerDescriptor {
             label: Some("atlas"),
             address_mode_u: wgpu::AddressMode::ClampToEdge,
@@ -208,10 +221,7 @@ impl MarchPipelines {
             ..Default::default()
         });
         Ok(Self {
-            layout,
             compute,
-            compute_marking,
-            counting,
             fragment_layout,
             fragment,
             fragment_marking,
@@ -221,7 +231,8 @@ impl MarchPipelines {
 
     /// The bind groups of the compute and the fragment march: uniform `march_params`, the
     /// relit atlas, the march grid, the voxel marks (`marks.rs`), the output `view`
-    /// (compute only) and the sample `counters` (compute only).
+    /// (compute only) and the sample `counters` (compute only). Without storage bindings
+    /// only the fragment march's, without marks.
     pub(super) fn bind_groups(
         &self,
         device: &wgpu::Device,
@@ -229,10 +240,10 @@ impl MarchPipelines {
         asset: &GpuAsset,
         view: &wgpu::TextureView,
         counters: &wgpu::Buffer,
-    ) -> (wgpu::BindGroup, wgpu::BindGroup) {
+    ) -> (Option<wgpu::BindGroup>, wgpu::BindGroup) {
         // Both read the uniform, atlas, sampler, march grid and marks; the compute march
         // also writes the output view and the counters.
-        let shared = [
+        let mut shared = vec![
             wgpu::BindGroupEntry {
                 binding: 0,
                 resource: march_params.as_entire_binding(),
@@ -249,26 +260,30 @@ impl MarchPipelines {
                 binding: 6,
                 resource: wgpu::BindingResource::TextureView(&asset.march_grid_view),
             },
-            wgpu::BindGroupEntry {
-                binding: 7,
-                resource: asset.marks.voxel_marks.as_entire_binding(),
-            },
         ];
-        let mut compute_entries = shared.to_vec();
-        compute_entries.extend([
-            wgpu::BindGroupEntry {
-                binding: 4,
-                resource: wgpu::BindingResource::TextureView(view),
-            },
-            wgpu::BindGroupEntry {
-                binding: 5,
-                resource: counters.as_entire_binding(),
-            },
-        ]);
-        let march_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("march"),
-            layout: &self.layout,
-            entries: &compute_entries,
+        if let Some(marks) = &asset.marks {
+            shared.push(wgpu::BindGroupEntry {
+                binding: 7,
+                resource: marks.voxel_marks.as_entire_binding(),
+            });
+        }
+        let march_bind_group = self.compute.as_ref().map(|compute| {
+            let mut entries = shared.clone();
+            entries.extend([
+                wgpu::BindGroupEntry {
+                    binding: 4,
+                    resource: wgpu::BindingResource::TextureView(view),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 5,
+                    resource: counters.as_entire_binding(),
+                },
+            ]);
+            device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: Some("march"),
+                layout: &compute.layout,
+                entries: &entries,
+            })
         });
         let march_fragment_bind_group = device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("march (fragment)"),
@@ -281,7 +296,8 @@ impl MarchPipelines {
     /// Encodes the march into `target` (its uniform already written): the fragment
     /// pipeline for [`MarchPass::Fragment`] unless counting samples, else a compute
     /// dispatch of 8 × 8 workgroups over the target; with `mark`, the pipeline that also
-    /// marks the voxels it reads (`marks.rs`; not when counting).
+    /// marks the voxels it reads (`marks.rs`; not when counting). Without storage
+    /// bindings always the plain fragment pipeline.
     pub(super) fn encode(
         &self,
         encoder: &mut wgpu::CommandEncoder,
@@ -290,7 +306,13 @@ impl MarchPipelines {
         count_samples: bool,
         mark: bool,
     ) {
-        if pass_kind == MarchPass::Fragment && !count_samples {
+        let compute = match (&self.compute, &target.march_bind_group) {
+            (Some(compute), Some(bind_group)) if pass_kind == MarchPass::Compute || count_samples => {
+                Some((compute, bind_group))
+            }
+            _ => None,
+        };
+        let Some((compute, bind_group)) = compute else {
             let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
                 label: Some("march (fragment)"),
                 color_attachments: &[Some(wgpu::RenderPassColorAttachment {
@@ -307,27 +329,26 @@ impl MarchPipelines {
                 occlusion_query_set: None,
                 multiview_mask: None,
             });
-            pass.set_pipeline(if mark {
-                &self.fragment_marking
-            } else {
-                &self.fragment
+            pass.set_pipeline(match (&self.fragment_marking, mark) {
+                (Some(marking), true) => marking,
+                _ => &self.fragment,
             });
             pass.set_bind_group(0, &target.march_fragment_bind_group, &[]);
             pass.draw(0..3, 0..1);
             return;
-        }
+        };
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("march"),
             timestamp_writes: None,
         });
         pass.set_pipeline(if count_samples {
-            &self.counting
+            &compute.counting
         } else if mark {
-            &self.compute_marking
+            &compute.marking
         } else {
-            &self.compute
+            &compute.plain
         });
-        pass.set_bind_group(0, &target.march_bind_group, &[]);
+        pass.set_bind_group(0, bind_group, &[]);
         pass.dispatch_workgroups(target.width.div_ceil(8), target.height.div_ceil(8), 1);
     }
 }

@@ -177,7 +177,7 @@ impl GpuRenderer {
     /// other voxels).
     pub(super) fn mark_key(&self, params: &MarchParams, settings: &ViewSettings) -> Option<MarchParams> {
         let asset = self.asset.as_ref()?;
-        let eligible = asset.marks.enabled
+        let eligible = asset.marks.as_ref().is_some_and(|m| m.enabled)
             && asset.view.is_none()
             && settings.view == MarchView::Shaded
             && self.relight_view == RelightView::Shaded;
@@ -193,19 +193,22 @@ impl GpuRenderer {
         encoder: &mut wgpu::CommandEncoder,
     ) -> Result<(), ViewerError> {
         let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
-        let pipelines = &self.pipelines.marks;
+        let none = || ViewerError::NoCompute("the marked relight");
+        let pipelines = self.pipelines.marks.as_ref().ok_or_else(none)?;
+        let marks = asset.marks.as_ref().ok_or_else(none)?;
+        let relight_bind_group = asset.relight_bind_group.as_ref().ok_or_else(none)?;
         let begin = |encoder: &mut wgpu::CommandEncoder, label: &str| {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some(label),
                 timestamp_writes: None,
             });
-            pass.set_bind_group(0, &asset.relight_bind_group, &[]);
-            pass.set_bind_group(1, &asset.marks.bind_group, &[]);
+            pass.set_bind_group(0, relight_bind_group, &[]);
+            pass.set_bind_group(1, &marks.bind_group, &[]);
             pass.forget_lifetime()
         };
         // The list and its dispatch size change only with the marks.
         if !self.marks_listed {
-            encoder.clear_buffer(&asset.marks.list, 0, Some(4));
+            encoder.clear_buffer(&marks.list, 0, Some(4));
             let (groups, _) = voxel_dispatch(asset.voxel_count);
             {
                 let mut pass = begin(encoder, "list marked voxels");
@@ -213,13 +216,13 @@ impl GpuRenderer {
                 pass.dispatch_workgroups(groups[0], groups[1], 1);
             }
             let mut pass = begin(encoder, "marked relight size");
-            pass.set_bind_group(2, &asset.marks.dispatch_bind_group, &[]);
+            pass.set_bind_group(2, &marks.dispatch_bind_group, &[]);
             pass.set_pipeline(&pipelines.args);
             pass.dispatch_workgroups(1, 1, 1);
         }
         let mut pass = begin(encoder, "relight (marked voxels)");
         pass.set_pipeline(&pipelines.relight);
-        pass.dispatch_workgroups_indirect(&asset.marks.dispatch, 0);
+        pass.dispatch_workgroups_indirect(&marks.dispatch, 0);
         drop(pass);
         self.marks_listed = true;
         Ok(())

@@ -49,8 +49,8 @@ use self::marks::{GpuMarks, MarkPipelines};
 use self::relight::RelightPipeline;
 use self::view::{GpuView, ViewBindings, ViewPipelines, lobe_buffer_words};
 use crate::atlas::{
-    AtlasLayout, Dequantization, GpuMemory, RelightView, indirection_grid, march_grid, neighbour_blocks,
-    pack_brick_cells, pack_coefficients, pack_density,
+    AtlasLayout, Dequantization, GpuMemory, Indirection, PackedCoefficients, RelightView, indirection_grid,
+    march_grid, neighbour_blocks, pack_brick_cells, pack_coefficients, pack_density,
 };
 use crate::error::ViewerError;
 use crate::shaders::{Counters, DisplayParams, MarchParams, RelightParams};
@@ -85,10 +85,12 @@ pub struct ViewInfo {
     pub encoding: CoefficientEncoding,
 }
 
-/// Compute and render pipelines, created once per device: one set per pass.
+/// Compute and render pipelines, created once per device: one set per pass. A device
+/// without storage bindings (WebGL2) gets no compute pipelines: its relight runs on the
+/// CPU (`atlas::relight_atlas_cpu`) and its march is `march_nostorage.wgsl`.
 struct Pipelines {
-    relight: RelightPipeline,
-    marks: MarkPipelines,
+    relight: Option<RelightPipeline>,
+    marks: Option<MarkPipelines>,
     march: MarchPipelines,
     display: DisplayPipelines,
     /// Created with the first view-dependent asset.
@@ -96,12 +98,18 @@ struct Pipelines {
 }
 
 impl Pipelines {
-    fn new(device: &wgpu::Device) -> Result<Self, ViewerError> {
-        let relight = RelightPipeline::new(device)?;
+    fn new(device: &wgpu::Device, storage: bool) -> Result<Self, ViewerError> {
+        let (relight, marks) = if storage {
+            let relight = RelightPipeline::new(device)?;
+            let marks = MarkPipelines::new(device, &relight)?;
+            (Some(relight), Some(marks))
+        } else {
+            (None, None)
+        };
         Ok(Self {
-            marks: MarkPipelines::new(device, &relight)?,
+            marks,
             relight,
-            march: MarchPipelines::new(device)?,
+            march: MarchPipelines::new(device, storage)?,
             display: DisplayPipelines::new(device)?,
             view: None,
         })
@@ -125,13 +133,23 @@ struct GpuAsset {
     march_grid_factor: u32,
     relight_params: wgpu::Buffer,
     light: wgpu::Buffer,
-    relight_bind_group: wgpu::BindGroup,
-    /// The voxels a marking march read (`marks.rs`).
-    marks: GpuMarks,
+    /// The relight pass's bindings (`None` without storage bindings).
+    relight_bind_group: Option<wgpu::BindGroup>,
+    /// The voxels a marking march read (`marks.rs`; `None` without storage bindings).
+    marks: Option<GpuMarks>,
+    /// What the CPU relight reads, on a device without storage bindings.
+    cpu_relight: Option<CpuRelight>,
     /// The view part of a view-dependent asset.
     view: Option<GpuView>,
     voxel_count: usize,
     info: AssetInfo,
+}
+
+/// An asset's stored data as the CPU relight reads it ([`crate::atlas::relight_atlas_cpu`]).
+struct CpuRelight {
+    coefficients: PackedCoefficients,
+    density: Vec<half::f16>,
+    indirection: Indirection,
 }
 
 /// The lighting in use.
@@ -149,7 +167,8 @@ struct Target {
     height: u32,
     texture: wgpu::Texture,
     view: wgpu::TextureView,
-    march_bind_group: wgpu::BindGroup,
+    /// The compute march's bindings (`None` without storage bindings).
+    march_bind_group: Option<wgpu::BindGroup>,
     march_fragment_bind_group: wgpu::BindGroup,
     display_bind_group: wgpu::BindGroup,
 }
@@ -160,6 +179,8 @@ pub struct GpuRenderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
     adapter_info: Option<wgpu::AdapterInfo>,
+    /// Whether the device has compute shaders and storage bindings (not WebGL2).
+    storage: bool,
     pipelines: Pipelines,
     march_params: wgpu::Buffer,
     display_params: wgpu::Buffer,
@@ -242,19 +263,35 @@ impl GpuRenderer {
     }
 
     /// A renderer on an existing device (the app passes eframe's). Needs only WebGPU's
-    /// default features and limits.
-    ///
-    /// A device without compute shaders or storage buffers (WebGL2) is refused with
-    /// [`ViewerError::NoCompute`] before any pipeline is made: creating a compute pipeline
-    /// there is a fatal validation error.
+    /// default features and limits, or, on a device without compute shaders or storage
+    /// bindings (WebGL2, where creating a compute pipeline is a fatal error), none of
+    /// them: there it relights on the CPU ([`crate::atlas::relight_atlas_cpu`], uploaded once per
+    /// lighting change) and marches with the storage-free fragment pass; the same image.
     pub fn from_device(device: wgpu::Device, queue: wgpu::Queue) -> Result<Self, ViewerError> {
         let limits = device.limits();
-        if limits.max_compute_invocations_per_workgroup == 0
-            || limits.max_storage_buffers_per_shader_stage == 0
-        {
-            return Err(ViewerError::NoCompute);
-        }
-        let pipelines = Pipelines::new(&device)?;
+        let storage = limits.max_compute_invocations_per_workgroup > 0
+            && limits.max_storage_buffers_per_shader_stage > 0
+            && limits.max_storage_textures_per_shader_stage > 0;
+        Self::with_storage(device, queue, storage)
+    }
+
+    /// A renderer that uses no compute shader and no storage binding on any device, as on
+    /// WebGL2 ([`GpuRenderer::from_device`]); tests run that path on any adapter.
+    pub fn from_device_without_storage(
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+    ) -> Result<Self, ViewerError> {
+        Self::with_storage(device, queue, false)
+    }
+
+    /// Whether the renderer uses compute shaders and storage bindings (else it relights
+    /// on the CPU).
+    pub fn uses_storage(&self) -> bool {
+        self.storage
+    }
+
+    fn with_storage(device: wgpu::Device, queue: wgpu::Queue, storage: bool) -> Result<Self, ViewerError> {
+        let pipelines = Pipelines::new(&device, storage)?;
         let uniform = |label: &str, size: usize| {
             device.create_buffer(&wgpu::BufferDescriptor {
                 label: Some(label),
@@ -268,13 +305,18 @@ impl GpuRenderer {
         let counters = device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("counters"),
             size: size_of::<Counters>() as u64,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC,
+            usage: if storage {
+                wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC
+            } else {
+                wgpu::BufferUsages::COPY_DST | wgpu::BufferUsages::COPY_SRC
+            },
             mapped_at_creation: false,
         });
         Ok(Self {
             device,
             queue,
             adapter_info: None,
+            storage,
             pipelines,
             march_params,
             display_params,
@@ -345,6 +387,9 @@ impl GpuRenderer {
     /// re-projected onto the new basis.
     pub fn load_asset(&mut self, asset: &Asset) -> Result<AssetInfo, ViewerError> {
         asset.validate()?;
+        if !self.storage && asset.view.is_some() {
+            return Err(ViewerError::NoCompute("a view-dependent asset (format 1.2)"));
+        }
         let limits = self.device.limits();
         let grid_bricks = asset.grid.grid_bricks;
         if grid_bricks.iter().any(|&n| n > limits.max_texture_dimension_3d) {
@@ -381,7 +426,8 @@ impl GpuRenderer {
             ),
             ("per-voxel view lobes", lobe_bytes),
         ] {
-            if bytes > max_binding {
+            // Without storage bindings these stay on the CPU.
+            if self.storage && bytes > max_binding {
                 return Err(ViewerError::TooLarge(format!(
                     "{what} take {bytes} bytes, the device binds at most {max_binding}"
                 )));
@@ -401,6 +447,20 @@ impl GpuRenderer {
                 contents,
                 usage: wgpu::BufferUsages::STORAGE,
             })
+        };
+        // Without storage bindings (WebGL2) the relight reads these on the CPU.
+        let has_storage = self.storage;
+        let storage = |label: &str, data: &[u8]| {
+            if has_storage {
+                storage(label, data)
+            } else {
+                self.device.create_buffer(&wgpu::BufferDescriptor {
+                    label: Some(label),
+                    size: 16,
+                    usage: wgpu::BufferUsages::COPY_DST,
+                    mapped_at_creation: false,
+                })
+            }
         };
         let coefficient_buffer = storage("coefficients", bytemuck::cast_slice(&coefficients.words));
         let density_buffer = storage("density", bytemuck::cast_slice(&density));
@@ -449,24 +509,32 @@ impl GpuRenderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
             format: wgpu::TextureFormat::Rgba16Float,
-            usage: wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::COPY_SRC,
+            usage: if self.storage {
+                wgpu::TextureUsages::STORAGE_BINDING
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC
+            } else {
+                wgpu::TextureUsages::COPY_DST
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::COPY_SRC
+            },
             view_formats: &[],
         });
         let atlas_view = atlas.create_view(&wgpu::TextureViewDescriptor::default());
         let march_grid_view = march_grid_texture.create_view(&wgpu::TextureViewDescriptor::default());
-        let relight_bind_group = self.pipelines.relight.bind_group(
-            &self.device,
-            [
-                &relight_params,
-                &light,
-                &coefficient_buffer,
-                &density_buffer,
-                &neighbour_buffer,
-            ],
-            &atlas_view,
-        );
+        let relight_bind_group = self.pipelines.relight.as_ref().map(|relight| {
+            relight.bind_group(
+                &self.device,
+                [
+                    &relight_params,
+                    &light,
+                    &coefficient_buffer,
+                    &density_buffer,
+                    &neighbour_buffer,
+                ],
+                &atlas_view,
+            )
+        });
         // Read by the view pass and the marked relight's listing.
         let brick_cells = storage(
             "brick cells",
@@ -493,13 +561,10 @@ impl GpuRenderer {
             }
             _ => None,
         };
-        let marks = GpuMarks::new(
-            &self.device,
-            &self.pipelines.marks,
-            grid_bricks,
-            voxel_count,
-            &brick_cells,
-        );
+        let marks =
+            self.pipelines.marks.as_ref().map(|pipelines| {
+                GpuMarks::new(&self.device, pipelines, grid_bricks, voxel_count, &brick_cells)
+            });
         let memory = GpuMemory {
             atlas_bytes: u64::from(texels[0]) * u64::from(texels[1]) * u64::from(texels[2]) * 8,
             coefficient_bytes: coefficient_buffer.size(),
@@ -507,7 +572,10 @@ impl GpuRenderer {
             march_grid_bytes: march_grid.texels.len() as u64 * 4,
             neighbour_bytes: neighbour_buffer.size(),
             view_bytes: view.as_ref().map_or(0, GpuView::bytes),
-            other_bytes: light.size() + relight_params.size() + brick_cells.size() + marks.bytes(),
+            other_bytes: light.size()
+                + relight_params.size()
+                + brick_cells.size()
+                + marks.as_ref().map_or(0, GpuMarks::bytes),
         };
         let max_density_per_m = asset.density.iter().map(|d| d.to_f32()).fold(0.0f32, f32::max);
         let info = AssetInfo {
@@ -539,6 +607,11 @@ impl GpuRenderer {
             light,
             relight_bind_group,
             marks,
+            cpu_relight: (!self.storage).then(|| CpuRelight {
+                coefficients,
+                density: asset.density.clone(),
+                indirection,
+            }),
             view,
             voxel_count,
             info,
@@ -643,10 +716,16 @@ impl GpuRenderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: MARCH_FORMAT,
-            usage: wgpu::TextureUsages::STORAGE_BINDING
-                | wgpu::TextureUsages::TEXTURE_BINDING
-                | wgpu::TextureUsages::RENDER_ATTACHMENT
-                | wgpu::TextureUsages::COPY_SRC,
+            usage: if self.storage {
+                wgpu::TextureUsages::STORAGE_BINDING
+                    | wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::COPY_SRC
+            } else {
+                wgpu::TextureUsages::TEXTURE_BINDING
+                    | wgpu::TextureUsages::RENDER_ATTACHMENT
+                    | wgpu::TextureUsages::COPY_SRC
+            },
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());
@@ -718,7 +797,8 @@ impl GpuRenderer {
         let target = self.target.as_ref().ok_or(ViewerError::NoAsset)?;
         if mark {
             let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
-            asset.marks.encode_clear(encoder);
+            let marks = asset.marks.as_ref().ok_or(ViewerError::NoAsset)?;
+            marks.encode_clear(encoder);
             self.marks_key = key;
             self.marks_listed = false;
         }

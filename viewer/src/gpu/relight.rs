@@ -23,7 +23,7 @@ use nelf_format::conventions::LT_DIM;
 use super::common::{compute_pipeline, shader_module, storage_entry, storage_texture_entry, uniform_entry};
 use super::view::{VIEW_LIGHT_ENTRIES, voxel_dispatch};
 use super::{GpuRenderer, RelightKind};
-use crate::atlas::{MAX_LOBES, RelightView, fold_light, fold_view_light};
+use crate::atlas::{MAX_LOBES, RelightView, fold_light, fold_view_light, relight_atlas_cpu};
 use crate::error::ViewerError;
 use crate::shaders::{RELIGHT_WGSL, RelightParams};
 
@@ -130,6 +130,46 @@ impl GpuRenderer {
             rank,
             self.relight_view,
         );
+        // No compute shaders (WebGL2): the same atlas relit on the CPU and uploaded.
+        if let Some(cpu) = &asset.cpu_relight {
+            let texels = relight_atlas_cpu(
+                &asset.layout,
+                &cpu.indirection,
+                asset.grid.grid_bricks,
+                &cpu.coefficients,
+                &cpu.density,
+                &folded,
+                matches!(self.relight_view, RelightView::Component(_)),
+            );
+            let size = asset.layout.texels();
+            self.queue.write_texture(
+                asset.atlas.as_image_copy(),
+                bytemuck::cast_slice(&texels),
+                wgpu::TexelCopyBufferLayout {
+                    offset: 0,
+                    bytes_per_row: Some(size[0] * 8),
+                    rows_per_image: Some(size[1]),
+                },
+                wgpu::Extent3d {
+                    width: size[0],
+                    height: size[1],
+                    depth_or_array_layers: size[2],
+                },
+            );
+            self.relight_dirty = false;
+            self.atlas_stale = false;
+            self.last_relight = Some(RelightKind::Full);
+            return Ok(self.last_relight);
+        }
+        let relight_pipeline = self
+            .pipelines
+            .relight
+            .as_ref()
+            .ok_or(ViewerError::NoCompute("the relight pass"))?;
+        let relight_bind_group = asset
+            .relight_bind_group
+            .as_ref()
+            .ok_or(ViewerError::NoCompute("the relight pass"))?;
         // Zeros up to the next multiple of 4: the shader applies whole words of codes.
         let mut components = folded.components.clone();
         components.resize(
@@ -199,8 +239,8 @@ impl GpuRenderer {
             pass.set_pipeline(pipeline);
             pass.dispatch_workgroups(groups[0], groups[1], 1);
         } else {
-            pass.set_bind_group(0, &asset.relight_bind_group, &[]);
-            pass.set_pipeline(&self.pipelines.relight.pipeline);
+            pass.set_bind_group(0, relight_bind_group, &[]);
+            pass.set_pipeline(&relight_pipeline.pipeline);
             pass.dispatch_workgroups(quarter_groups[0], quarter_groups[1], 1);
         }
         drop(pass);
