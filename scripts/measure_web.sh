@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# Measures the web viewer in headless Chromium (WebGPU on SwiftShader, i.e. the CPU):
+# Measures the web viewer in headless Chromium, on WebGPU and on WebGL2 (both on
+# SwiftShader, i.e. the CPU):
 # bundle bytes (raw and gzipped), time to the first frame, frames per second while
 # redrawing continuously, and the PSNR of the page's frame against `nelf render` of the
 # same camera and lighting (whole image and foreground).
@@ -26,13 +27,15 @@ server=$!
 trap 'kill $server' EXIT
 sleep 1
 url="http://127.0.0.1:$port/index.html?tonemap=linear&background=0,0,0&jitter=0&continuous=1"
-node "$root/web/tests/shoot.mjs" "$url" "$out/page" webgpu --fps 10 > /dev/null
-node -e '
+for backend in webgpu webgl2; do
+  node "$root/web/tests/shoot.mjs" "$url" "$out/$backend" "$backend" --fps 10 > /dev/null
+  node -e '
 const r = JSON.parse(require("fs").readFileSync(process.argv[1]));
 if (r.data.nelfError) { console.error("page error: " + r.data.nelfError); process.exit(1); }
 require("fs").writeFileSync(process.argv[2], r.data.nelfCamera);
-console.log(`first frame ${r.data.nelfFirstFrameMs} ms after the module started (page load to 3 frames: ${r.wait_ms} ms); ` +
-  `${r.fps.toFixed(2)} fps over 10 s (smoothed frame interval ${r.frame_ms} ms); view ${r.data.nelfMarch} px`);
-' "$out/page/report.json" "$out/camera.json"
-"$nelf" render "$asset" --camera "$out/camera.json" --envmap "$env" -o "$out/reference.png" > "$out/render.txt"
-echo "page vs nelf render: $(node "$root/web/tests/psnr.mjs" "$out/page/view.png" "$out/reference.png")"
+console.log(`${process.argv[3]} (${r.data.nelfGpu}): first frame ${r.data.nelfFirstFrameMs} ms after the module started ` +
+  `(page load to 3 frames: ${r.wait_ms} ms); ${r.fps.toFixed(2)} fps over 10 s (smoothed frame interval ${r.frame_ms} ms); view ${r.data.nelfMarch} px`);
+' "$out/$backend/report.json" "$out/camera_$backend.json" "$backend"
+  "$nelf" render "$asset" --camera "$out/camera_$backend.json" --envmap "$env" -o "$out/reference_$backend.png" > "$out/render_$backend.txt"
+  echo "  page vs nelf render: $(node "$root/web/tests/psnr.mjs" "$out/$backend/view.png" "$out/reference_$backend.png")"
+done

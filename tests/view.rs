@@ -12,6 +12,8 @@
 //! gives lavapipe on machines without a GPU); `.ci/run` installs both.
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
+mod common;
+
 use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output, Stdio};
@@ -229,40 +231,14 @@ fn gpu_march_and_marked_relight_on_the_scanned_head_under_a_real_hdri() {
     // through the march grid) equals the CPU reference, and at a held camera the relight
     // of only the voxels it reads gives the same image as a fresh renderer's full relight.
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
-    let mesh = data.join("meshes/head.off");
     let env_path = data.join("envmaps/studio.exr");
-    for path in [&mesh, &env_path] {
-        assert!(
-            path.is_file(),
-            "missing test data {} (see data/README.md)",
-            path.display()
-        );
-    }
-    let dir = tempfile::tempdir().unwrap();
-    let asset_path = dir.path().join("scan.nelf");
-    let out = Command::new(env!("CARGO_BIN_EXE_nelf"))
-        .args(["bake", "mesh"])
-        .arg(&mesh)
-        .args([
-            "--resolution",
-            "40",
-            "--view-dependence",
-            "off",
-            "--render-size",
-            "32",
-            "--rank",
-            "8",
-            "--quiet",
-            "-o",
-        ])
-        .arg(&asset_path)
-        .output()
-        .unwrap();
     assert!(
-        out.status.success(),
-        "bake: {}",
-        String::from_utf8_lossy(&out.stderr)
+        env_path.is_file(),
+        "missing test data {} (see data/README.md)",
+        env_path.display()
     );
+    let dir = tempfile::tempdir().unwrap();
+    let asset_path = common::bake_scan_head(dir.path());
     let asset = nelf_format::read_asset(&asset_path).unwrap();
     let env = nelf_scene::envmap::load_envmap(&env_path).unwrap();
     let lo = glam::DVec3::from_array(asset.grid.bbox_min_m);

@@ -14,6 +14,8 @@
 //! (`npm ci` there), the wasm32 target and wasm-bindgen-cli; `.ci/run` installs them.
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
+mod common;
+
 use std::io::{BufRead as _, BufReader, Write as _};
 use std::net::TcpListener;
 use std::path::{Path, PathBuf};
@@ -100,16 +102,28 @@ fn shoot(url: &str, backend: &str, out: &Path, options: &[&str]) -> serde_json::
     serde_json::from_str(&text).unwrap()
 }
 
-fn nelf(args: &[&std::ffi::OsStr]) {
-    let out = Command::new(env!("CARGO_BIN_EXE_nelf"))
-        .args(args)
-        .output()
-        .unwrap();
-    assert!(
-        out.status.success(),
-        "nelf {args:?}: {}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+/// `nelf render` of `asset` from the camera in `camera_json` under `envmap` turned by
+/// `rotate_deg`, written to `out` (8-bit sRGB PNG) and read back.
+fn render_reference(
+    asset: &Path,
+    camera_json: &Path,
+    envmap: &Path,
+    rotate_deg: &str,
+    out: &Path,
+) -> image::RgbImage {
+    common::succeed(&[
+        "render".as_ref(),
+        asset.as_os_str(),
+        "--camera".as_ref(),
+        camera_json.as_os_str(),
+        "--envmap".as_ref(),
+        envmap.as_os_str(),
+        "--rotate-deg".as_ref(),
+        rotate_deg.as_ref(),
+        "-o".as_ref(),
+        out.as_os_str(),
+    ]);
+    image::open(out).unwrap().to_rgb8()
 }
 
 /// PSNR (dB) of two 8-bit RGB images over the pixels `keep` selects.
@@ -131,35 +145,16 @@ fn psnr_u8(a: &image::RgbImage, b: &image::RgbImage, keep: impl Fn(&[u8; 3], &[u
 #[test]
 fn the_exported_page_draws_the_scan_like_nelf_render_on_webgpu_and_webgl2() {
     let data = repo().join("data");
-    let mesh = data.join("meshes/head.off");
     let env_path = data.join("envmaps/studio.exr");
-    for path in [&mesh, &env_path] {
-        assert!(
-            path.is_file(),
-            "missing test data {} (see data/README.md)",
-            path.display()
-        );
-    }
+    assert!(
+        env_path.is_file(),
+        "missing test data {} (see data/README.md)",
+        env_path.display()
+    );
     let dir = tempfile::tempdir().unwrap();
-    let asset = dir.path().join("scan.nelf");
-    nelf(&[
-        "bake".as_ref(),
-        "mesh".as_ref(),
-        mesh.as_os_str(),
-        "--resolution".as_ref(),
-        "40".as_ref(),
-        "--view-dependence".as_ref(),
-        "off".as_ref(),
-        "--render-size".as_ref(),
-        "32".as_ref(),
-        "--rank".as_ref(),
-        "8".as_ref(),
-        "--quiet".as_ref(),
-        "-o".as_ref(),
-        asset.as_os_str(),
-    ]);
+    let asset = common::bake_scan_head(dir.path());
     let site = dir.path().join("site");
-    nelf(&[
+    common::succeed(&[
         "export".as_ref(),
         "web".as_ref(),
         asset.as_os_str(),
@@ -212,19 +207,7 @@ fn the_exported_page_draws_the_scan_like_nelf_render_on_webgpu_and_webgl2() {
         let camera_path = dir.path().join(format!("camera_{backend}.json"));
         std::fs::write(&camera_path, camera).unwrap();
         let reference = dir.path().join(format!("reference_{backend}.png"));
-        nelf(&[
-            "render".as_ref(),
-            asset.as_os_str(),
-            "--camera".as_ref(),
-            camera_path.as_os_str(),
-            "--envmap".as_ref(),
-            env_path.as_os_str(),
-            "--rotate-deg".as_ref(),
-            "40".as_ref(),
-            "-o".as_ref(),
-            reference.as_os_str(),
-        ]);
-        let want = image::open(&reference).unwrap().to_rgb8();
+        let want = render_reference(&asset, &camera_path, &env_path, "40", &reference);
         let got = image::open(shots.join("view.png")).unwrap().to_rgb8();
         assert_eq!(
             got.dimensions(),
@@ -291,20 +274,8 @@ fn the_exported_page_draws_the_scan_like_nelf_render_on_webgpu_and_webgl2() {
     assert_eq!(report["data"]["nelfError"], "", "dropped HDRI: {report:#}");
     assert_eq!(report["dropped"], "sunset.exr", "{report:#}");
     let relit_reference = dir.path().join("reference_sunset.png");
-    nelf(&[
-        "render".as_ref(),
-        asset.as_os_str(),
-        "--camera".as_ref(),
-        camera_path.as_os_str(),
-        "--envmap".as_ref(),
-        hdri.as_os_str(),
-        "--rotate-deg".as_ref(),
-        "40".as_ref(),
-        "-o".as_ref(),
-        relit_reference.as_os_str(),
-    ]);
     let relit = image::open(relit_shots.join("view.png")).unwrap().to_rgb8();
-    let relit_want = image::open(&relit_reference).unwrap().to_rgb8();
+    let relit_want = render_reference(&asset, &camera_path, &hdri, "40", &relit_reference);
     let relit_psnr = psnr_u8(&relit, &relit_want, |_, _| true);
     let studio_psnr = psnr_u8(&relit_want, &want, |_, _| true);
     eprintln!(

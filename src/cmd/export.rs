@@ -43,8 +43,8 @@ pub enum ExportCommand {
     /// The relight, march and display passes as GLSL 4.50 and HLSL (translated from our
     /// WGSL by naga), with `shaders.json` naming entry points and bindings.
     Shaders(ShadersArgs),
-    /// A self-contained web page (the viewer built for WebGPU, the asset, its map) that
-    /// any static file server can host.
+    /// A self-contained web page (the viewer built for the browser, WebGPU or WebGL2; the
+    /// asset; its map) that any static file server can host.
     Web(WebArgs),
 }
 

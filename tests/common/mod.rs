@@ -37,6 +37,36 @@ pub fn succeed<S: AsRef<OsStr>>(args: &[S]) -> String {
     String::from_utf8(out.stdout).unwrap()
 }
 
+/// The shared head scan (`data/meshes/head.off`: open at the neck, holes, thin parts)
+/// baked small (`--resolution 40 --rank 8`, view-independent) into `dir/scan.nelf`;
+/// fails the test, naming the file, when the scan is missing.
+pub fn bake_scan_head(dir: &Path) -> PathBuf {
+    let mesh = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/meshes/head.off");
+    assert!(
+        mesh.is_file(),
+        "missing test data {} (see data/README.md)",
+        mesh.display()
+    );
+    let asset = dir.join("scan.nelf");
+    succeed(&[
+        "bake".as_ref(),
+        "mesh".as_ref(),
+        mesh.as_os_str(),
+        "--resolution".as_ref(),
+        "40".as_ref(),
+        "--view-dependence".as_ref(),
+        "off".as_ref(),
+        "--render-size".as_ref(),
+        "32".as_ref(),
+        "--rank".as_ref(),
+        "8".as_ref(),
+        "--quiet".as_ref(),
+        "-o".as_ref(),
+        asset.as_os_str(),
+    ]);
+    asset
+}
+
 /// Writes `nelf capture synth` output to `dir/capture`: `size`² images, `targets`
 /// held-aside views, direct lighting only with few samples (seconds, not minutes),
 /// plus `extra` options. Returns the folder.

@@ -145,6 +145,15 @@ struct GpuAsset {
     info: AssetInfo,
 }
 
+/// Which passes a device runs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Passes {
+    /// Compute shaders and storage bindings: every pass on the GPU.
+    Compute,
+    /// Neither (WebGL2): the relight on the CPU, the storage-free march.
+    StorageFree,
+}
+
 /// An asset's stored data as the CPU relight reads it ([`crate::atlas::relight_atlas_cpu`]).
 struct CpuRelight {
     coefficients: PackedCoefficients,
@@ -179,8 +188,8 @@ pub struct GpuRenderer {
     device: wgpu::Device,
     queue: wgpu::Queue,
     adapter_info: Option<wgpu::AdapterInfo>,
-    /// Whether the device has compute shaders and storage bindings (not WebGL2).
-    storage: bool,
+    /// Which passes the device runs (compute and storage bindings, or not: WebGL2).
+    passes: Passes,
     pipelines: Pipelines,
     march_params: wgpu::Buffer,
     display_params: wgpu::Buffer,
@@ -287,7 +296,11 @@ impl GpuRenderer {
     /// Whether the renderer uses compute shaders and storage bindings (else it relights
     /// on the CPU).
     pub fn uses_storage(&self) -> bool {
-        self.storage
+        self.storage()
+    }
+
+    fn storage(&self) -> bool {
+        self.passes == Passes::Compute
     }
 
     fn with_storage(device: wgpu::Device, queue: wgpu::Queue, storage: bool) -> Result<Self, ViewerError> {
@@ -316,7 +329,11 @@ impl GpuRenderer {
             device,
             queue,
             adapter_info: None,
-            storage,
+            passes: if storage {
+                Passes::Compute
+            } else {
+                Passes::StorageFree
+            },
             pipelines,
             march_params,
             display_params,
@@ -387,7 +404,7 @@ impl GpuRenderer {
     /// re-projected onto the new basis.
     pub fn load_asset(&mut self, asset: &Asset) -> Result<AssetInfo, ViewerError> {
         asset.validate()?;
-        if !self.storage && asset.view.is_some() {
+        if !self.storage() && asset.view.is_some() {
             return Err(ViewerError::NoCompute("a view-dependent asset (format 1.2)"));
         }
         let limits = self.device.limits();
@@ -427,7 +444,7 @@ impl GpuRenderer {
             ("per-voxel view lobes", lobe_bytes),
         ] {
             // Without storage bindings these stay on the CPU.
-            if self.storage && bytes > max_binding {
+            if self.storage() && bytes > max_binding {
                 return Err(ViewerError::TooLarge(format!(
                     "{what} take {bytes} bytes, the device binds at most {max_binding}"
                 )));
@@ -449,7 +466,7 @@ impl GpuRenderer {
             })
         };
         // Without storage bindings (WebGL2) the relight reads these on the CPU.
-        let has_storage = self.storage;
+        let has_storage = self.storage();
         let storage = |label: &str, data: &[u8]| {
             if has_storage {
                 storage(label, data)
@@ -509,7 +526,7 @@ impl GpuRenderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
             format: wgpu::TextureFormat::Rgba16Float,
-            usage: if self.storage {
+            usage: if self.storage() {
                 wgpu::TextureUsages::STORAGE_BINDING
                     | wgpu::TextureUsages::TEXTURE_BINDING
                     | wgpu::TextureUsages::COPY_SRC
@@ -607,7 +624,7 @@ impl GpuRenderer {
             light,
             relight_bind_group,
             marks,
-            cpu_relight: (!self.storage).then(|| CpuRelight {
+            cpu_relight: (!self.storage()).then(|| CpuRelight {
                 coefficients,
                 density: asset.density.clone(),
                 indirection,
@@ -716,7 +733,7 @@ impl GpuRenderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: MARCH_FORMAT,
-            usage: if self.storage {
+            usage: if self.storage() {
                 wgpu::TextureUsages::STORAGE_BINDING
                     | wgpu::TextureUsages::TEXTURE_BINDING
                     | wgpu::TextureUsages::RENDER_ATTACHMENT
