@@ -939,8 +939,14 @@ impl ViewerApp {
         ];
         let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
         let Some(orbit) = self.orbit.as_mut() else {
+            // Files the host is still fetching (the web page's asset) may be on their way.
+            let text = if self.incoming.is_some() {
+                "Loading…"
+            } else {
+                "No asset loaded. Drop a .nelf file on the window."
+            };
             ui.centered_and_justified(|ui| {
-                ui.label("No asset loaded. Drop a .nelf file on the window.");
+                ui.label(text);
             });
             return;
         };
