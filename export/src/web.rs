@@ -75,6 +75,7 @@ pub fn write_web_page(options: &WebPageOptions, out_dir: &Path) -> Result<WebPag
     let asset_bytes = std::fs::read(&options.asset).map_err(io(&options.asset))?;
     nelf_format::read_asset_bytes(&asset_bytes)?;
     let asset_name = file_name(&options.asset)?;
+    // A file's bytes are copied; a generated map is written as EXR below.
     let (env_name, env_bytes) = match &options.envmap {
         WebEnvmap::File(path) => {
             let bytes = std::fs::read(path).map_err(io(path))?;
@@ -83,9 +84,9 @@ pub fn write_web_page(options: &WebPageOptions, out_dir: &Path) -> Result<WebPag
                 .map_err(|e| ExportError::BadOption(e.to_string()))?;
             nelf_format::envmap_file::decode_envmap(&bytes, kind)
                 .map_err(|e| ExportError::BadOption(format!("{}: {e}", path.display())))?;
-            (name, bytes)
+            (name, Some(bytes))
         }
-        WebEnvmap::Generated { name, env } => (format!("{name}.exr"), encode_exr(env)?),
+        WebEnvmap::Generated { name, .. } => (format!("{name}.exr"), None),
     };
     if asset_name == env_name || PAGE_FILES.iter().any(|(n, _)| *n == asset_name || *n == env_name) {
         return Err(ExportError::BadOption(format!(
@@ -112,7 +113,17 @@ pub fn write_web_page(options: &WebPageOptions, out_dir: &Path) -> Result<WebPag
         files.push(write_file(out_dir, name, bytes)?);
     }
     files.push(write_file(out_dir, &asset_name, &asset_bytes)?);
-    files.push(write_file(out_dir, &env_name, &env_bytes)?);
+    match (&options.envmap, env_bytes) {
+        (_, Some(bytes)) => files.push(write_file(out_dir, &env_name, &bytes)?),
+        (WebEnvmap::Generated { env, .. }, None) => {
+            let path = out_dir.join(&env_name);
+            nelf_scene::image_io::write_exr_rgb(&path, env.width() as u32, env.height() as u32, env.texels())
+                .map_err(|e| ExportError::Metadata(format!("cannot write the environment map: {e}")))?;
+            let bytes = std::fs::metadata(&path).map_err(io(&path))?.len();
+            files.push((env_name, bytes));
+        }
+        (WebEnvmap::File(_), None) => {}
+    }
     Ok(WebPageReport {
         files,
         viewer_bytes,
@@ -161,26 +172,6 @@ pub fn url_encode(text: &str) -> String {
     out
 }
 
-/// A lat-long map as a 32-bit float OpenEXR file.
-fn encode_exr(env: &LatLong) -> Result<Vec<u8>, ExportError> {
-    use exr::prelude::WritableImage as _;
-    let width = env.width();
-    let texels = env.texels();
-    let image = exr::prelude::Image::from_channels(
-        (width, env.height()),
-        exr::prelude::SpecificChannels::rgb(|p: exr::prelude::Vec2<usize>| {
-            let [r, g, b] = texels[p.y() * width + p.x()];
-            (r, g, b)
-        }),
-    );
-    let mut bytes = std::io::Cursor::new(Vec::new());
-    image
-        .write()
-        .to_buffered(&mut bytes)
-        .map_err(|e| ExportError::Metadata(format!("cannot encode the environment map as EXR: {e}")))?;
-    Ok(bytes.into_inner())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -213,9 +204,29 @@ mod tests {
     }
 
     #[test]
-    fn a_generated_map_round_trips_through_exr() {
+    fn a_generated_map_round_trips_through_the_written_exr() {
+        let dir = tempfile::tempdir().unwrap();
+        let asset_path = dir.path().join("head.nelf");
+        let asset = nelf_format::synthetic::SyntheticField::new(2_000, 3)
+            .asset(2, nelf_format::CoefficientEncoding::U8Affine)
+            .unwrap();
+        nelf_format::write_asset(&asset_path, &asset, &nelf_format::WriteOptions::default()).unwrap();
         let env = LatLong::new(4, 2, (0..8).map(|i| [i as f32, 0.5, 2.0]).collect()).unwrap();
-        let bytes = encode_exr(&env).unwrap();
+        let options = WebPageOptions {
+            asset: asset_path,
+            envmap: WebEnvmap::Generated {
+                name: "sky".into(),
+                env: env.clone(),
+            },
+            start_query: String::new(),
+        };
+        let report = write_web_page(&options, &dir.path().join("site")).unwrap();
+        assert!(
+            report.files.iter().any(|(n, b)| n == "sky.exr" && *b > 0),
+            "{report:?}"
+        );
+        assert_eq!(report.defaults, "asset=head.nelf&env=sky.exr");
+        let bytes = std::fs::read(dir.path().join("site/sky.exr")).unwrap();
         let back = nelf_format::envmap_file::decode_envmap(&bytes, nelf_format::envmap_file::EnvmapKind::Exr)
             .unwrap();
         assert_eq!(back.texels(), env.texels());

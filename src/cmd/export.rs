@@ -24,7 +24,7 @@ use std::time::Instant;
 use anyhow::Context;
 use nelf_export::web::{WebEnvmap, WebPageOptions};
 use nelf_export::{Compression, Lighting, VdbOptions, VdbReport, write_vdb};
-use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
+use nelf_scene::envgen::EnvFamily;
 use nelf_scene::shot::{LightingArgs, load_lighting};
 use serde::{Deserialize, Serialize};
 
@@ -196,7 +196,8 @@ fn run_web(args: &WebArgs) -> anyhow::Result<()> {
     }
     println!(
         "web page written to {} (viewer {} bytes; start: ?{}); serve the folder, e.g. \
-         `python3 -m http.server -d {}`, and open index.html in a WebGPU browser",
+         `python3 -m http.server -d {}`, and open index.html (WebGPU, or WebGL2 with the relight \
+         on the CPU)",
         args.out.display(),
         report.viewer_bytes,
         report.defaults,
@@ -205,15 +206,9 @@ fn run_web(args: &WebArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The built-in studio map (`nelf view`'s "studio (procedural)", seed 1).
+/// The built-in studio map (`nelf view`'s "studio (procedural)").
 fn studio_envmap() -> nelf_format::conventions::LatLong {
-    procedural_envmap(
-        1,
-        &EnvGenParams {
-            family: Some(EnvFamily::Studio),
-            ..EnvGenParams::default()
-        },
-    )
+    super::view::builtin_envmap(EnvFamily::Studio)
 }
 
 fn run_shaders(args: &ShadersArgs) -> anyhow::Result<()> {

@@ -1,14 +1,14 @@
 //! `nelf view ASSET`: the interactive viewer (`nelf_viewer::run_viewer`). The command
-//! supplies what the viewer library must not depend on: the EXR/HDR loader
-//! (`nelf_scene::envmap::load_envmap`) and built-in environment maps (procedural studio,
-//! outdoor and indoor skies from `nelf_scene::envgen`, plus every EXR/HDR file of
-//! `--envmap-dir`). `--screenshot PATH --frames N --exit` saves the window after N frames
-//! and closes it (for scripted checks under Xvfb).
+//! supplies what the viewer library must not depend on: built-in environment maps
+//! (procedural studio, outdoor and indoor skies from `nelf_scene::envgen`, plus every
+//! EXR/HDR file of `--envmap-dir`). `--screenshot PATH --frames N --exit` saves the window
+//! after N frames and closes it (for scripted checks under Xvfb).
 
 use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
+use nelf_format::conventions::LatLong;
 use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
 use nelf_scene::envmap::load_envmap;
 use nelf_viewer::{NamedEnvmap, ViewerConfig, run_viewer};
@@ -52,6 +52,18 @@ fn parse_size(text: &str) -> Result<[f32; 2], String> {
     Ok([parse(w)?, parse(h)?])
 }
 
+/// The built-in procedural map of `family` (seed 1), as the picker names it
+/// "… (procedural)"; `nelf export` lights with the studio one.
+pub fn builtin_envmap(family: EnvFamily) -> LatLong {
+    procedural_envmap(
+        1,
+        &EnvGenParams {
+            family: Some(family),
+            ..EnvGenParams::default()
+        },
+    )
+}
+
 /// Built-in maps: one procedural map per family, then the files of `dir`.
 fn builtin_envmaps(dir: Option<&PathBuf>) -> anyhow::Result<Vec<NamedEnvmap>> {
     let mut maps: Vec<NamedEnvmap> = [
@@ -62,13 +74,7 @@ fn builtin_envmaps(dir: Option<&PathBuf>) -> anyhow::Result<Vec<NamedEnvmap>> {
     .into_iter()
     .map(|(name, family)| NamedEnvmap {
         name: name.to_string(),
-        env: procedural_envmap(
-            1,
-            &EnvGenParams {
-                family: Some(family),
-                ..EnvGenParams::default()
-            },
-        ),
+        env: builtin_envmap(family),
     })
     .collect();
     if let Some(dir) = dir {
