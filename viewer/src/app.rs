@@ -618,12 +618,8 @@ impl ViewerApp {
 
     /// Loads an EXR/HDR map file; true on success.
     fn load_env_file(&mut self, state: Option<&egui_wgpu::RenderState>, path: &Path) -> bool {
-        let name = path.file_name().map_or_else(
-            || path.display().to_string(),
-            |n| n.to_string_lossy().into_owned(),
-        );
         self.read_file(path)
-            .is_some_and(|bytes| self.load_env(state, &name, &bytes))
+            .is_some_and(|bytes| self.load_env(state, &path.display().to_string(), &bytes))
     }
 
     /// Decodes an EXR/HDR map (`name`'s extension says which) and makes it the
@@ -631,7 +627,7 @@ impl ViewerApp {
     fn load_env(&mut self, state: Option<&egui_wgpu::RenderState>, name: &str, bytes: &[u8]) -> bool {
         match EnvmapKind::from_name(name).and_then(|kind| decode_envmap(bytes, kind)) {
             Ok(env) => {
-                let name = name.rsplit('/').next().unwrap_or(name).to_owned();
+                let name = file_name_of(name).to_owned();
                 self.loaded_envs.retain(|e| e.name != name);
                 self.loaded_envs.push(NamedEnvmap {
                     name: name.clone(),
@@ -763,10 +759,7 @@ impl ViewerApp {
     fn controls(&mut self, ui: &mut egui::Ui, state: Option<&egui_wgpu::RenderState>) {
         ui.heading("nelf view");
         match &self.asset_name {
-            Some(name) => ui.label(format!(
-                "asset: {}",
-                name.rsplit(['/', '\\']).next().unwrap_or(name)
-            )),
+            Some(name) => ui.label(format!("asset: {}", file_name_of(name))),
             None => ui.label("no asset: drop a .nelf file here"),
         };
         if self.asset_name.is_some() {
@@ -1094,6 +1087,11 @@ pub fn capture_light_beside(asset: &Path) -> Option<PathBuf> {
         return capture.envmap_path(capture_dir).filter(|p| p.is_file());
     }
     None
+}
+
+/// The last component of a path or URL (what the picker and the stats line show).
+fn file_name_of(name: &str) -> &str {
+    name.rsplit(['/', '\\']).next().unwrap_or(name)
 }
 
 /// Writes an egui screenshot as PNG.

@@ -525,25 +525,65 @@ pub fn fold_light(
     }
 }
 
+/// Marker of an atlas texel that mirrors no stored voxel in [`atlas_sources`].
+pub const NO_SOURCE: u32 = u32::MAX;
+
+/// The stored voxel every atlas texel mirrors, for the CPU relight
+/// ([`relight_atlas_cpu`]); fixed per asset, so computed once at load. Every texel of every
+/// slot (present brick or halo cell: its 8³ voxels and the 1-voxel apron) mirrors the
+/// grid voxel at its place, [`NO_SOURCE`] where no brick stores that voxel. Texels x
+/// fastest, in the atlas's `layout.texels()` extent; `bricks` is the stored brick count.
+pub fn atlas_sources(
+    layout: &AtlasLayout,
+    indirection: &Indirection,
+    grid_bricks: [u32; 3],
+    bricks: usize,
+) -> Vec<u32> {
+    let texels = layout.texels().map(|n| n as usize);
+    let mut sources = vec![NO_SOURCE; texels[0] * texels[1] * texels[2]];
+    let n = grid_bricks.map(i64::from);
+    let brick = BRICK_SIZE as i64;
+    for (slot, cell) in indirection.slot_cells.iter().enumerate() {
+        for lz in -1..=brick as i32 {
+            for ly in -1..=brick as i32 {
+                for lx in -1..=brick as i32 {
+                    let local = [lx, ly, lz];
+                    let g: [i64; 3] =
+                        std::array::from_fn(|a| i64::from(cell[a]) * brick + i64::from(local[a]));
+                    let c = g.map(|x| x.div_euclid(brick));
+                    if (0..3).any(|a| c[a] < 0 || c[a] >= n[a]) {
+                        continue;
+                    }
+                    let entry = indirection.entries[(c[0] + n[0] * (c[1] + n[1] * c[2])) as usize];
+                    let Some(source) = entry.checked_sub(1).map(|s| s as usize).filter(|&s| s < bricks)
+                    else {
+                        continue;
+                    };
+                    let l = g.map(|x| x.rem_euclid(brick) as usize);
+                    let t = layout.texel_of(slot as u32, local).map(|x| x as usize);
+                    sources[t[0] + texels[0] * (t[1] + texels[1] * t[2])] =
+                        (source * BRICK_VOXELS + l[0] + 8 * l[1] + 64 * l[2]) as u32;
+                }
+            }
+        }
+    }
+    sources
+}
+
 /// The relit atlas computed on the CPU, texel for texel what the relight pass
 /// (`relight.wgsl`, `relight`) writes, for devices that cannot run it (no compute
 /// shaders: WebGL2). Every stored voxel is shaded as `shade_voxel` does (`folded`'s mean
 /// plus its codes or halves times `folded`'s per-code radiance, `|rgb|` with
-/// `magnitude`, the component view), with its density in alpha; then every texel of
-/// every slot (present brick or halo cell: its 8³ voxels and the 1-voxel apron) takes the
-/// value of the grid voxel it mirrors, 0 where no brick stores that voxel. Texels x
-/// fastest, in the atlas's `layout.texels()` extent.
+/// `magnitude`, the component view), with its density in alpha; then every texel takes
+/// the value of the voxel `sources` ([`atlas_sources`]) names, 0 for [`NO_SOURCE`].
 pub fn relight_atlas_cpu(
-    layout: &AtlasLayout,
-    indirection: &Indirection,
-    grid_bricks: [u32; 3],
+    sources: &[u32],
     coefficients: &PackedCoefficients,
     density: &[half::f16],
     folded: &FoldedLight,
     magnitude: bool,
 ) -> Vec<[half::f16; 4]> {
     let voxels = density.len();
-    let bricks = voxels / BRICK_VOXELS;
     let used = folded.components.len();
     let light = |k: usize| folded.components.get(k).copied().unwrap_or([0.0; 4]);
     let words_used = if coefficients.encoding == 1 {
@@ -575,35 +615,10 @@ pub fn relight_atlas_cpu(
         }
         *value = [rgb[0], rgb[1], rgb[2], density[v].to_f32()].map(half::f16::from_f32);
     }
-    let texels = layout.texels().map(|n| n as usize);
-    let mut atlas = vec![[half::f16::ZERO; 4]; texels[0] * texels[1] * texels[2]];
-    let n = grid_bricks.map(i64::from);
-    let brick = BRICK_SIZE as i64;
-    for (slot, cell) in indirection.slot_cells.iter().enumerate() {
-        for lz in -1..=brick as i32 {
-            for ly in -1..=brick as i32 {
-                for lx in -1..=brick as i32 {
-                    let local = [lx, ly, lz];
-                    let g: [i64; 3] =
-                        std::array::from_fn(|a| i64::from(cell[a]) * brick + i64::from(local[a]));
-                    let c = g.map(|x| x.div_euclid(brick));
-                    if (0..3).any(|a| c[a] < 0 || c[a] >= n[a]) {
-                        continue;
-                    }
-                    let entry = indirection.entries[(c[0] + n[0] * (c[1] + n[1] * c[2])) as usize];
-                    let Some(source) = entry.checked_sub(1).map(|s| s as usize).filter(|&s| s < bricks)
-                    else {
-                        continue;
-                    };
-                    let l = g.map(|x| x.rem_euclid(brick) as usize);
-                    let v = source * BRICK_VOXELS + l[0] + 8 * l[1] + 64 * l[2];
-                    let t = layout.texel_of(slot as u32, local).map(|x| x as usize);
-                    atlas[t[0] + texels[0] * (t[1] + texels[1] * t[2])] = values[v];
-                }
-            }
-        }
-    }
-    atlas
+    sources
+        .iter()
+        .map(|&v| values.get(v as usize).copied().unwrap_or([half::f16::ZERO; 4]))
+        .collect()
 }
 
 /// Lobe count the view lighting buffer and the shaders have room for: the 9 real

@@ -49,7 +49,7 @@ use self::marks::{GpuMarks, MarkPipelines};
 use self::relight::RelightPipeline;
 use self::view::{GpuView, ViewBindings, ViewPipelines, lobe_buffer_words};
 use crate::atlas::{
-    AtlasLayout, Dequantization, GpuMemory, Indirection, PackedCoefficients, RelightView, indirection_grid,
+    AtlasLayout, Dequantization, GpuMemory, PackedCoefficients, RelightView, atlas_sources, indirection_grid,
     march_grid, neighbour_blocks, pack_brick_cells, pack_coefficients, pack_density,
 };
 use crate::error::ViewerError;
@@ -158,7 +158,8 @@ enum Passes {
 struct CpuRelight {
     coefficients: PackedCoefficients,
     density: Vec<half::f16>,
-    indirection: Indirection,
+    /// The voxel each atlas texel mirrors ([`crate::atlas::atlas_sources`]).
+    sources: Vec<u32>,
 }
 
 /// The lighting in use.
@@ -301,6 +302,15 @@ impl GpuRenderer {
 
     fn storage(&self) -> bool {
         self.passes == Passes::Compute
+    }
+
+    /// `STORAGE_BINDING` where the device has storage bindings, else nothing.
+    fn storage_texture_usage(&self) -> wgpu::TextureUsages {
+        if self.storage() {
+            wgpu::TextureUsages::STORAGE_BINDING
+        } else {
+            wgpu::TextureUsages::empty()
+        }
     }
 
     fn with_storage(device: wgpu::Device, queue: wgpu::Queue, storage: bool) -> Result<Self, ViewerError> {
@@ -526,15 +536,11 @@ impl GpuRenderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D3,
             format: wgpu::TextureFormat::Rgba16Float,
-            usage: if self.storage() {
-                wgpu::TextureUsages::STORAGE_BINDING
-                    | wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC
-            } else {
-                wgpu::TextureUsages::COPY_DST
-                    | wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::COPY_SRC
-            },
+            // Written by the relight pass, or by an upload of the CPU relight.
+            usage: self.storage_texture_usage()
+                | wgpu::TextureUsages::COPY_DST
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         });
         let atlas_view = atlas.create_view(&wgpu::TextureViewDescriptor::default());
@@ -625,9 +631,9 @@ impl GpuRenderer {
             relight_bind_group,
             marks,
             cpu_relight: (!self.storage()).then(|| CpuRelight {
+                sources: atlas_sources(&layout, &indirection, grid_bricks, asset.bricks.len()),
                 coefficients,
                 density: asset.density.clone(),
-                indirection,
             }),
             view,
             voxel_count,
@@ -733,16 +739,10 @@ impl GpuRenderer {
             sample_count: 1,
             dimension: wgpu::TextureDimension::D2,
             format: MARCH_FORMAT,
-            usage: if self.storage() {
-                wgpu::TextureUsages::STORAGE_BINDING
-                    | wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::COPY_SRC
-            } else {
-                wgpu::TextureUsages::TEXTURE_BINDING
-                    | wgpu::TextureUsages::RENDER_ATTACHMENT
-                    | wgpu::TextureUsages::COPY_SRC
-            },
+            usage: self.storage_texture_usage()
+                | wgpu::TextureUsages::TEXTURE_BINDING
+                | wgpu::TextureUsages::RENDER_ATTACHMENT
+                | wgpu::TextureUsages::COPY_SRC,
             view_formats: &[],
         });
         let view = texture.create_view(&wgpu::TextureViewDescriptor::default());

@@ -133,9 +133,7 @@ impl GpuRenderer {
         // No compute shaders (WebGL2): the same atlas relit on the CPU and uploaded.
         if let Some(cpu) = &asset.cpu_relight {
             let texels = relight_atlas_cpu(
-                &asset.layout,
-                &cpu.indirection,
-                asset.grid.grid_bricks,
+                &cpu.sources,
                 &cpu.coefficients,
                 &cpu.density,
                 &folded,
