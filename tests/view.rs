@@ -229,7 +229,8 @@ fn gpu_march_and_marked_relight_on_the_scanned_head_under_a_real_hdri() {
     // Real data, not a procedural head: the shared head scan (open at the neck, holes
     // and thin parts) baked small, lit by a real HDRI. The GPU march (empty-space skipping
     // through the march grid) equals the CPU reference, and at a held camera the relight
-    // of only the voxels it reads gives the same image as a fresh renderer's full relight.
+    // of only the voxels it reads gives the same image as a fresh renderer's full relight,
+    // and the per-pixel replay (the default there) the same to rounding.
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("data");
     let env_path = data.join("envmaps/studio.exr");
     assert!(
@@ -254,30 +255,46 @@ fn gpu_march_and_marked_relight_on_the_scanned_head_under_a_real_hdri() {
     );
     let settings = nelf_viewer::ViewSettings::default();
     let turn = |deg: f64| nelf_format::conventions::rotation_y(deg.to_radians());
-    let mut gpu = nelf_viewer::GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}; {APT_HINT}"));
-    gpu.load_asset(&asset).unwrap();
-    gpu.set_lighting(&env, turn(0.0)).unwrap();
-    gpu.render(&camera, &settings).unwrap();
-    for deg in [40.0, 80.0, 120.0] {
-        gpu.set_light_rotation(turn(deg)).unwrap();
-        let got = gpu.render(&camera, &settings).unwrap();
-        let want = nelf_render::render_asset(
-            &asset,
-            &camera,
-            &env,
-            turn(deg),
-            None,
-            &nelf_render::MarchSettings::default(),
-        )
-        .unwrap();
-        let db = psnr(&want.rgb, &got.rgb);
-        assert!(db >= 45.0, "scan at {deg}°: GPU vs CPU PSNR {db:.1} dB");
-        let mut fresh = nelf_viewer::GpuRenderer::new_headless().unwrap();
-        fresh.load_asset(&asset).unwrap();
-        fresh.set_lighting(&env, turn(deg)).unwrap();
-        assert_eq!(got, fresh.render(&camera, &settings).unwrap(), "scan at {deg}°");
+    for (budget, kind) in [
+        (0, nelf_viewer::RelightKind::Marked),
+        (
+            nelf_viewer::DEFAULT_REPLAY_BUDGET_BYTES,
+            nelf_viewer::RelightKind::Replay,
+        ),
+    ] {
+        let mut gpu = nelf_viewer::GpuRenderer::new_headless().unwrap_or_else(|e| panic!("{e}; {APT_HINT}"));
+        gpu.set_replay_budget_bytes(budget);
+        gpu.load_asset(&asset).unwrap();
+        gpu.set_lighting(&env, turn(0.0)).unwrap();
+        gpu.render(&camera, &settings).unwrap();
+        for deg in [40.0, 80.0, 120.0] {
+            gpu.set_light_rotation(turn(deg)).unwrap();
+            let got = gpu.render(&camera, &settings).unwrap();
+            let want = nelf_render::render_asset(
+                &asset,
+                &camera,
+                &env,
+                turn(deg),
+                None,
+                &nelf_render::MarchSettings::default(),
+            )
+            .unwrap();
+            let db = psnr(&want.rgb, &got.rgb);
+            assert!(db >= 45.0, "scan at {deg}°: GPU vs CPU PSNR {db:.1} dB");
+            let mut fresh = nelf_viewer::GpuRenderer::new_headless().unwrap();
+            fresh.load_asset(&asset).unwrap();
+            fresh.set_lighting(&env, turn(deg)).unwrap();
+            let want = fresh.render(&camera, &settings).unwrap();
+            if kind == nelf_viewer::RelightKind::Marked {
+                assert_eq!(got, want, "scan at {deg}°");
+            } else {
+                let db = psnr(&want.rgb, &got.rgb);
+                assert!(db >= 70.0, "scan at {deg}°: replay vs march PSNR {db:.1} dB");
+                assert_eq!(got.alpha, want.alpha, "scan at {deg}°");
+            }
+        }
+        // With the cache off the first change at the held camera relit in full and marked,
+        // the later ones only the voxels it reads; with it on, all were replayed.
+        assert_eq!(gpu.last_relight(), Some(kind));
     }
-    // The first change at the held camera relit in full and marked; the later ones only
-    // the voxels it reads.
-    assert_eq!(gpu.last_relight(), Some(nelf_viewer::RelightKind::Marked));
 }

@@ -12,8 +12,10 @@
 //! `nelf_format::synthetic::synthetic_view`). For each asset it prints, as markdown:
 //! GPU memory, relight-pass ms, frame ms at 512² and 1920×1080 with relighting every
 //! frame and without (the march alone over the precomputed RGBA atlas) and their ratio
-//! (at a held camera, so relighting runs on the voxels it reads; the first lighting
-//! change there, which marks them, is timed below the table),
+//! (at a held camera: the frame relit per pixel from its cache where it fits the cache,
+//! `gpu/replay.rs`, else the voxels it reads relit and marched; and the latter alone, with
+//! the cache off; the first lighting change there, which builds the cache or marks the
+//! voxels, is timed below the table),
 //! jitter on and off, trilinear samples per frame and per second, and — as the ceiling
 //! of a texture march on this device — the bare dense march of PLATFORM.md (128³
 //! RGBA16F, 512² rays × 128 steps, every ray taking all its steps) measured in the same
@@ -401,9 +403,9 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
         "bare dense march (PLATFORM.md; 512² rays × 128 steps in a 128³ RGBA16F texture): {dense} ms = {dense_rate:.0} M trilinear samples/s\n"
     );
     println!(
-        "| frame | march, fragment pass (ms) | march, compute pass (ms) | relight + march (ms) | ratio | jitter on (ms) | samples/frame | M samples/s | of dense |"
+        "| frame | march, fragment pass (ms) | march, compute pass (ms) | relit frame (ms) | ratio | marked relight + march (ms) | ratio | jitter on (ms) | samples/frame | M samples/s | of dense |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |");
     for (w, h) in [(512u32, 512u32), (1920, 1080)] {
         let camera = portrait_camera(asset, w, h);
         let settings = ViewSettings {
@@ -425,45 +427,68 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
         };
         let march = time_ms(reps, || Ok(gpu.frame_blocking(&camera, &settings)?))?;
         let march_compute = time_ms(reps, || Ok(gpu.frame_blocking(&camera, &compute)?))?;
+        // Relighting every frame at the held camera: its pixels from the per-pixel cache
+        // where the frame fits it (replay.rs), else the marked voxels and a march; then the
+        // marked relight alone (no cache), for comparison.
         let both = time_ms(reps, || {
             gpu.invalidate_lighting();
             Ok(gpu.frame_blocking(&camera, &settings)?)
         })?;
+        let relit_kind = gpu.last_relight();
+        gpu.set_replay_budget_bytes(0);
+        let marked = time_ms(reps, || {
+            gpu.invalidate_lighting();
+            Ok(gpu.frame_blocking(&camera, &settings)?)
+        })?;
+        gpu.set_replay_budget_bytes(nelf_viewer::DEFAULT_REPLAY_BUDGET_BYTES);
         let jitter = time_ms(reps, || {
             frame += 1;
             Ok(gpu.frame_blocking(&camera, &jittered(frame))?)
         })?;
-        // The first lighting change at a held camera relights in full and marks the voxels
-        // the march reads (for the marked relight of the next changes): its cost against a
-        // full relight plus a march, the camera alternating between two nearby orbits so
-        // that each is unmarked.
+        // The first lighting change at a held camera builds the per-pixel cache (or, with
+        // the cache off, relights in full and marks the voxels the march reads): its cost
+        // against a full relight plus a march, the camera alternating between two nearby
+        // orbits so that neither is cached or marked.
         let nearby = orbit_camera(asset, w, h, 21.0);
-        let mut marking_ms = Vec::with_capacity(reps.max(1));
-        for rep in 0..reps.max(1) + 2 {
-            let cam = if rep % 2 == 0 { &nearby } else { &camera };
-            gpu.frame_blocking(cam, &settings)?;
-            gpu.invalidate_lighting();
-            let start = Instant::now();
-            gpu.frame_blocking(cam, &settings)?;
-            if rep >= 2 {
-                marking_ms.push(start.elapsed().as_secs_f64() * 1e3);
+        for (what, budget) in [
+            (
+                "cache build + per-pixel relight",
+                nelf_viewer::DEFAULT_REPLAY_BUDGET_BYTES,
+            ),
+            ("full relight + marking march", 0),
+        ] {
+            gpu.set_replay_budget_bytes(budget);
+            let mut first_ms = Vec::with_capacity(reps.max(1));
+            for rep in 0..reps.max(1) + 2 {
+                let cam = if rep % 2 == 0 { &nearby } else { &camera };
+                gpu.frame_blocking(cam, &settings)?;
+                gpu.invalidate_lighting();
+                let start = Instant::now();
+                gpu.frame_blocking(cam, &settings)?;
+                if rep >= 2 {
+                    first_ms.push(start.elapsed().as_secs_f64() * 1e3);
+                }
             }
+            first_ms.sort_by(f64::total_cmp);
+            notes.push(format!(
+                "{w}×{h}: first lighting change at a held camera ({what}, {:?}) {:.1} (median {:.1}) ms, \
+                 {:.2}× a full relight ({:.1} ms) plus a march",
+                gpu.last_relight(),
+                first_ms[0],
+                first_ms[first_ms.len() / 2],
+                first_ms[0] / (relight.min + march.min),
+                relight.min
+            ));
         }
-        marking_ms.sort_by(f64::total_cmp);
-        notes.push(format!(
-            "{w}×{h}: first lighting change at a held camera (full relight + marking march) {:.1} (median {:.1}) ms, \
-             {:.2}× a full relight ({:.1} ms) plus a march",
-            marking_ms[0],
-            marking_ms[marking_ms.len() / 2],
-            marking_ms[0] / (relight.min + march.min),
-            relight.min
-        ));
+        gpu.set_replay_budget_bytes(nelf_viewer::DEFAULT_REPLAY_BUDGET_BYTES);
         let counters = gpu.count_samples(&camera, &settings)?;
         let rate = f64::from(counters.samples) / (march.min * 1e-3) / 1e6;
         println!(
-            "| {w}×{h} | {march} = {:.1} fps | {march_compute} | {both} | {:.2} | {jitter} | {} | {rate:.0} | {:.2} |",
+            "| {w}×{h} | {march} = {:.1} fps | {march_compute} | {both} ({}) | {:.2} | {marked} | {:.2} | {jitter} | {} | {rate:.0} | {:.2} |",
             1e3 / march.min,
+            relit_kind.map_or_else(|| "none".to_string(), |k| format!("{k:?}")),
             both.min / march.min,
+            marked.min / march.min,
             counters.samples,
             rate / dense_rate
         );
@@ -518,6 +543,21 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
     println!(
         "\nGPU vs CPU reference at 256²: PSNR {:.1} dB; CPU reference (project, relight, march; rayon) {cpu_ms:.0} ms, GPU march {gpu_frame} ms",
         psnr(&want, &got)
+    );
+    // The same camera held while the lighting turns: frames replayed per pixel (or, over
+    // the cache budget, marked relights) against the CPU reference under each lighting.
+    let mut worst = f64::INFINITY;
+    let mut kind = None;
+    for step in 1..=3 {
+        let turn = rotation_y(0.7 * f64::from(step));
+        gpu.set_light_rotation(turn)?;
+        let got = gpu.render(&camera, &settings)?;
+        let want = render_asset(asset, &camera, &env, turn, None, &MarchSettings::default())?;
+        worst = worst.min(psnr(&want, &got));
+        kind = gpu.last_relight();
+    }
+    println!(
+        "held camera at 256², lighting turned 3 times ({kind:?}): PSNR vs CPU reference ≥ {worst:.1} dB"
     );
     bench_view_dependence(gpu, asset, reps)
 }

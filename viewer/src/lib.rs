@@ -30,6 +30,6 @@ pub use app::{
 pub use atlas::{GpuMemory, RelightView};
 pub use error::ViewerError;
 pub use gpu::{
-    AssetInfo, DisplayImage, DisplaySettings, GpuRenderer, MarchPass, MarchView, RelightKind, ToneMap,
-    ViewInfo, ViewSettings,
+    AssetInfo, DEFAULT_REPLAY_BUDGET_BYTES, DisplayImage, DisplaySettings, GpuRenderer, MarchPass, MarchView,
+    RelightKind, ToneMap, ViewInfo, ViewSettings,
 };

@@ -20,6 +20,9 @@ pub const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
 /// entry only, no counters, no marks.
 pub const MARCH_NOSTORAGE_WGSL: &str = include_str!("../../shaders/march_nostorage.wgsl");
 
+/// Relighting a held camera's frame per pixel (compute; viewer/src/gpu/replay.rs).
+pub const REPLAY_WGSL: &str = include_str!("../../shaders/replay.wgsl");
+
 /// Every entry shader the viewer compiles: `nelf_render::wgsl::PASSES`, the view pass and
 /// the storage-free march.
 pub const VIEWER_PASSES: &[(&str, &str)] = &[
@@ -29,7 +32,24 @@ pub const VIEWER_PASSES: &[(&str, &str)] = &[
     ("display.wgsl", DISPLAY_WGSL),
     ("dense_march.wgsl", DENSE_MARCH_WGSL),
     ("view.wgsl", VIEW_WGSL),
+    ("replay.wgsl", REPLAY_WGSL),
 ];
+
+/// Uniform of the per-pixel replay (`ReplayParams` in `replay.wgsl`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ReplayParams {
+    /// First component of a build dispatch, components it sums (≤ 64), components the
+    /// relight uses, pixels.
+    pub components: [u32; 4],
+    /// Stored bricks, u32 words per voxel, coefficient encoding (1 = 8-bit affine,
+    /// 2 = f16), stored rank.
+    pub coefficients: [u32; 4],
+    /// The lighting's mean radiance `P_mean` (rgb, not folded), unused.
+    pub light_mean: [f32; 4],
+    /// The cached rectangle of the image: first pixel x, y; width, height.
+    pub rect: [u32; 4],
+}
 
 /// Uniform of the relight pass (`RelightParams` in `relight.wgsl`).
 #[repr(C)]
@@ -207,6 +227,8 @@ mod tests {
         assert_mirror!(march, Counters, [samples, steps]);
         let display = module("display.wgsl", DISPLAY_WGSL);
         assert_mirror!(display, DisplayParams, [background, mode]);
+        let replay = module("replay.wgsl", REPLAY_WGSL);
+        assert_mirror!(replay, ReplayParams, [components, coefficients, light_mean, rect]);
         let dense = module("dense_march.wgsl", DENSE_MARCH_WGSL);
         assert_mirror!(dense, DenseParams, [image]);
     }

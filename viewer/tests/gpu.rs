@@ -735,11 +735,12 @@ fn the_march_pass_follows_the_device() {
 
 #[test]
 fn a_held_camera_relights_only_what_it_reads() {
-    // An asset with holes (aprons next to missing bricks matter) and a held camera: the
-    // first lighting change there relights in full and marks the voxels the camera reads,
-    // the next ones relight only those, and the image is bit for bit a fresh renderer's
-    // (full relight) and matches the CPU reference; moving the camera then relights in
-    // full, and reading the atlas back gives the fully relit atlas.
+    // An asset with holes (aprons next to missing bricks matter) and a held camera whose
+    // frame does not fit the per-pixel cache (budget 0): the first lighting change there
+    // relights in full and marks the voxels the camera reads, the next ones relight only
+    // those, and the image is bit for bit a fresh renderer's (full relight) and matches
+    // the CPU reference; moving the camera then relights in full, and reading the atlas
+    // back gives the fully relit atlas.
     let asset = without_bricks(
         &asset_through_file(40_000, 8, CoefficientEncoding::U8Affine, 5),
         |b| (b[0] + b[1] + 2 * b[2]) % 3 == 0,
@@ -763,6 +764,7 @@ fn a_held_camera_relights_only_what_it_reads() {
         (image, gpu.read_atlas().unwrap())
     };
     let mut gpu = renderer();
+    gpu.set_replay_budget_bytes(0);
     gpu.load_asset(&asset).unwrap();
     gpu.set_lighting(&env, rotation_y(0.7)).unwrap();
     gpu.render(&cam, &no_jitter()).unwrap();
@@ -838,6 +840,112 @@ fn a_held_camera_relights_only_what_it_reads() {
     gpu.render(&moved, &no_jitter()).unwrap();
     assert_eq!(gpu.last_relight(), Some(RelightKind::Marked));
     assert_eq!(gpu.read_atlas().unwrap(), want_atlas);
+}
+
+#[test]
+fn a_held_camera_replays_its_pixels_under_new_lighting() {
+    // At a held camera whose frame fits the per-pixel cache, lighting changes are a dot
+    // product per pixel (replay.wgsl), no march: the image must be a fresh renderer's (full
+    // relight + march) to rounding and the CPU reference's, with brick holes, 8-bit and
+    // f16 coefficients, a rank over 64 (two build dispatches), a truncated rank, a jitter
+    // seed and both passes; moving the camera relights the atlas in full again.
+    let holed = |asset: &Asset| without_bricks(asset, |b| (b[0] + 2 * b[1] + b[2]) % 4 == 0);
+    let cases = [
+        (
+            holed(&asset_through_file(30_000, 8, CoefficientEncoding::U8Affine, 11)),
+            MarchPass::Fragment,
+        ),
+        (
+            holed(&asset_through_file(30_000, 70, CoefficientEncoding::F16, 12)),
+            MarchPass::Compute,
+        ),
+        (
+            asset_through_file(20_000, 67, CoefficientEncoding::U8Affine, 13),
+            MarchPass::Fragment,
+        ),
+    ];
+    let env = sky(64, 32);
+    let cam = camera(96, 80);
+    let moved = PinholeCamera::look_at(
+        DVec3::new(-0.3, 0.05, 0.3),
+        DVec3::new(0.0, 0.01, 0.0),
+        DVec3::Y,
+        96,
+        80,
+        0.65,
+    );
+    for (case, (asset, pass)) in cases.iter().enumerate() {
+        let settings = ViewSettings {
+            pass: *pass,
+            ..no_jitter()
+        };
+        let jittered = ViewSettings {
+            jitter: true,
+            frame_index: 5,
+            ..settings
+        };
+        let fresh = |camera: &PinholeCamera, settings: &ViewSettings, angle: f64, rank: Option<usize>| {
+            let mut gpu = renderer();
+            gpu.load_asset(asset).unwrap();
+            gpu.set_rank(rank);
+            gpu.set_lighting(&env, rotation_y(angle)).unwrap();
+            let image = gpu.render(camera, settings).unwrap();
+            assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
+            image
+        };
+        let mut gpu = renderer();
+        gpu.load_asset(asset).unwrap();
+        gpu.set_lighting(&env, rotation_y(0.7)).unwrap();
+        gpu.render(&cam, &settings).unwrap();
+        assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
+        for (step, (angle, rank, view)) in [
+            (1.2, None, &settings),
+            (2.3, None, &settings),
+            (2.9, Some(5), &settings),
+            (4.0, None, &jittered),
+            (4.4, None, &jittered),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            gpu.set_rank(rank);
+            gpu.set_light_rotation(rotation_y(angle)).unwrap();
+            let got = gpu.render(&cam, view).unwrap();
+            // The jittered frames: the first at a new seed is a march, then replays.
+            let want_kind = if step == 3 {
+                RelightKind::Full
+            } else {
+                RelightKind::Replay
+            };
+            assert_eq!(gpu.last_relight(), Some(want_kind), "case {case}, {angle} rad");
+            let want = fresh(&cam, view, angle, rank);
+            assert_eq!(got.alpha, want.alpha, "case {case}, {angle} rad: alpha");
+            let db = psnr(&want, &got);
+            assert!(
+                db >= 70.0,
+                "case {case}, {angle} rad: replay vs march PSNR {db:.2} dB"
+            );
+            if !view.jitter {
+                let march = MarchSettings::default();
+                let reference = render_asset(asset, &cam, &env, rotation_y(angle), rank, &march).unwrap();
+                let db = psnr(&reference, &got);
+                assert!(
+                    db >= 45.0,
+                    "case {case}, {angle} rad: replay vs CPU PSNR {db:.2} dB"
+                );
+            }
+        }
+        assert!(gpu.replay_bytes() > 0);
+        // The atlas was left stale: a new camera relights it in full and marches.
+        gpu.set_rank(None);
+        let got = gpu.render(&moved, &settings).unwrap();
+        assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
+        assert_eq!(
+            got,
+            fresh(&moved, &settings, 4.4, None),
+            "case {case}: moved camera"
+        );
+    }
 }
 
 #[test]

@@ -12,7 +12,7 @@
 //!
 //! [`GpuRenderer::render_display`]: super::GpuRenderer::render_display
 
-use super::common::{shader_module, texture_entry, uniform_entry};
+use super::common::{fullscreen_pipeline, shader_module, texture_entry, uniform_entry};
 use super::march::MarchView;
 use crate::error::ViewerError;
 use crate::shaders::{DISPLAY_WGSL, DisplayParams};
@@ -107,31 +107,14 @@ impl DisplayPipelines {
         let index = if let Some(i) = self.pipelines.iter().position(|(f, _)| *f == format) {
             i
         } else {
-            let pipeline = device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("display"),
-                layout: Some(&self.pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &self.module,
-                    entry_point: Some("vs_main"),
-                    compilation_options: wgpu::PipelineCompilationOptions::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: None,
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &self.module,
-                    entry_point: Some("fs_main"),
-                    compilation_options: wgpu::PipelineCompilationOptions::default(),
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            });
+            let pipeline = fullscreen_pipeline(
+                device,
+                &self.pipeline_layout,
+                &self.module,
+                ["vs_main", "fs_main"],
+                format,
+                &[],
+            );
             self.pipelines.push((format, pipeline));
             self.pipelines.len() - 1
         };

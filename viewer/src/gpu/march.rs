@@ -25,7 +25,8 @@ use nelf_format::spec::BRICK_SIZE;
 use nelf_render::MarchSettings;
 
 use super::common::{
-    compute_pipeline, shader_module, storage_entry, storage_texture_entry, texture_entry, uniform_entry,
+    compute_pipeline, fullscreen_pass, fullscreen_pipeline, shader_module, storage_entry,
+    storage_texture_entry, texture_entry, uniform_entry,
 };
 use super::{GpuAsset, GpuRenderer, Target};
 use crate::error::ViewerError;
@@ -179,34 +180,14 @@ impl MarchPipelines {
             immediate_size: 0,
         });
         let fragment_pipeline = |constants: &[(&str, f64)]| {
-            device.create_render_pipeline(&wgpu::RenderPipelineDescriptor {
-                label: Some("march (fragment)"),
-                layout: Some(&fragment_pipeline_layout),
-                vertex: wgpu::VertexState {
-                    module: &module,
-                    entry_point: Some("march_vs"),
-                    compilation_options: wgpu::PipelineCompilationOptions::default(),
-                    buffers: &[],
-                },
-                primitive: wgpu::PrimitiveState::default(),
-                depth_stencil: None,
-                multisample: wgpu::MultisampleState::default(),
-                fragment: Some(wgpu::FragmentState {
-                    module: &module,
-                    entry_point: Some("march_fs"),
-                    compilation_options: wgpu::PipelineCompilationOptions {
-                        constants,
-                        zero_initialize_workgroup_memory: false,
-                    },
-                    targets: &[Some(wgpu::ColorTargetState {
-                        format: MARCH_FORMAT,
-                        blend: None,
-                        write_mask: wgpu::ColorWrites::ALL,
-                    })],
-                }),
-                multiview_mask: None,
-                cache: None,
-            })
+            fullscreen_pipeline(
+                device,
+                &fragment_pipeline_layout,
+                &module,
+                ["march_vs", "march_fs"],
+                MARCH_FORMAT,
+                constants,
+            )
         };
         let fragment = fragment_pipeline(&[]);
         let fragment_marking = storage.then(|| fragment_pipeline(&[("MARK_VOXELS", 1.0)]));
@@ -227,6 +208,12 @@ impl MarchPipelines {
             fragment_marking,
             sampler,
         })
+    }
+
+    /// The compute march's bind group layout (group 0 of the replay passes too; `None`
+    /// without storage bindings).
+    pub(super) fn compute_layout(&self) -> Option<&wgpu::BindGroupLayout> {
+        self.compute.as_ref().map(|c| &c.layout)
     }
 
     /// The bind groups of the compute and the fragment march: uniform `march_params`, the
@@ -313,22 +300,12 @@ impl MarchPipelines {
             _ => None,
         };
         let Some((compute, bind_group)) = compute else {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("march (fragment)"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &target.view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::TRANSPARENT),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = fullscreen_pass(
+                encoder,
+                "march (fragment)",
+                &target.view,
+                wgpu::Color::TRANSPARENT,
+            );
             pass.set_pipeline(match (&self.fragment_marking, mark) {
                 (Some(marking), true) => marking,
                 _ => &self.fragment,

@@ -37,6 +37,9 @@ pub enum RelightKind {
     Full,
     /// The voxels the marking march listed for the current camera.
     Marked,
+    /// No voxel: the held camera's pixels from its per-pixel cache (`replay.rs`), without
+    /// a march.
+    Replay,
 }
 
 /// The marked relight's pipelines and the layout of its groups 1 (the list) and 2 (the

@@ -9,8 +9,10 @@
 //! voxel's radiance is its `K`-term dot product, written with its density into an RGBA16F
 //! atlas ([`crate::atlas`]). Shading is linear, so marching the relit atlas equals
 //! shading every sample; a frame without a lighting change costs only the march. A
-//! lighting change at a held camera marks the voxels its march reads (about 7 % of a
-//! head's), and the next lighting changes at that camera relight only those (`marks`).
+//! lighting change at a held camera caches its frame per pixel, and the next lighting
+//! changes at that camera are a dot product per pixel with no march (`replay`); where the
+//! cache would be too large, that first change marks the voxels its march reads (about
+//! 7 % of a head's) and the next ones relight only those (`marks`).
 //!
 //! A view-dependent asset (format 1.2) adds one small per-voxel pass between the two,
 //! run only when the camera's eye or the lighting changed: the relight pass then writes
@@ -20,6 +22,7 @@
 //!
 //! One module per pass, as the shaders are (`shaders/*.wgsl`): `relight` (relight.wgsl),
 //! `marks` (the marked relight: relight.wgsl's `relight_marked`, march.wgsl's marking),
+//! `replay` (replay.wgsl: a held camera's frame relit per pixel),
 //! `view` (view.wgsl and relight.wgsl's `relight_lobes`), `march` (march.wgsl, compute,
 //! counting and fragment variants), `display` (display.wgsl: exposure, tone map, sRGB);
 //! `common` holds the layout and pipeline helpers they share and `readback` the headless
@@ -32,6 +35,7 @@ mod march;
 mod marks;
 mod readback;
 mod relight;
+mod replay;
 mod view;
 
 use glam::DMat3;
@@ -47,6 +51,8 @@ pub use self::march::{MarchPass, MarchView, ViewSettings};
 pub use self::marks::RelightKind;
 use self::marks::{GpuMarks, MarkPipelines};
 use self::relight::RelightPipeline;
+pub use self::replay::DEFAULT_REPLAY_BUDGET_BYTES;
+use self::replay::{GpuReplay, ReplayInputs, ReplayPipelines};
 use self::view::{GpuView, ViewBindings, ViewPipelines, lobe_buffer_words};
 use crate::atlas::{
     AtlasLayout, Dequantization, GpuMemory, PackedCoefficients, RelightView, atlas_sources, indirection_grid,
@@ -91,6 +97,8 @@ pub struct ViewInfo {
 struct Pipelines {
     relight: Option<RelightPipeline>,
     marks: Option<MarkPipelines>,
+    /// The per-pixel replay of a held camera (`None` without storage bindings).
+    replay: Option<ReplayPipelines>,
     march: MarchPipelines,
     display: DisplayPipelines,
     /// Created with the first view-dependent asset.
@@ -106,10 +114,16 @@ impl Pipelines {
         } else {
             (None, None)
         };
+        let march = MarchPipelines::new(device, storage)?;
+        let replay = match march.compute_layout() {
+            Some(layout) => Some(ReplayPipelines::new(device, layout)?),
+            None => None,
+        };
         Ok(Self {
             marks,
             relight,
-            march: MarchPipelines::new(device, storage)?,
+            replay,
+            march,
             display: DisplayPipelines::new(device)?,
             view: None,
         })
@@ -137,6 +151,8 @@ struct GpuAsset {
     relight_bind_group: Option<wgpu::BindGroup>,
     /// The voxels a marking march read (`marks.rs`; `None` without storage bindings).
     marks: Option<GpuMarks>,
+    /// What the per-pixel replay reads (`replay.rs`; `None` without storage bindings).
+    replay: Option<ReplayInputs>,
     /// What the CPU relight reads, on a device without storage bindings.
     cpu_relight: Option<CpuRelight>,
     /// The view part of a view-dependent asset.
@@ -160,6 +176,19 @@ struct CpuRelight {
     density: Vec<half::f16>,
     /// The voxel each atlas texel mirrors ([`crate::atlas::atlas_sources`]).
     sources: Vec<u32>,
+}
+
+/// What the atlas holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum AtlasState {
+    /// Nothing yet: no relight since the asset was loaded.
+    Unlit,
+    /// Every voxel's radiance under the current lighting, and its density.
+    Lit,
+    /// Every voxel's density (no lighting changes it), but radiance under the current
+    /// lighting only where the current camera reads it (the marked relight) or nowhere
+    /// (the per-pixel replay): the next other camera relights in full.
+    Stale,
 }
 
 /// The lighting in use.
@@ -204,12 +233,16 @@ pub struct GpuRenderer {
     marks_key: Option<MarchParams>,
     /// The mark key of the last frame encoded.
     last_mark_key: Option<MarchParams>,
-    /// Whether only the marked voxels hold the current lighting.
-    atlas_stale: bool,
+    /// What the atlas holds.
+    atlas_state: AtlasState,
     /// Whether the list of marked stored voxels is built from the latest marks.
     marks_listed: bool,
     /// How the last relight ran.
     last_relight: Option<RelightKind>,
+    /// The per-pixel cache of a held camera (`replay.rs`), allocated on first use.
+    replay: Option<GpuReplay>,
+    /// Largest per-pixel cache to allocate; larger frames use the marked relight.
+    replay_budget_bytes: u64,
     /// The eye (lattice coordinates) the atlas of a view-dependent asset shows radiance
     /// toward; `None` when the view pass must run before the next march.
     view_eye: Option<[f32; 3]>,
@@ -355,9 +388,11 @@ impl GpuRenderer {
             relight_dirty: true,
             marks_key: None,
             last_mark_key: None,
-            atlas_stale: false,
+            atlas_state: AtlasState::Unlit,
             marks_listed: false,
             last_relight: None,
+            replay: None,
+            replay_budget_bytes: DEFAULT_REPLAY_BUDGET_BYTES,
             view_eye: None,
             last_eye: None,
             target: None,
@@ -614,12 +649,18 @@ impl GpuRenderer {
                 encoding: v.coefficients.encoding(),
             }),
         };
+        let dequantization = Dequantization::of(&asset.coefficients);
+        let replay = self
+            .pipelines
+            .replay
+            .as_ref()
+            .map(|_| ReplayInputs::new(&self.device, coefficient_buffer.clone(), &dequantization));
         self.asset = Some(GpuAsset {
             layout,
             grid: asset.grid,
             pca: asset.pca.clone(),
             world_from_light: asset.world_from_light,
-            dequantization: Dequantization::of(&asset.coefficients),
+            dequantization,
             coefficient_words_per_voxel: coefficients.words_per_voxel,
             coefficient_encoding: coefficients.encoding,
             atlas,
@@ -630,6 +671,7 @@ impl GpuRenderer {
             light,
             relight_bind_group,
             marks,
+            replay,
             cpu_relight: (!self.storage()).then(|| CpuRelight {
                 sources: atlas_sources(&layout, &indirection, grid_bricks, asset.bricks.len()),
                 coefficients,
@@ -644,7 +686,8 @@ impl GpuRenderer {
         self.relight_dirty = true;
         self.marks_key = None;
         self.last_mark_key = None;
-        self.atlas_stale = false;
+        self.replay = None;
+        self.atlas_state = AtlasState::Unlit;
         self.view_eye = None;
         self.last_eye = None;
         if let Some(lighting) = self.lighting.take() {
@@ -705,6 +748,21 @@ impl GpuRenderer {
             self.relight_view = view;
             self.relight_dirty = true;
         }
+    }
+
+    /// Caps the per-pixel cache of a held camera (`replay.rs`; default
+    /// [`DEFAULT_REPLAY_BUDGET_BYTES`]): frames needing more relight the voxels their march
+    /// reads instead (0 turns the replay off).
+    pub fn set_replay_budget_bytes(&mut self, bytes: u64) {
+        self.replay_budget_bytes = bytes;
+        if self.replay.as_ref().is_none_or(|r| r.bytes() > bytes) {
+            self.replay = None;
+        }
+    }
+
+    /// GPU memory of the per-pixel cache of a held camera, if one is allocated.
+    pub fn replay_bytes(&self) -> u64 {
+        self.replay.as_ref().map_or(0, GpuReplay::bytes)
     }
 
     /// Makes the next frame relight even if nothing changed (benchmarks).
@@ -792,8 +850,38 @@ impl GpuRenderer {
         // The marked relight serves a camera whose read voxels are marked; any other
         // frame needs the whole atlas lit (marks.rs).
         let key = self.mark_key(&params, settings);
+        // At a held camera whose frame fits the per-pixel cache, lighting changes replay
+        // the pixels (replay.rs) instead of relighting voxels and marching.
+        let replay_rect = if key.is_some() && !count_samples {
+            self.replay_fits(camera)
+        } else {
+            None
+        };
+        if let (Some(key), Some(rect)) = (key, replay_rect) {
+            let replayed = self.replay.as_ref().is_some_and(|r| r.key == Some(key));
+            let held = self.last_mark_key == Some(key);
+            if (replayed && (self.relight_dirty || self.atlas_state == AtlasState::Stale))
+                || (held && self.relight_dirty)
+            {
+                self.last_mark_key = Some(key);
+                self.last_eye = Some([params.origin_u[0], params.origin_u[1], params.origin_u[2]]);
+                self.ensure_target(camera.width, camera.height)?;
+                self.queue
+                    .write_buffer(&self.march_params, 0, bytemuck::bytes_of(&params));
+                // The first lighting change here fills the cache (a march over the atlas's
+                // densities, which no lighting changes), then every change relights it.
+                if !replayed {
+                    if self.atlas_state == AtlasState::Unlit {
+                        self.relight_dirty = true;
+                        self.encode_relight_if_needed(encoder, false)?;
+                    }
+                    self.encode_replay_build(encoder, key, rect)?;
+                }
+                return self.encode_replay_relight(encoder, settings.pass);
+            }
+        }
         let marked = key.is_some() && key == self.marks_key;
-        if self.atlas_stale && !marked {
+        if self.atlas_state == AtlasState::Stale && !marked {
             self.relight_dirty = true;
         }
         let relit = self.encode_relight_if_needed(encoder, marked)?;

@@ -8,7 +8,8 @@
 use nelf_format::conventions::PinholeCamera;
 use nelf_render::Image;
 
-use super::{DisplayImage, DisplaySettings, GpuRenderer, ViewSettings};
+use super::common::fullscreen_pass;
+use super::{AtlasState, DisplayImage, DisplaySettings, GpuRenderer, ViewSettings};
 use crate::error::ViewerError;
 use crate::shaders::Counters;
 
@@ -149,22 +150,7 @@ impl GpuRenderer {
         });
         let view = output.create_view(&wgpu::TextureViewDescriptor::default());
         {
-            let mut pass = encoder.begin_render_pass(&wgpu::RenderPassDescriptor {
-                label: Some("display"),
-                color_attachments: &[Some(wgpu::RenderPassColorAttachment {
-                    view: &view,
-                    depth_slice: None,
-                    resolve_target: None,
-                    ops: wgpu::Operations {
-                        load: wgpu::LoadOp::Clear(wgpu::Color::BLACK),
-                        store: wgpu::StoreOp::Store,
-                    },
-                })],
-                depth_stencil_attachment: None,
-                timestamp_writes: None,
-                occlusion_query_set: None,
-                multiview_mask: None,
-            });
+            let mut pass = fullscreen_pass(&mut encoder, "display", &view, wgpu::Color::BLACK);
             self.paint(&mut pass, format);
         }
         self.submit_and_wait(encoder)?;
@@ -185,7 +171,7 @@ impl GpuRenderer {
     pub fn read_atlas(&mut self) -> Result<Vec<[f32; 4]>, ViewerError> {
         let mut encoder = self.encoder("relight");
         // The whole atlas, not only the voxels the last camera reads.
-        if self.atlas_stale {
+        if self.atlas_state == AtlasState::Stale {
             self.relight_dirty = true;
         }
         self.encode_relight_if_needed(&mut encoder, false)?;

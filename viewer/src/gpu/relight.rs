@@ -22,7 +22,7 @@ use nelf_format::conventions::LT_DIM;
 
 use super::common::{compute_pipeline, shader_module, storage_entry, storage_texture_entry, uniform_entry};
 use super::view::{VIEW_LIGHT_ENTRIES, voxel_dispatch};
-use super::{GpuRenderer, RelightKind};
+use super::{AtlasState, GpuRenderer, RelightKind};
 use crate::atlas::{MAX_LOBES, RelightView, fold_light, fold_view_light, relight_atlas_cpu};
 use crate::error::ViewerError;
 use crate::shaders::{RELIGHT_WGSL, RelightParams};
@@ -155,7 +155,7 @@ impl GpuRenderer {
                 },
             );
             self.relight_dirty = false;
-            self.atlas_stale = false;
+            self.atlas_state = AtlasState::Lit;
             self.last_relight = Some(RelightKind::Full);
             return Ok(self.last_relight);
         }
@@ -224,7 +224,7 @@ impl GpuRenderer {
         if marked && lobes.is_none() {
             self.encode_marked_relight(encoder)?;
             self.relight_dirty = false;
-            self.atlas_stale = true;
+            self.atlas_state = AtlasState::Stale;
             self.last_relight = Some(RelightKind::Marked);
             return Ok(self.last_relight);
         }
@@ -243,7 +243,7 @@ impl GpuRenderer {
         }
         drop(pass);
         self.relight_dirty = false;
-        self.atlas_stale = false;
+        self.atlas_state = AtlasState::Lit;
         self.last_relight = Some(RelightKind::Full);
         // The atlas no longer shows radiance toward any eye.
         self.view_eye = None;
