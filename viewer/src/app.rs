@@ -972,7 +972,8 @@ impl ViewerApp {
         };
         // A new jitter pattern per camera, not per frame: there is no temporal
         // accumulation, so a held camera keeps one pattern (no flicker while the lighting
-        // changes) and its relights can stay on the voxels it reads (gpu/marks.rs).
+        // changes) and its relights can replay its pixels (gpu/replay.rs) or stay on the
+        // voxels it reads (gpu/marks.rs).
         if self.jitter_camera != Some(camera) {
             self.jitter_camera = Some(camera);
             self.frame_index = self.frame_index.wrapping_add(1);
