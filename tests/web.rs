@@ -286,6 +286,66 @@ fn the_exported_page_draws_the_scan_like_nelf_render_on_webgpu_and_webgl2() {
         relit_psnr >= 35.0 && studio_psnr < relit_psnr - 10.0,
         "dropped HDRI: {relit_psnr:.2} dB"
     );
+
+    // Touch, as a phone sends it: one finger orbits, two fingers pinched apart zoom in
+    // (the eye moves along the view axis, no turn), two fingers dragged pan (the eye
+    // moves across the view axis, no turn).
+    let report = shoot(&view_url, "webgpu", &dir.path().join("touch"), &["--touch"]);
+    let cameras: Vec<(glam::DMat3, glam::DVec3)> = report["touch"]
+        .as_array()
+        .unwrap_or_else(|| panic!("no touch report: {report:#}"))
+        .iter()
+        .map(|c| page_camera(c.as_str().unwrap_or_default()))
+        .collect();
+    assert_eq!(cameras.len(), 4, "{report:#}");
+    // The angle of the rotation between two camera rotations: cos θ = (tr(aᵀb) − 1) / 2.
+    let turn_deg = |a: &glam::DMat3, b: &glam::DMat3| {
+        let m = a.transpose() * *b;
+        let cos = (m.x_axis.x + m.y_axis.y + m.z_axis.z - 1.0) / 2.0;
+        cos.clamp(-1.0, 1.0).acos().to_degrees()
+    };
+    let (r0, _) = cameras[0];
+    let (r1, c1) = cameras[1];
+    let (r2, c2) = cameras[2];
+    let (r3, c3) = cameras[3];
+    let forward = |r: &glam::DMat3| r.row(2);
+    assert!(
+        turn_deg(&r0, &r1) > 5.0,
+        "one-finger drag did not orbit: {report:#}"
+    );
+    let zoom = c2 - c1;
+    assert!(
+        turn_deg(&r1, &r2) < 0.5 && zoom.length() > 1e-3 && zoom.dot(forward(&r1)) > 0.9 * zoom.length(),
+        "pinch did not zoom in along the view axis: moved {zoom:?}, turned {:.2}°",
+        turn_deg(&r1, &r2)
+    );
+    let pan = c3 - c2;
+    assert!(
+        turn_deg(&r2, &r3) < 0.5 && pan.length() > 1e-3 && pan.dot(forward(&r2)).abs() < 0.1 * pan.length(),
+        "two-finger drag did not pan: moved {pan:?}, turned {:.2}°",
+        turn_deg(&r2, &r3)
+    );
+}
+
+/// The page's reported camera (a `cameras.json` view object): world-to-camera rotation
+/// and the camera centre in the world.
+fn page_camera(json: &str) -> (glam::DMat3, glam::DVec3) {
+    let v: serde_json::Value = serde_json::from_str(json).unwrap_or_else(|e| panic!("camera {json}: {e}"));
+    let w = &v["world_to_camera"];
+    let row = |i: usize| {
+        glam::DVec3::from_array(std::array::from_fn(|j| {
+            w["rotation"][i][j]
+                .as_f64()
+                .unwrap_or_else(|| panic!("camera {json}"))
+        }))
+    };
+    let rotation = glam::DMat3::from_cols(row(0), row(1), row(2)).transpose();
+    let t = glam::DVec3::from_array(std::array::from_fn(|j| {
+        w["translation"][j]
+            .as_f64()
+            .unwrap_or_else(|| panic!("camera {json}"))
+    }));
+    (rotation, -(rotation.transpose() * t))
 }
 
 #[test]

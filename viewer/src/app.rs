@@ -945,7 +945,16 @@ impl ViewerApp {
         };
         let shift = ui.input(|i| i.modifiers.shift);
         let delta = response.drag_delta();
-        if response.dragged_by(egui::PointerButton::Primary) && !shift {
+        // Two or more fingers on a touch screen: they pan (their mean translation) and
+        // pinch-zoom (egui's zoom delta, below); the first finger, which egui also reports
+        // as a dragging pointer, must not orbit meanwhile. One finger orbits.
+        let touch = ui
+            .input(egui::InputState::multi_touch)
+            .filter(|_| response.hovered());
+        if let Some(touch) = touch {
+            let pan = touch.translation_delta;
+            orbit.pan(f64::from(pan.x), f64::from(pan.y), f64::from(rect.width()));
+        } else if response.dragged_by(egui::PointerButton::Primary) && !shift {
             orbit.yaw_rad -= f64::from(delta.x) * 0.01;
             orbit.pitch_rad = (orbit.pitch_rad + f64::from(delta.y) * 0.01).clamp(-1.5, 1.5);
         } else if response.dragged_by(egui::PointerButton::Secondary)

@@ -2,13 +2,17 @@
 // error) and writes what it saw: `<out>/report.json` (the page's data-nelf-* report, the
 // backend, timings) and `<out>/view.png` (a screenshot of the 3D view's rectangle).
 //
-//   node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS] [--drop FILE]
+//   node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS] [--drop FILE] [--touch]
 //
 // webgpu: Chromium's WebGPU on SwiftShader (Vulkan); webgl2: WebGPU off, so the page
 // gets WebGL2 only. --fps: after the screenshot, count frames for SECONDS of real time
 // (the URL should say continuous=1). --drop: after the first frames, drop FILE on the
 // canvas as a person would (a DragEvent carrying the file) and wait for the page to show
-// an error or draw three more frames; the report is written after that.
+// an error or draw three more frames; the report is written after that. --touch: after the
+// first frames, three gestures on the 3D view by touch (Chromium's touch events, as a
+// phone sends them): a one-finger drag to the right, a two-finger pinch apart, a
+// two-finger drag down; the report's `touch` lists the page's camera before and after
+// each.
 import { chromium } from "playwright-core";
 import { mkdirSync, readFileSync, writeFileSync } from "node:fs";
 import { basename, join } from "node:path";
@@ -21,6 +25,7 @@ if (!url || !outDir || !["webgpu", "webgl2"].includes(backend)) {
 const option = (name) => { const i = rest.indexOf(name); return i >= 0 ? rest[i + 1] : undefined; };
 const fpsSeconds = Number(option("--fps") || 0);
 const dropFile = option("--drop");
+const touch = rest.includes("--touch");
 const base = [
   "--headless", "--no-sandbox", "--disable-quic", "--no-first-run",
   "--disable-background-networking", "--disable-component-update", "--disable-sync",
@@ -35,7 +40,7 @@ const browser = await chromium.launch({
 });
 const report = { url, backend };
 try {
-  const page = await browser.newPage({ viewport: { width: 1024, height: 768 }, deviceScaleFactor: 1 });
+  const page = await browser.newPage({ viewport: { width: 1024, height: 768 }, deviceScaleFactor: 1, hasTouch: touch });
   const console_lines = [];
   page.on("console", (m) => console_lines.push(`${m.type()}: ${m.text()}`));
   page.on("pageerror", (e) => console_lines.push(`pageerror: ${e.message}`));
@@ -66,6 +71,39 @@ try {
       { timeout: 120000, polling: 100 },
     );
     report.dropped = name;
+  }
+  if (touch && !(await page.evaluate(() => document.body.dataset.nelfError))) {
+    const cdp = await page.context().newCDPSession(page);
+    const [x, y, width, height] = (await page.evaluate(() => document.body.dataset.nelfRect)).split(",").map(Number);
+    const [cx, cy] = [x + width / 2, y + height / 2];
+    const camera = () => page.evaluate(() => document.body.dataset.nelfCamera);
+    const frames = () => page.evaluate(() => Number(document.body.dataset.nelfFrames || 0));
+    const send = async (type, points) => {
+      await cdp.send("Input.dispatchTouchEvent", {
+        type,
+        touchPoints: points.map(([px, py], id) => ({ x: px, y: py, id })),
+      });
+      await page.waitForTimeout(40);
+    };
+    // Fingers at `start` moved by `step` per event, ten times, then lifted; then the page
+    // is left to draw.
+    const gesture = async (start, step) => {
+      await send("touchStart", start);
+      for (let i = 1; i <= 10; i++) {
+        await send("touchMove", start.map(([px, py], f) => [px + i * step[f][0], py + i * step[f][1]]));
+      }
+      await send("touchEnd", []);
+      const before = await frames();
+      await page.waitForFunction((n) => Number(document.body.dataset.nelfFrames || 0) > n, before, { timeout: 60000 });
+      await page.waitForTimeout(500);
+    };
+    report.touch = [await camera()];
+    await gesture([[cx, cy]], [[10, 0]]);
+    report.touch.push(await camera());
+    await gesture([[cx - 40, cy], [cx + 40, cy]], [[-8, 0], [8, 0]]);
+    report.touch.push(await camera());
+    await gesture([[cx - 40, cy], [cx + 40, cy]], [[0, 8], [0, 8]]);
+    report.touch.push(await camera());
   }
   report.data = await page.evaluate(() => ({ ...document.body.dataset }));
   report.message = await page.evaluate(() => document.getElementById("nelf_message")?.textContent || "");
