@@ -206,6 +206,18 @@ fn psnr(reference: &Image, test: &Image) -> f64 {
     10.0 * (peak * peak / (sum / n as f64).max(1e-30)).log10()
 }
 
+/// [`camera`]'s 96 × 80 view from another side (a camera that moved).
+fn moved_camera() -> PinholeCamera {
+    PinholeCamera::look_at(
+        DVec3::new(-0.3, 0.05, 0.3),
+        DVec3::new(0.0, 0.01, 0.0),
+        DVec3::Y,
+        96,
+        80,
+        0.65,
+    )
+}
+
 fn no_jitter() -> ViewSettings {
     ViewSettings {
         march: MarchSettings::default(),
@@ -747,14 +759,7 @@ fn a_held_camera_relights_only_what_it_reads() {
     );
     let env = sky(64, 32);
     let cam = camera(96, 80);
-    let moved = PinholeCamera::look_at(
-        DVec3::new(-0.3, 0.05, 0.3),
-        DVec3::new(0.0, 0.01, 0.0),
-        DVec3::Y,
-        96,
-        80,
-        0.65,
-    );
+    let moved = moved_camera();
     let fresh = |camera: &PinholeCamera, angle: f64| {
         let mut gpu = renderer();
         gpu.load_asset(&asset).unwrap();
@@ -866,14 +871,7 @@ fn a_held_camera_replays_its_pixels_under_new_lighting() {
     ];
     let env = sky(64, 32);
     let cam = camera(96, 80);
-    let moved = PinholeCamera::look_at(
-        DVec3::new(-0.3, 0.05, 0.3),
-        DVec3::new(0.0, 0.01, 0.0),
-        DVec3::Y,
-        96,
-        80,
-        0.65,
-    );
+    let moved = moved_camera();
     for (case, (asset, pass)) in cases.iter().enumerate() {
         let settings = ViewSettings {
             pass: *pass,

@@ -209,6 +209,24 @@ impl GpuRenderer {
         (bytes <= self.replay_budget_bytes.min(limit)).then_some(rect)
     }
 
+    /// The replay's pipelines (none on a device without storage bindings).
+    fn replay_pipelines(&self) -> Result<&ReplayPipelines, ViewerError> {
+        self.pipelines
+            .replay
+            .as_ref()
+            .ok_or(ViewerError::NoCompute("the replay"))
+    }
+
+    /// The march target and its compute bind group (group 0 of the replay passes).
+    fn replay_target(&self) -> Result<(&super::Target, &wgpu::BindGroup), ViewerError> {
+        let target = self.target.as_ref().ok_or(ViewerError::NoAsset)?;
+        let group = target
+            .march_bind_group
+            .as_ref()
+            .ok_or(ViewerError::NoCompute("the replay"))?;
+        Ok((target, group))
+    }
+
     /// A cache of room for `pixels` pixels, reallocated only to grow.
     fn ensure_replay(&mut self, pixels: u64) -> Result<(), ViewerError> {
         if self.replay.as_ref().is_some_and(|r| r.pixels >= pixels) {
@@ -219,11 +237,7 @@ impl GpuRenderer {
             .replay
             .as_ref()
             .ok_or(ViewerError::NoCompute("the replay"))?;
-        let pipelines = self
-            .pipelines
-            .replay
-            .as_ref()
-            .ok_or(ViewerError::NoCompute("the replay"))?;
+        let pipelines = self.replay_pipelines()?;
         let rank = asset.info.rank;
         let cache = self.device.create_buffer(&wgpu::BufferDescriptor {
             label: Some("replay cache"),
@@ -366,16 +380,8 @@ impl GpuRenderer {
         replay.key = Some(key);
         replay.rect = rect;
         let replay = self.replay.as_ref().ok_or(ViewerError::NoAsset)?;
-        let target = self.target.as_ref().ok_or(ViewerError::NoAsset)?;
-        let march_group = target
-            .march_bind_group
-            .as_ref()
-            .ok_or(ViewerError::NoCompute("the replay"))?;
-        let pipelines = self
-            .pipelines
-            .replay
-            .as_ref()
-            .ok_or(ViewerError::NoCompute("the replay"))?;
+        let (_, march_group) = self.replay_target()?;
+        let pipelines = self.replay_pipelines()?;
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some("replay build"),
             timestamp_writes: None,
@@ -415,16 +421,8 @@ impl GpuRenderer {
             .write_buffer(&replay.params, 0, bytemuck::bytes_of(&uniform));
         self.queue
             .write_buffer(&replay.light, 0, bytemuck::cast_slice(&light));
-        let target = self.target.as_ref().ok_or(ViewerError::NoAsset)?;
-        let march_group = target
-            .march_bind_group
-            .as_ref()
-            .ok_or(ViewerError::NoCompute("the replay"))?;
-        let pipelines = self
-            .pipelines
-            .replay
-            .as_ref()
-            .ok_or(ViewerError::NoCompute("the replay"))?;
+        let (target, march_group) = self.replay_target()?;
+        let pipelines = self.replay_pipelines()?;
         if pass_kind == MarchPass::Compute {
             let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
                 label: Some("replay relight"),
