@@ -11,6 +11,7 @@ pub mod conventions;
 pub mod envmap_file;
 pub mod error;
 pub mod inspect;
+pub mod orbit;
 pub mod read;
 pub mod spec;
 pub mod synthetic;

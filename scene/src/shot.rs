@@ -44,37 +44,17 @@ use crate::error::SceneError;
 pub const DEFAULT_ORBIT_SIZE: u32 = 512;
 /// Horizontal field of view of an orbit camera when none is given, degrees.
 pub const DEFAULT_FOV_X_DEG: f64 = 30.0;
-/// Largest `|elevation|` of an orbit, degrees (exclusive): the view direction must not
-/// be parallel to +y, the up vector.
-pub const MAX_ORBIT_ELEVATION_DEG: f64 = 89.9;
+pub use nelf_format::orbit::MAX_ORBIT_ELEVATION_DEG;
+use nelf_format::orbit::{Orbit, OrbitError};
 /// Name [`load_lighting`] gives the constant white map.
 pub const CONSTANT_WHITE_NAME: &str = "constant white (radiance 1)";
 
 /// Something wrong with a camera or lighting option, file or number.
 #[derive(Debug, thiserror::Error)]
 pub enum ShotError {
-    /// `--orbit` is not two or three numbers.
-    #[error("--orbit {spec:?}: expected two or three numbers AZ,EL[,DIST]")]
-    OrbitSyntax {
-        /// The option's text.
-        spec: String,
-    },
-    /// Orbit angles out of range.
-    #[error(
-        "--orbit {azimuth_deg},{elevation_deg}: azimuth must be finite and elevation within (-89.9, 89.9) degrees"
-    )]
-    OrbitAngles {
-        /// Azimuth, degrees.
-        azimuth_deg: f64,
-        /// Elevation, degrees.
-        elevation_deg: f64,
-    },
-    /// Orbit distance not positive and finite.
-    #[error("--orbit distance {distance_m} must be positive and finite (metres)")]
-    OrbitDistance {
-        /// The distance, metres.
-        distance_m: f64,
-    },
+    /// `--orbit` is not two or three numbers, or out of range.
+    #[error("--{0}")]
+    Orbit(#[from] OrbitError),
     /// The box an orbit circles is not finite, or empty (no default distance).
     #[error("the scene box {lo:?} .. {hi:?} must be finite with a positive diagonal")]
     SceneBox {
@@ -452,40 +432,10 @@ pub fn resized(
 }
 
 /// Parses `AZ,EL[,DIST]` (degrees, degrees, metres; spaces allowed around the numbers)
-/// and checks the ranges [`orbit_camera`] accepts.
+/// and checks the ranges [`orbit_camera`] accepts ([`nelf_format::orbit::Orbit::parse`]).
 pub fn parse_orbit(spec: &str) -> Result<(f64, f64, Option<f64>), ShotError> {
-    let syntax = || ShotError::OrbitSyntax {
-        spec: spec.to_string(),
-    };
-    let numbers = spec
-        .split(',')
-        .map(|s| s.trim().parse::<f64>())
-        .collect::<Result<Vec<_>, _>>()
-        .map_err(|_| syntax())?;
-    let (azimuth_deg, elevation_deg, distance_m) = match numbers[..] {
-        [a, e] => (a, e, None),
-        [a, e, d] => (a, e, Some(d)),
-        _ => return Err(syntax()),
-    };
-    check_orbit(azimuth_deg, elevation_deg, distance_m)?;
-    Ok((azimuth_deg, elevation_deg, distance_m))
-}
-
-/// Finite azimuth, `|elevation| <` [`MAX_ORBIT_ELEVATION_DEG`], positive finite distance.
-fn check_orbit(azimuth_deg: f64, elevation_deg: f64, distance_m: Option<f64>) -> Result<(), ShotError> {
-    if !(azimuth_deg.is_finite()
-        && elevation_deg.is_finite()
-        && elevation_deg.abs() < MAX_ORBIT_ELEVATION_DEG)
-    {
-        return Err(ShotError::OrbitAngles {
-            azimuth_deg,
-            elevation_deg,
-        });
-    }
-    match distance_m {
-        Some(d) if !(d.is_finite() && d > 0.0) => Err(ShotError::OrbitDistance { distance_m: d }),
-        _ => Ok(()),
-    }
+    let orbit = Orbit::parse(spec)?;
+    Ok((orbit.azimuth_deg, orbit.elevation_deg, orbit.distance_m))
 }
 
 /// A `width` × `height` camera with a horizontal field of view of `fov_x_deg` at
@@ -501,7 +451,7 @@ pub fn orbit_camera(
     fov_x_deg: f64,
     scene_box: (DVec3, DVec3),
 ) -> Result<PinholeCamera, ShotError> {
-    check_orbit(azimuth_deg, elevation_deg, distance_m)?;
+    Orbit::new(azimuth_deg, elevation_deg, distance_m)?;
     if width == 0 || height == 0 {
         return Err(ShotError::ImageSize { width, height });
     }
@@ -680,33 +630,21 @@ mod tests {
 
     #[test]
     fn bad_orbits_sizes_and_boxes_are_refused() {
-        assert_eq!(parse_orbit("30,-10").unwrap(), (30.0, -10.0, None));
+        // The parser is nelf_format::orbit's (tested there); here it speaks as the option.
         assert_eq!(parse_orbit(" 1, 2 ,3").unwrap(), (1.0, 2.0, Some(3.0)));
-        assert_eq!(parse_orbit("0,-89.8").unwrap(), (0.0, -89.8, None));
-        for spec in ["a,b", "1", "", "1,2,3,4", "1;2", "1,,2"] {
+        for (spec, says) in [("a,b", "AZ,EL"), ("0,90", "elevation"), ("0,0,-1", "distance")] {
             let error = parse_orbit(spec).unwrap_err();
-            assert!(matches!(error, ShotError::OrbitSyntax { .. }), "{spec}: {error}");
-            assert!(error.to_string().contains("AZ,EL"), "{error}");
-        }
-        for spec in ["0,90", "0,89.9", "10,-89.95", "inf,0", "NaN,3"] {
-            let error = parse_orbit(spec).unwrap_err();
-            assert!(matches!(error, ShotError::OrbitAngles { .. }), "{spec}: {error}");
-            assert!(error.to_string().contains("elevation"), "{error}");
-        }
-        for spec in ["0,0,0", "0,0,-1", "0,0,inf"] {
-            let error = parse_orbit(spec).unwrap_err();
-            assert!(
-                matches!(error, ShotError::OrbitDistance { .. }),
-                "{spec}: {error}"
-            );
+            assert!(matches!(error, ShotError::Orbit(_)), "{spec}: {error}");
+            let text = error.to_string();
+            assert!(text.starts_with("--orbit") && text.contains(says), "{text}");
         }
         assert!(matches!(
             orbit_camera(0.0, 89.9, None, 8, 8, 30.0, BOX),
-            Err(ShotError::OrbitAngles { .. })
+            Err(ShotError::Orbit(OrbitError::Angles { .. }))
         ));
         assert!(matches!(
             orbit_camera(0.0, 0.0, Some(0.0), 8, 8, 30.0, BOX),
-            Err(ShotError::OrbitDistance { .. })
+            Err(ShotError::Orbit(OrbitError::Distance { .. }))
         ));
         for (width, height) in [(0, 8), (8, 0)] {
             let error = orbit_camera(0.0, 0.0, None, width, height, 30.0, BOX).unwrap_err();

@@ -7,6 +7,7 @@
 //! takes its last value, so an exported page's defaults (its `nelf-defaults` meta tag,
 //! read first) yield to the link's own parameters.
 
+use nelf_format::orbit::Orbit;
 use nelf_viewer::{OrbitStart, StartView, ToneMap};
 
 /// What the URL asks for.
@@ -50,10 +51,15 @@ impl WebParams {
                 "asset" => params.asset = Some(value.clone()),
                 "env" => params.env = Some(value.clone()),
                 "orbit" => {
-                    params.start.orbit =
-                        Some(parse_orbit(&value).ok_or_else(|| {
-                            bad("expected AZ,EL or AZ,EL,DIST (degrees, degrees, metres > 0)")
-                        })?);
+                    // The same parser and ranges as `nelf render --orbit`.
+                    let orbit = Orbit::parse(&value).map_err(|_| {
+                        bad("expected AZ,EL or AZ,EL,DIST (degrees, degrees within ±89.9, metres > 0)")
+                    })?;
+                    params.start.orbit = Some(OrbitStart {
+                        azimuth_deg: orbit.azimuth_deg,
+                        elevation_deg: orbit.elevation_deg,
+                        distance_m: orbit.distance_m,
+                    });
                 }
                 "rotate" => {
                     params.start.rotation_deg =
@@ -106,23 +112,6 @@ fn parse_flag(value: &str) -> Option<bool> {
         "0" | "false" => Some(false),
         _ => None,
     }
-}
-
-fn parse_orbit(value: &str) -> Option<OrbitStart> {
-    let parts: Vec<f64> = value
-        .split(',')
-        .map(|p| p.trim().parse::<f64>().ok().filter(|v| v.is_finite()))
-        .collect::<Option<_>>()?;
-    let (azimuth_deg, elevation_deg, distance_m) = match parts[..] {
-        [az, el] => (az, el, None),
-        [az, el, d] if d > 0.0 => (az, el, Some(d)),
-        _ => return None,
-    };
-    Some(OrbitStart {
-        azimuth_deg,
-        elevation_deg,
-        distance_m,
-    })
 }
 
 /// Decodes `%XX` escapes and `+` (a space in query strings); malformed escapes stay as
@@ -199,6 +188,7 @@ mod tests {
             ("orbit=10", "orbit"),
             ("orbit=1,2,-3", "orbit"),
             ("orbit=a,b", "orbit"),
+            ("orbit=0,95", "orbit"),
             ("rotate=NaN", "rotate"),
             ("tonemap=filmic", "tonemap"),
             ("jitter=maybe", "jitter"),
