@@ -47,9 +47,12 @@ pub fn write_atomically(
     let mut writer = BufWriter::new(file);
     write(&mut writer)?;
     writer.flush()?;
-    let file = writer.into_inner().map_err(std::io::IntoInnerError::into_error)?;
-    file.sync_all()?;
-    drop(file);
+    {
+        // Closed at the end of this block, before the rename (Windows cannot rename an
+        // open file).
+        let file = writer.into_inner().map_err(std::io::IntoInnerError::into_error)?;
+        file.sync_all()?;
+    }
     tmp_path.persist(path).map_err(|e| e.error)?;
     Ok(())
 }
