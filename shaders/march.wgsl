@@ -39,7 +39,7 @@ fn mark_corners(u: vec3<f32>, voxels: vec3<i32>) {
 
 // march_core.wgsl's per-sample hook: with MARK_VOXELS, marks the voxels a sample with
 // σ > 0 reads.
-fn on_sample(u: vec3<f32>, value: vec4<f32>, voxels: vec3<i32>) {
+fn on_sample(u: vec3<f32>, value: vec4<f32>, weight: f32, voxels: vec3<i32>) {
     if MARK_VOXELS && value.a > 0.0 {
         mark_corners(u, voxels);
     }

@@ -4,10 +4,12 @@
 // entry with no storage bindings, for devices that have none: WebGL2). Imported after
 // common.wgsl.
 //
-// The importing pass defines `fn on_sample(u: vec3<f32>, value: vec4<f32>, voxels:
-// vec3<i32>)`, called for every sample taken (u: lattice coordinates; value: the atlas
-// sample; voxels: the grid box's voxel extent): `march.wgsl` marks the voxels it reads
-// there, `march_nostorage.wgsl` does nothing.
+// The importing pass defines `fn on_sample(u: vec3<f32>, value: vec4<f32>, weight: f32,
+// voxels: vec3<i32>)`, called for every sample taken, after compositing it (u: lattice
+// coordinates; value: the atlas sample; weight: its compositing weight T_i α_i, 0 where
+// σ ≤ 0 or in the density view; voxels: the grid box's voxel extent): `march.wgsl` marks
+// the voxels it reads there, `replay.wgsl` sums their coefficients,
+// `march_nostorage.wgsl` does nothing.
 //
 // Mirrors nelf_render::march (the CPU reference; its module docs define every step):
 // a ray per pixel centre of an OpenCV pinhole camera, clipped against the grid box,
@@ -71,10 +73,13 @@ struct Accum {
     rgb: vec3<f32>,
     transmittance: f32,
     max_sigma: f32,
+    // The last sample's compositing weight T_i α_i (for `on_sample`).
+    weight: f32,
 }
 
 // Composites one sample (σ in alpha); true once the ray may stop (T < min_transmittance).
 fn composite(acc: ptr<function, Accum>, value: vec4<f32>, step: f32, view: u32, min_transmittance: f32) -> bool {
+    (*acc).weight = 0.0;
     let sigma = value.a;
     if sigma <= 0.0 {
         return false;
@@ -85,8 +90,10 @@ fn composite(acc: ptr<function, Accum>, value: vec4<f32>, step: f32, view: u32, 
     }
     // As the reference: s = exp(−σΔ), α = 1 − s, T ← T·s.
     let survive = exp(-sigma * step);
-    (*acc).rgb += ((*acc).transmittance * (1.0 - survive)) * value.rgb;
+    let weight = (*acc).transmittance * (1.0 - survive);
+    (*acc).rgb += weight * value.rgb;
     (*acc).transmittance *= survive;
+    (*acc).weight = weight;
     return (*acc).transmittance < min_transmittance;
 }
 
@@ -124,7 +131,7 @@ fn march_pixel(pixel: vec2<u32>) -> MarchResult {
     let view = params.view.x;
     let min_transmittance = params.atlas_inv_size.w;
     let inv_atlas = params.atlas_inv_size.xyz;
-    var acc = Accum(vec3<f32>(0.0), 1.0, 0.0);
+    var acc = Accum(vec3<f32>(0.0), 1.0, 0.0, 0.0);
     var samples = 0u;
     var steps = 0u;
     // The march grid (viewer/src/atlas.rs, `MarchGrid`): per cube of f³ voxels, the
@@ -162,8 +169,9 @@ fn march_pixel(pixel: vec2<u32>) -> MarchResult {
             + vec3<f32>(1.5);
         let value = textureSampleLevel(atlas, atlas_sampler, (u + shift) * inv_atlas, 0.0);
         samples += 1u;
-        on_sample(u, value, (cube_max + vec3<i32>(1)) * factor_i);
-        if composite(&acc, value, step, view, min_transmittance) {
+        let stop = composite(&acc, value, step, view, min_transmittance);
+        on_sample(u, value, acc.weight, (cube_max + vec3<i32>(1)) * factor_i);
+        if stop {
             break;
         }
     }

@@ -7,7 +7,7 @@
 #import "march_core.wgsl"
 
 // march_core.wgsl's per-sample hook: nothing to record here.
-fn on_sample(u: vec3<f32>, value: vec4<f32>, voxels: vec3<i32>) {}
+fn on_sample(u: vec3<f32>, value: vec4<f32>, weight: f32, voxels: vec3<i32>) {}
 
 @fragment
 fn march_fs(@builtin(position) position: vec4<f32>) -> @location(0) vec4<f32> {

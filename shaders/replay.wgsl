@@ -65,21 +65,16 @@ fn cached_pixel(pixel: vec2<u32>) -> u32 {
 // Components one build dispatch sums.
 const BUILD_COMPONENTS: u32 = 64u;
 
-// The build's per-pixel state: transmittance, W_p and the component sums of this dispatch.
-var<private> transmittance: f32;
+// The build's per-pixel state: W_p and the component sums of this dispatch.
 var<private> present_weight: f32;
 var<private> sums: array<vec4<f32>, 16>;
 
-// march_core.wgsl's per-sample hook: adds the sample's weight times its 8 corners'
-// coefficients. The weight repeats `composite`'s arithmetic, so it is the march's.
-fn on_sample(u: vec3<f32>, value: vec4<f32>, voxels: vec3<i32>) {
-    let sigma = value.a;
-    if sigma <= 0.0 {
+// march_core.wgsl's per-sample hook: adds the sample's compositing weight `w` (the
+// march's own, from `composite`) times its 8 corners' coefficients.
+fn on_sample(u: vec3<f32>, value: vec4<f32>, w: f32, voxels: vec3<i32>) {
+    if w <= 0.0 {
         return;
     }
-    let survive = exp(-sigma * params.box_max_u.w);
-    let w = transmittance * (1.0 - survive);
-    transmittance *= survive;
     let base = floor(u);
     let f = u - base;
     // Cube of a voxel: a shift, the factor being a power of two (integer division is
@@ -168,7 +163,6 @@ fn replay_build(@builtin(global_invocation_id) gid: vec3<u32>) {
     if any(gid.xy >= replay.rect.zw) {
         return;
     }
-    transmittance = 1.0;
     present_weight = 0.0;
     for (var i = 0u; i < BUILD_COMPONENTS / 4u; i++) {
         sums[i] = vec4<f32>(0.0);

@@ -294,7 +294,7 @@ impl<'a, D: DensityAt + ?Sized> Marcher<'a, D> {
 
 /// Ray–box intersection `(t_near, t_far)` of the line `o + t d` (slab test); `None` if the
 /// line misses the box, only touches it (`t_far = t_near`) or the box is behind (`t_far ≤ 0`).
-fn ray_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
+pub fn ray_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> Option<(f64, f64)> {
     let mut t_near = f64::NEG_INFINITY;
     let mut t_far = f64::INFINITY;
     for a in 0..3 {

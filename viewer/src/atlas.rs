@@ -479,6 +479,14 @@ impl Dequantization {
             Self::Identity { rank } => *rank,
         }
     }
+
+    /// Per component `[o_k, s_k]`, `c_k = o_k + s_k · stored`: `[0, 1]` for f16 values.
+    pub fn offset_scale(&self) -> Vec<[f32; 2]> {
+        match self {
+            Self::Affine { scale, offset } => offset.iter().zip(scale).map(|(&o, &s)| [o, s]).collect(),
+            Self::Identity { rank } => vec![[0.0, 1.0]; *rank],
+        }
+    }
 }
 
 /// Folds 8-bit affine parameters into the projected lighting: with `c_k = o_k + s_k q_k`,

@@ -650,11 +650,13 @@ impl GpuRenderer {
             }),
         };
         let dequantization = Dequantization::of(&asset.coefficients);
-        let replay = self
-            .pipelines
-            .replay
-            .as_ref()
-            .map(|_| ReplayInputs::new(&self.device, coefficient_buffer.clone(), &dequantization));
+        let replay = self.pipelines.replay.is_some().then(|| ReplayInputs {
+            coefficients: coefficient_buffer.clone(),
+            dequantization: storage(
+                "replay dequantization",
+                bytemuck::cast_slice(&dequantization.offset_scale()),
+            ),
+        });
         self.asset = Some(GpuAsset {
             layout,
             grid: asset.grid,
@@ -850,29 +852,28 @@ impl GpuRenderer {
         // The marked relight serves a camera whose read voxels are marked; any other
         // frame needs the whole atlas lit (marks.rs).
         let key = self.mark_key(&params, settings);
+        // Whether the camera (and march) is the last frame's.
+        let held = key.is_some() && key == self.last_mark_key;
+        self.last_mark_key = key;
+        let eye = [params.origin_u[0], params.origin_u[1], params.origin_u[2]];
+        self.last_eye = Some(eye);
+        self.ensure_target(camera.width, camera.height)?;
+        self.queue
+            .write_buffer(&self.march_params, 0, bytemuck::bytes_of(&params));
         // At a held camera whose frame fits the per-pixel cache, lighting changes replay
         // the pixels (replay.rs) instead of relighting voxels and marching.
-        let replay_rect = if key.is_some() && !count_samples {
-            self.replay_fits(camera)
-        } else {
-            None
-        };
-        if let (Some(key), Some(rect)) = (key, replay_rect) {
+        if let Some(key) = key.filter(|_| !count_samples)
+            && let Some(rect) = self.replay_fits(camera)
+        {
             let replayed = self.replay.as_ref().is_some_and(|r| r.key == Some(key));
-            let held = self.last_mark_key == Some(key);
             if (replayed && (self.relight_dirty || self.atlas_state == AtlasState::Stale))
                 || (held && self.relight_dirty)
             {
-                self.last_mark_key = Some(key);
-                self.last_eye = Some([params.origin_u[0], params.origin_u[1], params.origin_u[2]]);
-                self.ensure_target(camera.width, camera.height)?;
-                self.queue
-                    .write_buffer(&self.march_params, 0, bytemuck::bytes_of(&params));
                 // The first lighting change here fills the cache (a march over the atlas's
-                // densities, which no lighting changes), then every change relights it.
+                // densities, which no lighting changes; relit once if it holds nothing
+                // yet), then every change relights it.
                 if !replayed {
                     if self.atlas_state == AtlasState::Unlit {
-                        self.relight_dirty = true;
                         self.encode_relight_if_needed(encoder, false)?;
                     }
                     self.encode_replay_build(encoder, key, rect)?;
@@ -887,18 +888,8 @@ impl GpuRenderer {
         let relit = self.encode_relight_if_needed(encoder, marked)?;
         // A lighting change at a camera held since the last frame relights in full and
         // marks what the camera reads, so that the next ones relight only that.
-        let mark = !count_samples
-            && relit == Some(RelightKind::Full)
-            && key.is_some()
-            && key == self.last_mark_key
-            && key != self.marks_key;
-        self.last_mark_key = key;
-        let eye = [params.origin_u[0], params.origin_u[1], params.origin_u[2]];
-        self.last_eye = Some(eye);
+        let mark = !count_samples && relit == Some(RelightKind::Full) && held && key != self.marks_key;
         self.encode_view_if_needed(encoder, eye)?;
-        self.ensure_target(camera.width, camera.height)?;
-        self.queue
-            .write_buffer(&self.march_params, 0, bytemuck::bytes_of(&params));
         let target = self.target.as_ref().ok_or(ViewerError::NoAsset)?;
         if mark {
             let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;

@@ -31,7 +31,6 @@ use super::common::{
 };
 use super::march::MARCH_FORMAT;
 use super::{AtlasState, GpuRenderer, MarchPass, RelightKind};
-use crate::atlas::Dequantization;
 use crate::error::ViewerError;
 use crate::shaders::{MarchParams, REPLAY_WGSL, ReplayParams};
 
@@ -102,44 +101,17 @@ impl ReplayPipelines {
 }
 
 /// What an asset gives the replay: its coefficients (the relight pass's buffer) and their
-/// dequantisation per component, `(o_k, s_k)`.
+/// dequantisation per component (`Dequantization::offset_scale`, a storage buffer).
 pub(super) struct ReplayInputs {
     pub(super) coefficients: wgpu::Buffer,
-    dequantization: wgpu::Buffer,
-}
-
-impl ReplayInputs {
-    pub(super) fn new(
-        device: &wgpu::Device,
-        coefficients: wgpu::Buffer,
-        dequantization: &Dequantization,
-    ) -> Self {
-        use wgpu::util::DeviceExt as _;
-        let pairs: Vec<[f32; 2]> = match dequantization {
-            Dequantization::Affine { scale, offset } => {
-                offset.iter().zip(scale).map(|(&o, &s)| [o, s]).collect()
-            }
-            Dequantization::Identity { rank } => vec![[0.0, 1.0]; *rank],
-        };
-        let mut bytes: Vec<u8> = bytemuck::cast_slice(&pairs).to_vec();
-        bytes.resize(bytes.len().max(16), 0);
-        let dequantization = device.create_buffer_init(&wgpu::util::BufferInitDescriptor {
-            label: Some("replay dequantization"),
-            contents: &bytes,
-            usage: wgpu::BufferUsages::STORAGE,
-        });
-        Self {
-            coefficients,
-            dequantization,
-        }
-    }
+    pub(super) dequantization: wgpu::Buffer,
 }
 
 /// A held camera's per-pixel cache and what runs on it.
 pub(super) struct GpuReplay {
     /// The march (camera, settings, image size) the cache holds; `None` until built.
     pub(super) key: Option<MarchParams>,
-    /// The rectangle of that march's image the cache holds (`replay_rect`).
+    /// The rectangle of that march's image the cache holds ([`box_rect`]).
     rect: [u32; 4],
     /// Pixels the cache has room for.
     pixels: u64,
@@ -353,8 +325,8 @@ impl GpuRenderer {
         })
     }
 
-    /// Encodes `replay_build` for the march `key` (its uniform written, the atlas relit in
-    /// full): the frame's image and the cache, ⌈K/64⌉ dispatches over the target.
+    /// Encodes `replay_build` for the march `key` over `rect` (the march uniform written,
+    /// the atlas holding its densities): the cache, in ⌈K/64⌉ dispatches.
     pub(super) fn encode_replay_build(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -416,7 +388,6 @@ impl GpuRenderer {
         for (slot, p) in light.iter_mut().zip(&lighting.projected.component_rgb[..used]) {
             *slot = [p[0], p[1], p[2], 0.0];
         }
-        let replay = self.replay.as_ref().ok_or(ViewerError::NoAsset)?;
         self.queue
             .write_buffer(&replay.params, 0, bytemuck::bytes_of(&uniform));
         self.queue
@@ -456,18 +427,9 @@ mod tests {
     use glam::DVec3;
     use nelf_format::conventions::PinholeCamera;
 
-    use super::box_rect;
+    use nelf_render::march::ray_box;
 
-    /// Whether the ray `o + t d`, t ≥ 0, meets the box `[lo, hi]` (slabs).
-    fn meets_box(o: DVec3, d: DVec3, lo: DVec3, hi: DVec3) -> bool {
-        let (mut near, mut far) = (0.0f64, f64::INFINITY);
-        for a in 0..3 {
-            let (t0, t1) = ((lo[a] - o[a]) / d[a], (hi[a] - o[a]) / d[a]);
-            near = near.max(t0.min(t1));
-            far = far.min(t0.max(t1));
-        }
-        near <= far
-    }
+    use super::box_rect;
 
     #[test]
     fn the_cached_rectangle_holds_every_pixel_whose_ray_meets_the_box() {
@@ -502,7 +464,7 @@ mod tests {
             for y in 0..camera.height {
                 for x in 0..camera.width {
                     let (o, d) = camera.pixel_ray(x, y);
-                    if meets_box(o, d, DVec3::from_array(lo), DVec3::from_array(hi)) {
+                    if ray_box(o, d, DVec3::from_array(lo), DVec3::from_array(hi)).is_some() {
                         hits += 1;
                         assert!(
                             (x0..x0 + w).contains(&x) && (y0..y0 + h).contains(&y),
