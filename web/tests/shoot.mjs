@@ -87,13 +87,15 @@ try {
     };
     // Fingers at `start` moved by `step` per event, ten times, then lifted; then the page
     // is left to draw.
+    // (The page draws only on input: count frames from before the gesture, since it may
+    // have drawn all of them by the time the fingers lift.)
     const gesture = async (start, step) => {
+      const before = await frames();
       await send("touchStart", start);
       for (let i = 1; i <= 10; i++) {
         await send("touchMove", start.map(([px, py], f) => [px + i * step[f][0], py + i * step[f][1]]));
       }
       await send("touchEnd", []);
-      const before = await frames();
       await page.waitForFunction((n) => Number(document.body.dataset.nelfFrames || 0) > n, before, { timeout: 60000 });
       await page.waitForTimeout(500);
     };
