@@ -333,6 +333,37 @@ impl Orbit {
     }
 }
 
+/// The fingers on a touch screen, counted from egui's own touch events. egui's
+/// multi-touch state starts a frame after the second finger lands, and the pointer it
+/// emulates from the fingers can jump from one finger to another as fingers come and go;
+/// the 3D view orbits with one finger only, and moves nothing in a frame where a finger
+/// landed or lifted.
+#[derive(Debug, Default)]
+struct Fingers {
+    down: std::collections::BTreeSet<egui::TouchId>,
+}
+
+impl Fingers {
+    /// Takes one frame's input events; returns whether a finger landed or lifted.
+    fn update(&mut self, events: &[egui::Event]) -> bool {
+        let mut changed = false;
+        for event in events {
+            if let egui::Event::Touch { id, phase, .. } = event {
+                match phase {
+                    egui::TouchPhase::Start => changed |= self.down.insert(*id),
+                    egui::TouchPhase::End | egui::TouchPhase::Cancel => changed |= self.down.remove(id),
+                    egui::TouchPhase::Move => {}
+                }
+            }
+        }
+        changed
+    }
+
+    fn count(&self) -> usize {
+        self.down.len()
+    }
+}
+
 /// The loaded map and its name.
 struct CurrentEnv {
     name: String,
@@ -341,6 +372,8 @@ struct CurrentEnv {
 
 struct ViewerApp {
     builtin: Vec<NamedEnvmap>,
+    /// The fingers on the screen (touch screens).
+    fingers: Fingers,
     loaded_envs: Vec<NamedEnvmap>,
     env: Option<CurrentEnv>,
     /// The path field's text (natively; a browser has no paths).
@@ -449,6 +482,7 @@ impl ViewerApp {
         let (dropped_sender, dropped_receiver) = channel();
         let mut app = Self {
             builtin: config.builtin_envmaps,
+            fingers: Fingers::default(),
             loaded_envs: Vec::new(),
             env: None,
             env_path_text: String::new(),
@@ -930,7 +964,11 @@ impl ViewerApp {
             rect.width() * ppp,
             rect.height() * ppp,
         ];
-        let response = ui.allocate_rect(rect, egui::Sense::click_and_drag());
+        // Drags only: a view that also sensed clicks would take a finger held still for
+        // egui's press-and-hold time (0.8 s) as a context-menu click and drop the drag
+        // that follows.
+        let response = ui.allocate_rect(rect, egui::Sense::drag());
+        let fingers_changed = ui.input(|i| self.fingers.update(&i.events));
         let Some(orbit) = self.orbit.as_mut() else {
             // Files the host is still fetching (the web page's asset) may be on their way.
             let text = if self.incoming.is_some() {
@@ -944,16 +982,22 @@ impl ViewerApp {
             return;
         };
         let shift = ui.input(|i| i.modifiers.shift);
-        let delta = response.drag_delta();
-        // Two or more fingers on a touch screen: they pan (their mean translation) and
-        // pinch-zoom (egui's zoom delta, below); the first finger, which egui also reports
-        // as a dragging pointer, must not orbit meanwhile. One finger orbits.
-        let touch = ui
-            .input(egui::InputState::multi_touch)
-            .filter(|_| response.hovered());
-        if let Some(touch) = touch {
-            let pan = touch.translation_delta;
-            orbit.pan(f64::from(pan.x), f64::from(pan.y), f64::from(rect.width()));
+        // The frame a drag starts moves nothing: with drags sensed from the press on, that
+        // frame's pointer delta runs from wherever the pointer was before. Nor does a frame
+        // where a finger landed or lifted (`Fingers`).
+        let delta = if response.drag_started() || fingers_changed {
+            egui::Vec2::ZERO
+        } else {
+            response.drag_delta()
+        };
+        if self.fingers.count() >= 2 {
+            // Two or more fingers pan (their mean translation) and pinch-zoom (egui's zoom
+            // delta, below); the first finger, which egui also reports as a dragging
+            // pointer, does not orbit meanwhile.
+            if let Some(touch) = ui.input(egui::InputState::multi_touch) {
+                let pan = touch.translation_delta;
+                orbit.pan(f64::from(pan.x), f64::from(pan.y), f64::from(rect.width()));
+            }
         } else if response.dragged_by(egui::PointerButton::Primary) && !shift {
             orbit.yaw_rad -= f64::from(delta.x) * 0.01;
             orbit.pitch_rad = (orbit.pitch_rad + f64::from(delta.y) * 0.01).clamp(-1.5, 1.5);
@@ -1128,6 +1172,33 @@ mod tests {
     use nelf_format::capture::{Capture, CaptureView};
 
     use super::*;
+
+    #[test]
+    fn fingers_are_counted_from_touch_events() {
+        let touch = |id: u64, phase: egui::TouchPhase| egui::Event::Touch {
+            device_id: egui::TouchDeviceId(0),
+            id: egui::TouchId(id),
+            phase,
+            pos: egui::Pos2::ZERO,
+            force: None,
+        };
+        let mut fingers = Fingers::default();
+        assert!(!fingers.update(&[]));
+        assert!(fingers.update(&[touch(7, egui::TouchPhase::Start)]));
+        assert_eq!(fingers.count(), 1);
+        assert!(!fingers.update(&[touch(7, egui::TouchPhase::Move)]));
+        assert!(fingers.update(&[
+            touch(8, egui::TouchPhase::Start),
+            touch(7, egui::TouchPhase::Move)
+        ]));
+        assert_eq!(fingers.count(), 2);
+        assert!(fingers.update(&[touch(7, egui::TouchPhase::Cancel)]));
+        assert_eq!(fingers.count(), 1);
+        // An end for a finger never seen (it landed outside the view) changes nothing.
+        assert!(!fingers.update(&[touch(3, egui::TouchPhase::End)]));
+        assert!(fingers.update(&[touch(8, egui::TouchPhase::End)]));
+        assert_eq!(fingers.count(), 0);
+    }
 
     #[test]
     fn capture_light_is_found_beside_the_asset() {

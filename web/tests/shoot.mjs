@@ -10,9 +10,9 @@
 // canvas as a person would (a DragEvent carrying the file) and wait for the page to show
 // an error or draw three more frames; the report is written after that. --touch: after the
 // first frames, three gestures on the 3D view by touch (Chromium's touch events, as a
-// phone sends them): a one-finger drag to the right, a two-finger pinch apart, a
-// two-finger drag down; the report's `touch` lists the page's camera before and after
-// each.
+// phone sends them): a finger held still for a second, then dragged to the right; a
+// two-finger pinch apart; a two-finger drag down. The report's `touch` lists the page's
+// camera before and after each.
 import { chromium } from "playwright-core";
 import { mkdirSync, readFileSync, writeFileSync } from "node:fs";
 import { basename, join } from "node:path";
@@ -78,29 +78,32 @@ try {
     const [cx, cy] = [x + width / 2, y + height / 2];
     const camera = () => page.evaluate(() => document.body.dataset.nelfCamera);
     const frames = () => page.evaluate(() => Number(document.body.dataset.nelfFrames || 0));
+    // One touch event, then a frame drawn after it was sent (the page draws only on input,
+    // and may already have drawn by the time CDP returns: count from before), so that a
+    // slow frame on a loaded machine does not fold a whole gesture into one update.
     const send = async (type, points) => {
+      const before = await frames();
       await cdp.send("Input.dispatchTouchEvent", {
         type,
         touchPoints: points.map(([px, py], id) => ({ x: px, y: py, id })),
       });
-      await page.waitForTimeout(40);
+      await page.waitForFunction((n) => Number(document.body.dataset.nelfFrames || 0) > n, before, { timeout: 60000 });
     };
-    // Fingers at `start` moved by `step` per event, ten times, then lifted; then the page
-    // is left to draw.
-    // (The page draws only on input: count frames from before the gesture, since it may
-    // have drawn all of them by the time the fingers lift.)
-    const gesture = async (start, step) => {
-      const before = await frames();
+    // Fingers at `start`, held still for `holdMs`, moved by `step` per event, ten times,
+    // then lifted; then the page is left to draw.
+    const gesture = async (start, step, holdMs = 0) => {
       await send("touchStart", start);
+      await page.waitForTimeout(holdMs);
       for (let i = 1; i <= 10; i++) {
         await send("touchMove", start.map(([px, py], f) => [px + i * step[f][0], py + i * step[f][1]]));
       }
       await send("touchEnd", []);
-      await page.waitForFunction((n) => Number(document.body.dataset.nelfFrames || 0) > n, before, { timeout: 60000 });
       await page.waitForTimeout(500);
     };
     report.touch = [await camera()];
-    await gesture([[cx, cy]], [[10, 0]]);
+    // The finger rests a second before it moves, longer than egui's press-and-hold (0.8 s,
+    // a context-menu click on a view that senses clicks) and than a slow frame.
+    await gesture([[cx, cy]], [[10, 0]], 1000);
     report.touch.push(await camera());
     await gesture([[cx - 40, cy], [cx + 40, cy]], [[-8, 0], [8, 0]]);
     report.touch.push(await camera());
