@@ -1,74 +1,61 @@
 //! Could a reflection-aligned lobe carry the view dependence (a measurement, not a
 //! test)? Issue 17's candidates so far are bases over the outgoing direction in the
 //! world frame (spherical harmonics of degree ≤ 2, lobes learned from them); a glossy
-//! highlight follows the mirror direction `r = reflect(−ω_o, n)` and is too narrow for
-//! them. This fits, per voxel, the model
+//! highlight follows the mirror direction and is too narrow for them. This fits, per
+//! voxel, the model of [`nelf_render::reflection`],
 //!
-//! `T(x, ω_o)[i, c] = T̄(x)[i, c] + s_c(x) · (h_i(r) − mean_cams h_i(r_cam))`
+//! `T(x, ω_o)[c·128 + i] = T̄(x)[c·128 + i] + s_c(x) · (h_i(r) − h̄_i(x))`,
 //!
-//! with `h_i(r) = max(0, r·ω_i)^λ · max(0, n·ω_i) · ΔΩ_i` (a Phong lobe about the
-//! mirror direction, `ω_i` light texel `i`), `T̄` the transport averaged toward the
-//! source cameras (what the asset stores today), `n` the density's outward normal and
-//! three scalars `s_c` per voxel fitted by weighted least squares on the transport toward
-//! a Fibonacci sphere of directions (weights as the bake's view stage: the directions
-//! the voxel is seen from, most near the cameras). Without visibility in `h`, the shaded
-//! radiance is `s_c · (E_λ(r) − Ē_λ)` with `E_λ` the environment map prefiltered with
-//! the lobe, a lookup per voxel per camera move. The variant `vis` multiplies `h_i` by
-//! the voxel's own `T̄` luminance per light texel (visibility included, not cheap to
-//! render) to show what visibility is worth.
+//! with `T̄` the transport averaged toward the source cameras (what the asset stores
+//! today), `n` the density's outward normal (central differences of the field's density,
+//! 1 mm) and the scales fitted by [`nelf_bake::view::fit_reflection_scale`] on the
+//! transport toward the bake's Fibonacci sphere of directions.
 //!
-//! Then, per held-aside target and per model, bakes the capture with each voxel's
+//! Then, per held-aside target and per lobe exponent, bakes the capture with each voxel's
 //! transport taken as the model's prediction toward that target's eye and scores the
-//! target, beside the usual bake (`T̄` only) and the exact transport toward the eye.
+//! target, beside the usual bake (`T̄` only): the same measurement as `view_oracle`
+//! (which takes the exact transport toward the eye), so the two bound and test the model.
+//! (The first version of this example, commit 546fbf6, also tried `h` modulated by the
+//! voxel's own transport per light texel, i.e. with visibility: it gained nothing.)
 //!
-//! `cargo run --release -p nelf-bake --example view_reflect -- CAPTURE_DIR [--resolution N] [--lambdas 10,20]`
+//! `cargo run --release -p nelf-bake --example view_reflect -- CAPTURE_DIR [--resolution N] [--lambdas 10,20] [--grey]`
+//!
+//! `--grey` adds, per exponent, the model with one scale for the three channels.
 
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Mutex, RwLock};
 
-use rayon::prelude::*;
-
 use glam::{DVec3, Vec3};
 use nelf_bake::eval::{load_held_aside, score_view};
+use nelf_bake::view::{fit_reflection_scale, sample_directions, seen_weights};
 use nelf_bake::{
     BakeConfig, CaptureLoadOptions, FieldBake, GroundTruth, Progress, ViewChoice, bake_field, load_capture,
     with_capture_job,
 };
-use nelf_format::conventions::{
-    ENV_H, ENV_TEXELS, ENV_W, LT_DIM, col_phi_bounds, direction, row_theta_bounds, texel_center_direction,
-};
+use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
+use nelf_render::ReflectionLobe;
 use nelf_scene::field::{FieldError, FieldSource, ViewPolicy};
+use rayon::prelude::*;
 
 type Error = Box<dyn std::error::Error>;
-
-/// Fitting directions (a Fibonacci sphere).
-const FIT_DIRECTIONS: usize = 48;
 
 /// One voxel's fit.
 struct PointFit {
     sigma: f32,
     tbar: Vec<f32>,
     normal: Option<Vec3>,
-    /// `s_c` per model (`models` order).
+    /// `s_c` per lobe.
     scale: Vec<[f32; 3]>,
 }
 
-#[derive(Clone, Copy, Debug)]
-struct Model {
-    lambda: f32,
-    visibility: bool,
-}
-
+/// The model as a field: the transport toward `current`'s eye under lobe `current.0`
+/// (`None`: `T̄` only). Fits every point once, on first sight.
 struct Reflect<'a> {
     inner: &'a dyn FieldSource,
     cams: Vec<Vec3>,
-    /// Light texels: the centre direction in the world and 3 × 3 sub-directions with
-    /// their solid angles (the lobe is narrower than a texel's 22.5°).
-    texels: Vec<(Vec3, Vec<(Vec3, f32)>)>,
-    fit_dirs: Vec<Vec3>,
-    models: Vec<Model>,
-    /// `(model index or None for T̄ only, target eye)`.
+    /// The models tried: a lobe and whether its scale is one for all channels.
+    lobes: Vec<(ReflectionLobe, bool)>,
     current: Mutex<(Option<usize>, Vec3)>,
     cache: RwLock<HashMap<[u32; 3], PointFit>>,
 }
@@ -77,53 +64,7 @@ fn key(p: Vec3) -> [u32; 3] {
     [p.x.to_bits(), p.y.to_bits(), p.z.to_bits()]
 }
 
-fn reflect(toward_eye: Vec3, n: Vec3) -> Vec3 {
-    // Mirror of ω_o about n: 2 (n·ω_o) n − ω_o.
-    (2.0 * n.dot(toward_eye) * n - toward_eye).normalize_or_zero()
-}
-
 impl Reflect<'_> {
-    fn lobe(&self, model: &Model, r: Vec3, n: Vec3, tbar: &[f32], out: &mut [f32; ENV_TEXELS]) {
-        for (i, (centre, subs)) in self.texels.iter().enumerate() {
-            // The texel's corners are within 17° of its centre; cos^λ < 1e-3 beyond 60°.
-            if r.dot(*centre) < 0.2 {
-                out[i] = 0.0;
-                continue;
-            }
-            let mut h = 0.0;
-            for (w, solid) in subs {
-                let cos_r = r.dot(*w);
-                if cos_r > 0.0 {
-                    let cos_n = if model.visibility { 1.0 } else { n.dot(*w).max(0.0) };
-                    h += cos_r.powf(model.lambda) * cos_n * solid;
-                }
-            }
-            if model.visibility {
-                // T̄ ∝ visibility · cos · ΔΩ already: it stands in for cos (the lobe's
-                // solid-angle integral is kept, normalised by the texel's).
-                let lum =
-                    0.2126 * tbar[i] + 0.7152 * tbar[ENV_TEXELS + i] + 0.0722 * tbar[2 * ENV_TEXELS + i];
-                let texel_solid: f32 = subs.iter().map(|(_, a)| a).sum();
-                h *= lum.max(0.0) / texel_solid;
-            }
-            out[i] = h;
-        }
-    }
-
-    /// `mean_cams h(r_cam)` at `x`.
-    fn lobe_mean(&self, model: &Model, x: Vec3, n: Vec3, tbar: &[f32]) -> [f32; ENV_TEXELS] {
-        let mut mean = [0.0f32; ENV_TEXELS];
-        let mut one = [0.0f32; ENV_TEXELS];
-        for c in &self.cams {
-            let toward = (*c - x).normalize_or_zero();
-            self.lobe(model, reflect(toward, n), n, tbar, &mut one);
-            for (m, h) in mean.iter_mut().zip(one) {
-                *m += h / self.cams.len() as f32;
-            }
-        }
-        mean
-    }
-
     fn fit(&self, points: &[Vec3]) -> Result<Vec<PointFit>, FieldError> {
         let count = points.len();
         let mut sigma = vec![0.0f32; count];
@@ -134,84 +75,57 @@ impl Reflect<'_> {
             &mut sigma,
             &mut tbar,
         )?;
-        let dirs = self.fit_dirs.len();
-        let mut lt = vec![0.0f32; count * dirs * LT_DIM];
+        let dirs = sample_directions();
+        let mut lt = vec![0.0f32; count * dirs.len() * LT_DIM];
         let mut dens = vec![0.0f32; count];
         self.inner
-            .evaluate_directions(points, &self.fit_dirs, &mut dens, &mut lt)?;
-        // Outward normals from the density gradient (central differences, 1 mm).
+            .evaluate_directions(points, &dirs, &mut dens, &mut lt)?;
         let h = 1e-3f32;
-        let mut probes = Vec::with_capacity(count * 6);
-        for p in points {
-            for axis in [Vec3::X, Vec3::Y, Vec3::Z] {
-                probes.push(*p + axis * h);
-                probes.push(*p - axis * h);
-            }
-        }
+        let probes: Vec<Vec3> = points
+            .iter()
+            .flat_map(|p| {
+                [Vec3::X, Vec3::Y, Vec3::Z]
+                    .into_iter()
+                    .flat_map(move |a| [*p + a * h, *p - a * h])
+            })
+            .collect();
         let mut probe_sigma = vec![0.0f32; probes.len()];
         self.inner.evaluate_density(&probes, &mut probe_sigma)?;
-        let fits = points
+        let eyes: Vec<DVec3> = self.cams.iter().map(|c| c.as_dvec3()).collect();
+        Ok(points
             .par_iter()
             .enumerate()
-            .map(|(p_index, x)| {
-                let s = &probe_sigma[p_index * 6..p_index * 6 + 6];
+            .map(|(p, x)| {
+                let s = &probe_sigma[p * 6..p * 6 + 6];
                 let grad = Vec3::new(s[0] - s[1], s[2] - s[3], s[4] - s[5]);
                 let normal = (grad.length() > 1e-6).then(|| -grad.normalize());
-                let t = &tbar[p_index * LT_DIM..(p_index + 1) * LT_DIM];
-                let mut scale = vec![[0.0f32; 3]; self.models.len()];
-                if let Some(n) = normal {
-                    // Weights: seen from there, most near the cameras (the bake's view stage).
-                    let cam_dirs: Vec<Vec3> =
-                        self.cams.iter().map(|c| (*c - *x).normalize_or_zero()).collect();
-                    let weights: Vec<f32> = self
-                        .fit_dirs
-                        .iter()
-                        .map(|w| {
-                            let near = cam_dirs
-                                .iter()
-                                .map(|c| (8.0 * (c.dot(*w) - 1.0)).exp())
-                                .sum::<f32>()
-                                / cam_dirs.len() as f32;
-                            n.dot(*w).max(0.0) * (near + 0.02)
-                        })
-                        .collect();
-                    for (m, model) in self.models.iter().enumerate() {
-                        let mean = self.lobe_mean(model, *x, n, t);
-                        let mut one = [0.0f32; ENV_TEXELS];
-                        let (mut num, mut den) = ([0.0f64; 3], [0.0f64; 3]);
-                        for (d, w) in self.fit_dirs.iter().enumerate() {
-                            if weights[d] <= 0.0 {
-                                continue;
-                            }
-                            self.lobe(model, reflect(*w, n), n, t, &mut one);
-                            let sample = &lt[(p_index * dirs + d) * LT_DIM..][..LT_DIM];
-                            for c in 0..3 {
-                                for i in 0..ENV_TEXELS {
-                                    let dh = f64::from(one[i] - mean[i]);
-                                    let res = f64::from(sample[c * ENV_TEXELS + i] - t[c * ENV_TEXELS + i]);
-                                    num[c] += f64::from(weights[d]) * dh * res;
-                                    den[c] += f64::from(weights[d]) * dh * dh;
-                                }
-                            }
-                        }
-                        for c in 0..3 {
-                            scale[m][c] = if den[c] > 0.0 {
-                                (num[c] / den[c]).max(0.0) as f32
-                            } else {
-                                0.0
-                            };
-                        }
+                let t = &tbar[p * LT_DIM..(p + 1) * LT_DIM];
+                let scale = match normal {
+                    None => vec![[0.0; 3]; self.lobes.len()],
+                    Some(n) => {
+                        let weights = seen_weights(x.as_dvec3(), n.as_dvec3(), &eyes, &dirs);
+                        let residual: Vec<f32> = lt[p * dirs.len() * LT_DIM..(p + 1) * dirs.len() * LT_DIM]
+                            .chunks_exact(LT_DIM)
+                            .flat_map(|td| td.iter().zip(t).map(|(a, b)| a - b))
+                            .collect();
+                        self.lobes
+                            .iter()
+                            .map(|(lobe, grey)| {
+                                fit_reflection_scale(
+                                    lobe, *x, n, &self.cams, &dirs, &weights, &residual, *grey,
+                                )
+                            })
+                            .collect()
                     }
-                }
+                };
                 PointFit {
-                    sigma: sigma[p_index],
+                    sigma: sigma[p],
                     tbar: t.to_vec(),
                     normal,
                     scale,
                 }
             })
-            .collect();
-        Ok(fits)
+            .collect())
     }
 }
 
@@ -224,7 +138,10 @@ impl FieldSource for Reflect<'_> {
         lt: &mut [f32],
     ) -> Result<(), FieldError> {
         let missing: Vec<Vec3> = {
-            let cache = self.cache.read().unwrap_or_else(|e| e.into_inner());
+            let cache = self
+                .cache
+                .read()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
             points
                 .iter()
                 .copied()
@@ -233,13 +150,22 @@ impl FieldSource for Reflect<'_> {
         };
         if !missing.is_empty() {
             let fits = self.fit(&missing)?;
-            let mut cache = self.cache.write().unwrap_or_else(|e| e.into_inner());
+            let mut cache = self
+                .cache
+                .write()
+                .unwrap_or_else(std::sync::PoisonError::into_inner);
             for (p, f) in missing.iter().zip(fits) {
                 cache.insert(key(*p), f);
             }
         }
-        let (model, eye) = *self.current.lock().unwrap_or_else(|e| e.into_inner());
-        let cache = self.cache.read().unwrap_or_else(|e| e.into_inner());
+        let (lobe, eye) = *self
+            .current
+            .lock()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
+        let cache = self
+            .cache
+            .read()
+            .unwrap_or_else(std::sync::PoisonError::into_inner);
         density
             .par_iter_mut()
             .zip(lt.par_chunks_mut(LT_DIM))
@@ -248,20 +174,12 @@ impl FieldSource for Reflect<'_> {
                 let fit = &cache[&key(*p)];
                 *sigma = fit.sigma;
                 out.copy_from_slice(&fit.tbar);
-                if let (Some(m), Some(n)) = (model, fit.normal) {
-                    let spec = &self.models[m];
-                    let mean = self.lobe_mean(spec, *p, n, &fit.tbar);
-                    let mut one = [0.0f32; ENV_TEXELS];
-                    self.lobe(
-                        spec,
-                        reflect((eye - *p).normalize_or_zero(), n),
-                        n,
-                        &fit.tbar,
-                        &mut one,
-                    );
+                if let (Some(m), Some(n)) = (lobe, fit.normal) {
+                    let mean = self.lobes[m].0.mean_transport(*p, n, &self.cams);
+                    let seen = self.lobes[m].0.transport_seen_from(*p, n, eye);
                     for c in 0..3 {
                         for t in 0..ENV_TEXELS {
-                            out[c * ENV_TEXELS + t] += fit.scale[m][c] * (one[t] - mean[t]);
+                            out[c * ENV_TEXELS + t] += fit.scale[m][c] * (seen[t] - mean[t]);
                         }
                     }
                 }
@@ -282,14 +200,20 @@ impl FieldSource for Reflect<'_> {
     }
 }
 
+/// `λ20`, `λ20 grey`.
+fn label((lambda, grey): (f32, bool)) -> String {
+    format!("λ{lambda}{}", if grey { " grey" } else { "" })
+}
+
 fn main() -> Result<(), Error> {
     let mut args = std::env::args().skip(1);
     let dir = PathBuf::from(
         args.next()
-            .ok_or("usage: view_reflect CAPTURE_DIR [--resolution N] [--lambdas 10,20]")?,
+            .ok_or("usage: view_reflect CAPTURE_DIR [--resolution N] [--lambdas 10,20] [--grey]")?,
     );
     let mut resolution = 128;
     let mut lambdas = vec![10.0f32, 20.0];
+    let mut grey = false;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--resolution" => resolution = args.next().ok_or("--resolution needs a value")?.parse()?,
@@ -301,6 +225,7 @@ fn main() -> Result<(), Error> {
                     .map(str::parse)
                     .collect::<Result<_, _>>()?;
             }
+            "--grey" => grey = true,
             other => return Err(format!("unknown argument {other}").into()),
         }
     }
@@ -313,67 +238,32 @@ fn main() -> Result<(), Error> {
         ..BakeConfig::default()
     };
     let progress = Progress::hidden();
-    let mut models: Vec<Model> = lambdas
-        .iter()
-        .map(|&lambda| Model {
-            lambda,
-            visibility: false,
-        })
-        .collect();
-    models.extend(lambdas.iter().map(|&lambda| Model {
-        lambda,
-        visibility: true,
-    }));
     with_capture_job(&capture, &truth, &config, &progress, |job, prior| {
         let world_from_light = job.field.world_from_light();
-        let texels = (0..ENV_TEXELS)
-            .map(|i| {
-                let (row, col) = (i / ENV_W, i % ENV_W);
-                let centre = world_from_light * texel_center_direction(row, col, ENV_H, ENV_W);
-                let (t0, t1) = row_theta_bounds(row, ENV_H);
-                let (p0, p1) = col_phi_bounds(col, ENV_W);
-                let mut subs = Vec::with_capacity(9);
-                for a in 0..3 {
-                    let (ta, tb) = (
-                        t0 + (t1 - t0) * a as f64 / 3.0,
-                        t0 + (t1 - t0) * (a + 1) as f64 / 3.0,
-                    );
-                    for b in 0..3 {
-                        let phi = p0 + (p1 - p0) * (b as f64 + 0.5) / 3.0;
-                        let solid = (p1 - p0) / 3.0 * (ta.cos() - tb.cos());
-                        let d = world_from_light * direction(0.5 * (ta + tb), phi);
-                        subs.push((d.as_vec3(), solid as f32));
-                    }
-                }
-                (centre.as_vec3(), subs)
-            })
+        let models: Vec<(f32, bool)> = lambdas
+            .iter()
+            .flat_map(|&l| std::iter::once((l, false)).chain(grey.then_some((l, true))))
             .collect();
-        let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
-        let fit_dirs = (0..FIT_DIRECTIONS)
-            .map(|i| {
-                let y = 1.0 - 2.0 * (i as f64 + 0.5) / FIT_DIRECTIONS as f64;
-                let r = (1.0 - y * y).max(0.0).sqrt();
-                let phi = golden * i as f64;
-                DVec3::new(r * phi.cos(), y, r * phi.sin()).as_vec3()
-            })
-            .collect();
-        let cams: Vec<Vec3> = job.cameras.iter().map(|c| c.centre().as_vec3()).collect();
         let reflect = Reflect {
             inner: job.field,
-            cams,
-            texels,
-            fit_dirs,
-            models: models.clone(),
+            cams: job.cameras.iter().map(|c| c.centre().as_vec3()).collect(),
+            lobes: models
+                .iter()
+                .map(|&(l, grey)| (ReflectionLobe::new(l, world_from_light), grey))
+                .collect(),
             current: Mutex::new((None, Vec3::ZERO)),
             cache: RwLock::new(HashMap::new()),
         };
         let started = std::time::Instant::now();
-        let mut sums = vec![0.0f64; models.len() + 2];
+        let mut sums = vec![0.0f64; models.len() + 1];
         for (t, camera) in held.cameras.iter().enumerate() {
             let eye = camera.centre().as_vec3();
-            let mut line = format!("{}:", held.names[t]);
+            let mut line = vec![format!("{}:", held.names[t])];
             for m in std::iter::once(None).chain((0..models.len()).map(Some)) {
-                *reflect.current.lock().unwrap_or_else(|e| e.into_inner()) = (m, eye);
+                *reflect
+                    .current
+                    .lock()
+                    .unwrap_or_else(std::sync::PoisonError::into_inner) = (m, eye);
                 let bake = FieldBake {
                     field: &reflect,
                     plan: job.plan.clone(),
@@ -385,28 +275,23 @@ fn main() -> Result<(), Error> {
                 };
                 let asset = bake_field(&bake, &config, &progress, prior)?.asset;
                 let (score, _) = score_view(&asset, camera, &held.envs[t], &held.images[t], "model")?;
-                let label = m.map_or("T̄".to_owned(), |m| {
-                    let model = models[m];
-                    format!("λ{}{}", model.lambda, if model.visibility { "+vis" } else { "" })
-                });
-                line += &format!(" {label} {:.2}", score.psnr_db);
+                let label = m.map_or("T̄".to_owned(), |m| label(models[m]));
+                line.push(format!("{label} {:.2}", score.psnr_db));
                 sums[m.map_or(0, |m| m + 1)] += score.psnr_db;
             }
-            println!("{line}   ({:.0} s)", started.elapsed().as_secs_f64());
+            println!("{}   ({:.0} s)", line.join(" "), started.elapsed().as_secs_f64());
         }
         let n = held.len().max(1) as f64;
-        let mut line = "mean:".to_owned();
-        line += &format!(" T̄ {:.2}", sums[0] / n);
+        let mut line = vec![format!("mean: T̄ {:.2}", sums[0] / n)];
         for (m, model) in models.iter().enumerate() {
-            line += &format!(
-                " λ{}{} {:.2} ({:+.2})",
-                model.lambda,
-                if model.visibility { "+vis" } else { "" },
+            line.push(format!(
+                "{} {:.2} ({:+.2})",
+                label(*model),
                 sums[m + 1] / n,
                 (sums[m + 1] - sums[0]) / n
-            );
+            ));
         }
-        println!("{line}");
+        println!("{}", line.join(" "));
         Ok(())
     })?;
     Ok(())

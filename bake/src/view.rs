@@ -37,7 +37,7 @@ use std::str::FromStr;
 
 use glam::{DVec3, Vec3};
 use nalgebra::{DMatrix, SymmetricEigen};
-use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS, view_harmonics};
+use nelf_format::conventions::{ENV_TEXELS, LT_DIM, VIEW_HARMONICS, view_harmonics};
 use nelf_format::{CoefficientEncoding, Coefficients, ViewDependence};
 use nelf_render::BrickGrid;
 use nelf_scene::field::FieldSource;
@@ -253,6 +253,72 @@ pub struct ViewFit {
     pub skipped: bool,
 }
 
+/// How much each outgoing direction counts at a voxel at `x` with outward normal `n`
+/// (zero: unknown, every direction faces): `max(0, n·ω) · (mean_e exp(κ (e·ω − 1)) +
+/// floor)`, `e` the directions toward `eyes`: the directions the voxel is seen from, most
+/// near the views.
+pub fn seen_weights(x: DVec3, n: DVec3, eyes: &[DVec3], directions: &[Vec3]) -> Vec<f64> {
+    let toward: Vec<DVec3> = eyes.iter().map(|e| (*e - x).normalize_or_zero()).collect();
+    directions
+        .iter()
+        .map(|d| {
+            let d = d.as_dvec3();
+            let facing = if n == DVec3::ZERO { 1.0 } else { n.dot(d).max(0.0) };
+            let near: f64 = toward
+                .iter()
+                .map(|c| (VIEW_KERNEL * (c.dot(d) - 1.0)).exp())
+                .sum();
+            facing * (near / toward.len().max(1) as f64 + VIEW_WEIGHT_FLOOR)
+        })
+        .collect()
+}
+
+/// The reflection-lobe candidate's per-voxel fit ([`nelf_render::reflection`]): the
+/// scales `s_c ≥ 0` minimising `Σ_d w_d Σ_i (R_d[c·128 + i] − s_c (h_i(r_d) − h̄_i))²`,
+/// `R_d` the residual `T(x, ω_d) − T̄(x)` toward `directions[d]` (`residual`, `D × 384`),
+/// `r_d` the mirror of `ω_d` about the unit outward normal `n`, `h̄` the lobe's mean over
+/// the directions toward `eyes` (those `T̄` averages over) and `w_d` = `weights[d]`
+/// ([`seen_weights`]). Zero where nothing is seen or the lobe explains nothing.
+/// `colourless`: one scale for the three channels (the sum of their squared errors).
+#[allow(clippy::too_many_arguments)] // a voxel, its samples and the lobe
+pub fn fit_reflection_scale(
+    lobe: &nelf_render::ReflectionLobe,
+    x: Vec3,
+    n: Vec3,
+    eyes: &[Vec3],
+    directions: &[Vec3],
+    weights: &[f64],
+    residual: &[f32],
+    colourless: bool,
+) -> [f32; 3] {
+    let mean = lobe.mean_transport(x, n, eyes);
+    let (mut num, mut den) = ([0.0f64; 3], [0.0f64; 3]);
+    for ((d, w), r) in directions.iter().zip(weights).zip(residual.chunks_exact(LT_DIM)) {
+        if *w <= 0.0 {
+            continue;
+        }
+        let h = lobe.transport(nelf_render::mirror(*d, n), n);
+        for c in 0..3 {
+            for (i, (h, m)) in h.iter().zip(&mean).enumerate() {
+                let dh = f64::from(h - m);
+                num[c] += w * dh * f64::from(r[c * ENV_TEXELS + i]);
+                den[c] += w * dh * dh;
+            }
+        }
+    }
+    if colourless {
+        num = [num.iter().sum(); 3];
+        den = [den.iter().sum(); 3];
+    }
+    std::array::from_fn(|c| {
+        if den[c] > 0.0 {
+            (num[c] / den[c]).max(0.0) as f32
+        } else {
+            0.0
+        }
+    })
+}
+
 /// Samples and fits the residual of `field` over the band voxels `lt_voxels` (whose
 /// view-independent vectors are `lt`, `384` each, and visibility weights `weights`).
 /// `max_rank` caps the view basis.
@@ -284,20 +350,7 @@ pub fn fit_view(
     let position = |v: usize| voxel_position(&geometry, grid.bricks(), v);
     let direction_weights = |v: usize| -> Vec<f64> {
         let x = position(v);
-        let n = density_normal(grid, density, x);
-        let toward: Vec<DVec3> = eyes.iter().map(|e| (*e - x).normalize_or_zero()).collect();
-        directions
-            .iter()
-            .map(|d| {
-                let d = d.as_dvec3();
-                let facing = if n == DVec3::ZERO { 1.0 } else { n.dot(d).max(0.0) };
-                let near: f64 = toward
-                    .iter()
-                    .map(|c| (VIEW_KERNEL * (c.dot(d) - 1.0)).exp())
-                    .sum();
-                facing * (near / toward.len().max(1) as f64 + VIEW_WEIGHT_FLOOR)
-            })
-            .collect()
+        seen_weights(x, density_normal(grid, density, x), eyes, &directions)
     };
     // Transport toward every direction of a batch of band entries, minus T̄, in f64.
     let residuals = |entries: &[usize]| -> Result<Vec<f64>> {
@@ -577,6 +630,53 @@ mod tests {
         for v in &d {
             assert!((v.length() - 1.0).abs() < 1e-5);
         }
+    }
+
+    #[test]
+    fn the_reflection_scale_recovers_a_known_lobe() {
+        // A voxel facing +z seen from three eyes in front; its residual toward every
+        // direction is exactly a lobe of scales (0.3, 0.2, 0.1) about the mirror
+        // direction, minus the lobe's mean over the eyes.
+        let lobe = nelf_render::ReflectionLobe::new(20.0, glam::DMat3::IDENTITY);
+        let (x, n) = (Vec3::ZERO, Vec3::Z);
+        let eyes = [
+            Vec3::new(0.0, 0.0, 1.0),
+            Vec3::new(0.5, 0.1, 0.9),
+            Vec3::new(-0.4, -0.2, 0.9),
+        ];
+        let dirs = sample_directions();
+        let weights = seen_weights(x.as_dvec3(), n.as_dvec3(), &eyes.map(Vec3::as_dvec3), &dirs);
+        let scales = [0.3f32, 0.2, 0.1];
+        let mean = lobe.mean_transport(x, n, &eyes);
+        let residual: Vec<f32> = dirs
+            .iter()
+            .flat_map(|d| {
+                let h = lobe.transport(nelf_render::mirror(*d, n), n);
+                let mean = &mean;
+                scales
+                    .into_iter()
+                    .flat_map(move |s| (0..ENV_TEXELS).map(move |i| s * (h[i] - mean[i])))
+            })
+            .collect();
+        let fit = fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &residual, false);
+        for (a, b) in fit.iter().zip(scales) {
+            assert!((a - b).abs() < 1e-4 * b, "{fit:?}");
+        }
+        // One scale for all three: their mean here (the channels' lobes are the same).
+        let grey = fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &residual, true);
+        assert!(grey.iter().all(|g| (g - 0.2).abs() < 1e-4), "{grey:?}");
+        // A view-independent voxel (no residual) gets no lobe; nor does a lobe pointing
+        // the other way (negative scales clamp to zero).
+        let zero = vec![0.0f32; residual.len()];
+        assert_eq!(
+            fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &zero, false),
+            [0.0; 3]
+        );
+        let negative: Vec<f32> = residual.iter().map(|r| -r).collect();
+        assert_eq!(
+            fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &negative, false),
+            [0.0; 3]
+        );
     }
 
     #[test]

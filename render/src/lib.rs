@@ -26,6 +26,7 @@ pub mod error;
 pub mod grid;
 pub mod light;
 pub mod march;
+pub mod reflection;
 pub mod view;
 pub mod wgsl;
 
@@ -36,4 +37,5 @@ pub use march::{
     Image, MAX_PIXEL_GRID, MarchSettings, MarchStats, asset_density, render_asset, render_features,
     render_volume, render_volume_stats, render_volume_unskipped, visibility_weights,
 };
+pub use reflection::{ReflectionLobe, mirror};
 pub use view::{project_view_light, project_view_light_texels, radiance_seen_from, voxel_lobe_radiance};
