@@ -37,7 +37,9 @@ use nelf_format::envmap_file::{EnvmapKind, decode_envmap};
 use nelf_render::MarchSettings;
 
 use crate::atlas::RelightView;
-use crate::gpu::{DisplaySettings, GpuRenderer, MarchPass, MarchView, ToneMap, ViewInfo, ViewSettings};
+use crate::gpu::{
+    DisplaySettings, GpuRenderer, MarchPass, MarchView, RelightKind, ToneMap, ViewInfo, ViewSettings,
+};
 
 /// A named environment map offered in the picker.
 #[derive(Debug, Clone)]
@@ -457,6 +459,21 @@ fn asset_stats(rank: usize, view: Option<ViewInfo>) -> String {
     }
 }
 
+/// The stats line of the last lighting change on the GPU: which voxels it relit, or
+/// that the held camera's pixels were replayed (with the per-pixel cache's memory).
+/// `None` before the first one (and where the relight runs on the CPU).
+fn relight_stats(kind: Option<RelightKind>, replay_bytes: u64) -> Option<String> {
+    let text = match kind? {
+        RelightKind::Full => "last relight: every voxel".to_owned(),
+        RelightKind::Marked => "last relight: the voxels this view reads".to_owned(),
+        RelightKind::Replay => format!(
+            "last relight: pixels replayed (cache {:.1} MiB)",
+            replay_bytes as f64 / f64::from(1u32 << 20)
+        ),
+    };
+    Some(text)
+}
+
 /// Rendering options of the UI.
 #[derive(Debug, Clone, Copy)]
 struct Rendering {
@@ -811,6 +828,12 @@ impl ViewerApp {
             self.march_size[0],
             self.march_size[1]
         ));
+        let relight = Self::with_gpu(state, |gpu| {
+            relight_stats(gpu.renderer.last_relight(), gpu.renderer.replay_bytes())
+        });
+        if let Some(Some(text)) = relight {
+            ui.label(text);
+        }
         ui.separator();
 
         ui.label("Lighting");
@@ -1229,6 +1252,23 @@ mod tests {
         assert_eq!(
             capture_light_beside(&asset),
             Some(dir.path().join("head.light.exr"))
+        );
+    }
+
+    #[test]
+    fn stats_line_says_how_the_lighting_was_last_applied() {
+        assert_eq!(relight_stats(None, 0), None);
+        assert_eq!(
+            relight_stats(Some(RelightKind::Full), 0).as_deref(),
+            Some("last relight: every voxel")
+        );
+        assert_eq!(
+            relight_stats(Some(RelightKind::Marked), 0).as_deref(),
+            Some("last relight: the voxels this view reads")
+        );
+        assert_eq!(
+            relight_stats(Some(RelightKind::Replay), 3 << 20).as_deref(),
+            Some("last relight: pixels replayed (cache 3.0 MiB)")
         );
     }
 
