@@ -9,11 +9,8 @@
 
 use std::path::PathBuf;
 
-use nelf_bake::eval::{load_held_aside, score_view};
-use nelf_bake::{
-    BakeConfig, CaptureLoadOptions, FieldBake, GroundTruth, Progress, ViewChoice, bake_field, load_capture,
-    with_capture_job,
-};
+use nelf_bake::eval::{TruthCapture, load_truth_capture, score_view};
+use nelf_bake::{BakeConfig, FieldBake, Progress, ViewChoice, bake_field, with_capture_job};
 use nelf_scene::field::ViewPolicy;
 
 type Error = Box<dyn std::error::Error>;
@@ -30,9 +27,7 @@ fn main() -> Result<(), Error> {
             resolution = args.next().ok_or("--resolution needs a value")?.parse()?;
         }
     }
-    let capture = load_capture(&dir, &CaptureLoadOptions::default())?;
-    let truth = GroundTruth::from_synth_capture(&dir)?;
-    let held = load_held_aside(capture.description().ok_or("not a cameras.json capture")?, &dir)?;
+    let TruthCapture { capture, truth, held } = load_truth_capture(&dir)?;
     let config = BakeConfig {
         resolution,
         view_dependence: ViewChoice::Off,

@@ -18,21 +18,22 @@
 //! (The first version of this example, commit 546fbf6, also tried `h` modulated by the
 //! voxel's own transport per light texel, i.e. with visibility: it gained nothing.)
 //!
-//! `cargo run --release -p nelf-bake --example view_reflect -- CAPTURE_DIR [--resolution N] [--lambdas 10,20] [--grey]`
+//! `cargo run --release -p nelf-bake --example view_reflect -- CAPTURE_DIR [--resolution N] [--lambdas 10,20] [--grey] [--dump PATH]`
 //!
 //! `--grey` adds, per exponent, the model with one scale for the three channels.
+//! `--dump PATH` writes, per model, what the asset would store per voxel as byte planes
+//! (`PATH.<model>`: the normal's two octahedral coordinates, then the scales, 8 bits
+//! each, voxels in z, y, x order), to be measured with `zstd -19` (the writer's level, its
+//! byte shuffle being the planes).
 
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::{Mutex, RwLock};
 
 use glam::{DVec3, Vec3};
-use nelf_bake::eval::{load_held_aside, score_view};
+use nelf_bake::eval::{TruthCapture, load_truth_capture, score_view};
 use nelf_bake::view::{fit_reflection_scale, sample_directions, seen_weights};
-use nelf_bake::{
-    BakeConfig, CaptureLoadOptions, FieldBake, GroundTruth, Progress, ViewChoice, bake_field, load_capture,
-    with_capture_job,
-};
+use nelf_bake::{BakeConfig, FieldBake, Progress, ViewChoice, bake_field, with_capture_job};
 use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
 use nelf_render::ReflectionLobe;
 use nelf_scene::field::{FieldError, FieldSource, ViewPolicy};
@@ -200,6 +201,63 @@ impl FieldSource for Reflect<'_> {
     }
 }
 
+/// Octahedral coordinates of a unit vector in [0, 1]² (Meyer et al. 2010).
+fn octahedral(n: Vec3) -> [f32; 2] {
+    let n = n / (n.x.abs() + n.y.abs() + n.z.abs()).max(1e-12);
+    let (u, v) = if n.z >= 0.0 {
+        (n.x, n.y)
+    } else {
+        ((1.0 - n.y.abs()) * n.x.signum(), (1.0 - n.x.abs()) * n.y.signum())
+    };
+    [0.5 * u + 0.5, 0.5 * v + 0.5]
+}
+
+/// Writes `path.<model>` per model (see `--dump`).
+fn dump_planes(reflect: &Reflect<'_>, models: &[(f32, bool)], path: &std::path::Path) -> std::io::Result<()> {
+    let cache = reflect
+        .cache
+        .read()
+        .unwrap_or_else(std::sync::PoisonError::into_inner);
+    let mut voxels: Vec<(&[u32; 3], &PointFit)> = cache.iter().collect();
+    let coordinate = |k: &[u32; 3]| [2, 1, 0].map(|a| f32::from_bits(k[a]));
+    voxels.sort_by(|a, b| {
+        coordinate(a.0)
+            .partial_cmp(&coordinate(b.0))
+            .unwrap_or(std::cmp::Ordering::Equal)
+    });
+    let quantize = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
+    for (m, model) in models.iter().enumerate() {
+        let channels = if model.1 { 1 } else { 3 };
+        let max: Vec<f32> = (0..channels)
+            .map(|c| {
+                voxels
+                    .iter()
+                    .map(|(_, f)| f.scale[m][c])
+                    .fold(0.0, f32::max)
+                    .max(1e-30)
+            })
+            .collect();
+        let mut planes = vec![Vec::with_capacity(voxels.len()); 2 + channels];
+        for (_, fit) in &voxels {
+            let oct = fit.normal.map_or([0.5, 0.5], octahedral);
+            planes[0].push(quantize(oct[0]));
+            planes[1].push(quantize(oct[1]));
+            for c in 0..channels {
+                planes[2 + c].push(quantize(fit.scale[m][c] / max[c]));
+            }
+        }
+        let file = path.with_extension(label(*model).replace(' ', "-").replace('λ', "lambda"));
+        std::fs::write(&file, planes.concat())?;
+        println!(
+            "{}: {} voxels, {} planes",
+            file.display(),
+            voxels.len(),
+            2 + channels
+        );
+    }
+    Ok(())
+}
+
 /// `λ20`, `λ20 grey`.
 fn label((lambda, grey): (f32, bool)) -> String {
     format!("λ{lambda}{}", if grey { " grey" } else { "" })
@@ -207,13 +265,13 @@ fn label((lambda, grey): (f32, bool)) -> String {
 
 fn main() -> Result<(), Error> {
     let mut args = std::env::args().skip(1);
-    let dir = PathBuf::from(
-        args.next()
-            .ok_or("usage: view_reflect CAPTURE_DIR [--resolution N] [--lambdas 10,20] [--grey]")?,
-    );
+    let dir = PathBuf::from(args.next().ok_or(
+        "usage: view_reflect CAPTURE_DIR [--resolution N] [--lambdas 10,20] [--grey] [--dump PATH]",
+    )?);
     let mut resolution = 128;
     let mut lambdas = vec![10.0f32, 20.0];
     let mut grey = false;
+    let mut dump: Option<PathBuf> = None;
     while let Some(a) = args.next() {
         match a.as_str() {
             "--resolution" => resolution = args.next().ok_or("--resolution needs a value")?.parse()?,
@@ -226,12 +284,11 @@ fn main() -> Result<(), Error> {
                     .collect::<Result<_, _>>()?;
             }
             "--grey" => grey = true,
+            "--dump" => dump = Some(PathBuf::from(args.next().ok_or("--dump needs a path")?)),
             other => return Err(format!("unknown argument {other}").into()),
         }
     }
-    let capture = load_capture(&dir, &CaptureLoadOptions::default())?;
-    let truth = GroundTruth::from_synth_capture(&dir)?;
-    let held = load_held_aside(capture.description().ok_or("not a cameras.json capture")?, &dir)?;
+    let TruthCapture { capture, truth, held } = load_truth_capture(&dir)?;
     let config = BakeConfig {
         resolution,
         view_dependence: ViewChoice::Off,
@@ -292,6 +349,10 @@ fn main() -> Result<(), Error> {
             ));
         }
         println!("{}", line.join(" "));
+        if let Some(path) = &dump {
+            dump_planes(&reflect, &models, path)
+                .map_err(|e| nelf_bake::BakeError::Settings(format!("dump: {e}")))?;
+        }
         Ok(())
     })?;
     Ok(())

@@ -178,6 +178,30 @@ impl HeldAside {
     }
 }
 
+/// A ground-truth capture (`nelf capture synth` output) with its held-aside targets, as
+/// the view-dependence measurements load it (`examples/view_oracle.rs`,
+/// `examples/view_reflect.rs`).
+#[derive(Debug, Clone)]
+pub struct TruthCapture {
+    /// The capture's source views.
+    pub capture: crate::LoadedCapture,
+    /// The scene it was rendered from.
+    pub truth: crate::GroundTruth,
+    /// Its held-aside targets.
+    pub held: HeldAside,
+}
+
+/// Loads [`TruthCapture`] from `dir`; an error names what fails.
+pub fn load_truth_capture(dir: &Path) -> Result<TruthCapture> {
+    let capture = crate::load_capture(dir, &crate::CaptureLoadOptions::default())?;
+    let truth = crate::GroundTruth::from_synth_capture(dir)?;
+    let description = capture
+        .description()
+        .ok_or_else(|| BakeError::Settings(format!("{}: not a cameras.json capture", dir.display())))?;
+    let held = load_held_aside(description, dir)?;
+    Ok(TruthCapture { capture, truth, held })
+}
+
 /// Loads the held-aside target views of the capture in `dir` described by
 /// `capture`; an error names the file that fails. Empty when there are none.
 pub fn load_held_aside(capture: &nelf_format::capture::Capture, dir: &Path) -> Result<HeldAside> {
