@@ -1,4 +1,4 @@
-//! Engine shaders: the viewer's relight, march and display passes translated from
+//! Engine shaders: the viewer's relight, march, display and view passes translated from
 //! our WGSL (the same `#import`-resolved source the viewer compiles,
 //! `nelf_render::wgsl`) to GLSL 4.50 (one file per entry point, as GLSL has one
 //! `main`) and HLSL (Shader Model 5.1, one file per pass) by naga's back ends, never
@@ -20,16 +20,18 @@ use std::path::{Path, PathBuf};
 
 use naga::back::{glsl, hlsl};
 use naga::valid::{Capabilities, ValidationFlags, Validator};
-use nelf_render::wgsl::{DISPLAY_WGSL, MARCH_WGSL, RELIGHT_WGSL, preprocess};
+use nelf_render::wgsl::{DISPLAY_WGSL, MARCH_WGSL, RELIGHT_WGSL, VIEW_WGSL, preprocess};
 use serde::Serialize;
 
 use crate::ExportError;
 
-/// The passes an engine needs: (file stem, WGSL text).
+/// The passes an engine needs: (file stem, WGSL text). `view` only for a view-dependent
+/// asset (format 1.2): per voxel toward the eye, after the relight, before the march.
 pub const ENGINE_PASSES: &[(&str, &str)] = &[
     ("relight", RELIGHT_WGSL),
     ("march", MARCH_WGSL),
     ("display", DISPLAY_WGSL),
+    ("view", VIEW_WGSL),
 ];
 
 /// One translated entry point.

@@ -25,6 +25,9 @@ pub const MARCH_CORE_WGSL: &str = include_str!("../../shaders/march_core.wgsl");
 pub const MARCH_WGSL: &str = include_str!("../../shaders/march.wgsl");
 /// The display pass (tone mapping, sRGB; full-screen triangle).
 pub const DISPLAY_WGSL: &str = include_str!("../../shaders/display.wgsl");
+/// The view pass of view-dependent assets (format 1.2; compute, one invocation per
+/// voxel, run when the eye or the lighting changed).
+pub const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
 /// The benchmark's bare dense-texture march (the speed ceiling of a texture march).
 pub const DENSE_MARCH_WGSL: &str = include_str!("../../shaders/dense_march.wgsl");
 
@@ -37,6 +40,7 @@ pub const PASSES: &[(&str, &str)] = &[
     ("march.wgsl", MARCH_WGSL),
     ("display.wgsl", DISPLAY_WGSL),
     ("dense_march.wgsl", DENSE_MARCH_WGSL),
+    ("view.wgsl", VIEW_WGSL),
 ];
 
 /// A problem found while resolving `#import` lines.

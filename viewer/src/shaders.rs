@@ -1,7 +1,7 @@
 //! The `#[repr(C)]` mirrors of the structs the WGSL shaders read. The shader text and
 //! its `#import` preprocessing live in `nelf_render::wgsl` (shared with the exporter's
-//! GLSL/HLSL translation) and are re-exported here, except the view pass
-//! (`shaders/view.wgsl`, [`VIEW_WGSL`]), which only the viewer runs so far; [`VIEWER_PASSES`]
+//! GLSL/HLSL translation) and are re-exported here, except the passes only the viewer
+//! runs (the storage-free march of WebGL2 and the per-pixel replay); [`VIEWER_PASSES`]
 //! lists every pass the viewer compiles.
 //!
 //! **Mirrors.** Every uniform struct has a Rust twin with the same field order, made only
@@ -10,11 +10,8 @@
 
 pub use nelf_render::wgsl::{
     COMMON_WGSL, DENSE_MARCH_WGSL, DISPLAY_WGSL, LIBRARY, MARCH_WGSL, PASSES, PreprocessError, RELIGHT_WGSL,
-    preprocess,
+    VIEW_WGSL, preprocess,
 };
-
-/// The view pass of view-dependent assets (format 1.2; compute, one invocation per voxel).
-pub const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
 
 /// The march pass for devices without storage bindings or compute (WebGL2): a fragment
 /// entry only, no counters, no marks.
@@ -23,8 +20,8 @@ pub const MARCH_NOSTORAGE_WGSL: &str = include_str!("../../shaders/march_nostora
 /// Relighting a held camera's frame per pixel (compute; viewer/src/gpu/replay.rs).
 pub const REPLAY_WGSL: &str = include_str!("../../shaders/replay.wgsl");
 
-/// Every entry shader the viewer compiles: `nelf_render::wgsl::PASSES`, the view pass and
-/// the storage-free march.
+/// Every entry shader the viewer compiles: `nelf_render::wgsl::PASSES`, the storage-free
+/// march and the replay.
 pub const VIEWER_PASSES: &[(&str, &str)] = &[
     ("relight.wgsl", RELIGHT_WGSL),
     ("march.wgsl", MARCH_WGSL),
