@@ -18,9 +18,11 @@
 //! (The first version of this example, commit 546fbf6, also tried `h` modulated by the
 //! voxel's own transport per light texel, i.e. with visibility: it gained nothing.)
 //!
-//! `cargo run --release -p nelf-bake --example view_reflect -- CAPTURE_DIR [--resolution N] [--lambdas 10,20] [--grey] [--dump PATH]`
+//! `cargo run --release -p nelf-bake --example view_reflect -- CAPTURE_DIR [--resolution N] [--lambdas 10,20] [--grey] [--dump PATH] [--fit-normal DEG]`
 //!
 //! `--grey` adds, per exponent, the model with one scale for the three channels.
+//! `--fit-normal DEG` fits the normal too: of the density's and twelve around it (six at
+//! `DEG / 2`, six at `DEG`), the one whose lobe explains most of the residual.
 //! `--dump PATH` writes, per model, what the asset would store per voxel as byte planes
 //! (`PATH.<model>`: the normal's two octahedral coordinates, then the scales, 8 bits
 //! each, voxels in z, y, x order), to be measured with `zstd -19` (the writer's level, its
@@ -32,7 +34,7 @@ use std::sync::{Mutex, RwLock};
 
 use glam::{DVec3, Vec3};
 use nelf_bake::eval::{TruthCapture, load_truth_capture, score_view};
-use nelf_bake::view::{fit_reflection_scale, sample_directions, seen_weights};
+use nelf_bake::view::{fit_reflection, sample_directions, seen_weights};
 use nelf_bake::{BakeConfig, FieldBake, Progress, ViewChoice, bake_field, with_capture_job};
 use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
 use nelf_render::ReflectionLobe;
@@ -45,9 +47,28 @@ type Error = Box<dyn std::error::Error>;
 struct PointFit {
     sigma: f32,
     tbar: Vec<f32>,
+    /// The density's outward normal.
     normal: Option<Vec3>,
-    /// `s_c` per lobe.
-    scale: Vec<[f32; 3]>,
+    /// `s_c` per lobe, and the normal it was fitted with (the density's, or the best of
+    /// the candidates around it with `--fit-normal`).
+    scale: Vec<([f32; 3], Vec3)>,
+}
+
+/// `n` and, for a search angle `deg > 0`, six normals at `deg / 2` and six at `deg` around
+/// it.
+fn normal_candidates(n: Vec3, deg: f32) -> Vec<Vec3> {
+    let mut out = vec![n];
+    if deg > 0.0 {
+        let (t, b) = n.any_orthonormal_pair();
+        for ring in [0.5 * deg, deg] {
+            let (sin, cos) = ring.to_radians().sin_cos();
+            for k in 0..6 {
+                let phi = k as f32 * std::f32::consts::TAU / 6.0 + ring.to_radians();
+                out.push((cos * n + sin * (phi.cos() * t + phi.sin() * b)).normalize());
+            }
+        }
+    }
+    out
 }
 
 /// The model as a field: the transport toward `current`'s eye under lobe `current.0`
@@ -57,6 +78,8 @@ struct Reflect<'a> {
     cams: Vec<Vec3>,
     /// The models tried: a lobe and whether its scale is one for all channels.
     lobes: Vec<(ReflectionLobe, bool)>,
+    /// Search the normal within this many degrees of the density's (0: no search).
+    normal_search_deg: f32,
     current: Mutex<(Option<usize>, Vec3)>,
     cache: RwLock<HashMap<[u32; 3], PointFit>>,
 }
@@ -102,7 +125,7 @@ impl Reflect<'_> {
                 let normal = (grad.length() > 1e-6).then(|| -grad.normalize());
                 let t = &tbar[p * LT_DIM..(p + 1) * LT_DIM];
                 let scale = match normal {
-                    None => vec![[0.0; 3]; self.lobes.len()],
+                    None => vec![([0.0; 3], Vec3::Z); self.lobes.len()],
                     Some(n) => {
                         let weights = seen_weights(x.as_dvec3(), n.as_dvec3(), &eyes, &dirs);
                         let residual: Vec<f32> = lt[p * dirs.len() * LT_DIM..(p + 1) * dirs.len() * LT_DIM]
@@ -112,9 +135,16 @@ impl Reflect<'_> {
                         self.lobes
                             .iter()
                             .map(|(lobe, grey)| {
-                                fit_reflection_scale(
-                                    lobe, *x, n, &self.cams, &dirs, &weights, &residual, *grey,
-                                )
+                                normal_candidates(n, self.normal_search_deg)
+                                    .into_iter()
+                                    .map(|m| {
+                                        let fit = fit_reflection(
+                                            lobe, *x, m, &self.cams, &dirs, &weights, &residual, *grey,
+                                        );
+                                        (fit, m)
+                                    })
+                                    .max_by(|a, b| a.0.explained.total_cmp(&b.0.explained))
+                                    .map_or(([0.0; 3], n), |(fit, m)| (fit.scales, m))
                             })
                             .collect()
                     }
@@ -175,12 +205,13 @@ impl FieldSource for Reflect<'_> {
                 let fit = &cache[&key(*p)];
                 *sigma = fit.sigma;
                 out.copy_from_slice(&fit.tbar);
-                if let (Some(m), Some(n)) = (lobe, fit.normal) {
+                if let (Some(m), Some(_)) = (lobe, fit.normal) {
+                    let (scale, n) = fit.scale[m];
                     let mean = self.lobes[m].0.mean_transport(*p, n, &self.cams);
                     let seen = self.lobes[m].0.transport_seen_from(*p, n, eye);
                     for c in 0..3 {
                         for t in 0..ENV_TEXELS {
-                            out[c * ENV_TEXELS + t] += fit.scale[m][c] * (seen[t] - mean[t]);
+                            out[c * ENV_TEXELS + t] += scale[c] * (seen[t] - mean[t]);
                         }
                     }
                 }
@@ -232,18 +263,18 @@ fn dump_planes(reflect: &Reflect<'_>, models: &[(f32, bool)], path: &std::path::
             .map(|c| {
                 voxels
                     .iter()
-                    .map(|(_, f)| f.scale[m][c])
+                    .map(|(_, f)| f.scale[m].0[c])
                     .fold(0.0, f32::max)
                     .max(1e-30)
             })
             .collect();
         let mut planes = vec![Vec::with_capacity(voxels.len()); 2 + channels];
         for (_, fit) in &voxels {
-            let oct = fit.normal.map_or([0.5, 0.5], octahedral);
+            let oct = fit.normal.map_or([0.5, 0.5], |_| octahedral(fit.scale[m].1));
             planes[0].push(quantize(oct[0]));
             planes[1].push(quantize(oct[1]));
             for c in 0..channels {
-                planes[2 + c].push(quantize(fit.scale[m][c] / max[c]));
+                planes[2 + c].push(quantize(fit.scale[m].0[c] / max[c]));
             }
         }
         let file = path.with_extension(label(*model).replace(' ', "-").replace('λ', "lambda"));
@@ -271,6 +302,7 @@ fn main() -> Result<(), Error> {
     let mut resolution = 128;
     let mut lambdas = vec![10.0f32, 20.0];
     let mut grey = false;
+    let mut normal_search_deg = 0.0f32;
     let mut dump: Option<PathBuf> = None;
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -284,6 +316,7 @@ fn main() -> Result<(), Error> {
                     .collect::<Result<_, _>>()?;
             }
             "--grey" => grey = true,
+            "--fit-normal" => normal_search_deg = args.next().ok_or("--fit-normal needs degrees")?.parse()?,
             "--dump" => dump = Some(PathBuf::from(args.next().ok_or("--dump needs a path")?)),
             other => return Err(format!("unknown argument {other}").into()),
         }
@@ -308,6 +341,7 @@ fn main() -> Result<(), Error> {
                 .iter()
                 .map(|&(l, grey)| (ReflectionLobe::new(l, world_from_light), grey))
                 .collect(),
+            normal_search_deg,
             current: Mutex::new((None, Vec3::ZERO)),
             cache: RwLock::new(HashMap::new()),
         };

@@ -291,6 +291,31 @@ pub fn fit_reflection_scale(
     residual: &[f32],
     colourless: bool,
 ) -> [f32; 3] {
+    fit_reflection(lobe, x, n, eyes, directions, weights, residual, colourless).scales
+}
+
+/// A voxel's reflection-lobe fit.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReflectionFit {
+    /// The scales `s_c ≥ 0`.
+    pub scales: [f32; 3],
+    /// How much of the weighted squared residual they remove (`Σ_c s_c · num_c`, the
+    /// least-squares reduction): comparable between normals of one voxel.
+    pub explained: f64,
+}
+
+/// [`fit_reflection_scale`] with what the fit explains.
+#[allow(clippy::too_many_arguments)] // a voxel, its samples and the lobe
+pub fn fit_reflection(
+    lobe: &nelf_render::ReflectionLobe,
+    x: Vec3,
+    n: Vec3,
+    eyes: &[Vec3],
+    directions: &[Vec3],
+    weights: &[f64],
+    residual: &[f32],
+    colourless: bool,
+) -> ReflectionFit {
     let mean = lobe.mean_transport(x, n, eyes);
     let (mut num, mut den) = ([0.0f64; 3], [0.0f64; 3]);
     for ((d, w), r) in directions.iter().zip(weights).zip(residual.chunks_exact(LT_DIM)) {
@@ -306,17 +331,24 @@ pub fn fit_reflection_scale(
             }
         }
     }
-    if colourless {
+    let channels = if colourless {
         num = [num.iter().sum(); 3];
         den = [den.iter().sum(); 3];
-    }
-    std::array::from_fn(|c| {
+        1
+    } else {
+        3
+    };
+    let scales: [f64; 3] = std::array::from_fn(|c| {
         if den[c] > 0.0 {
-            (num[c] / den[c]).max(0.0) as f32
+            (num[c] / den[c]).max(0.0)
         } else {
             0.0
         }
-    })
+    });
+    ReflectionFit {
+        scales: scales.map(|s| s as f32),
+        explained: (0..channels).map(|c| scales[c] * num[c]).sum(),
+    }
 }
 
 /// Samples and fits the residual of `field` over the band voxels `lt_voxels` (whose
