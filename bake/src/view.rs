@@ -694,6 +694,10 @@ mod tests {
         for (a, b) in fit.iter().zip(scales) {
             assert!((a - b).abs() < 1e-4 * b, "{fit:?}");
         }
+        // The true normal explains more of the residual than one turned 10° away.
+        let turned = (Vec3::Z + 0.176 * Vec3::X).normalize();
+        let at = |m: Vec3| fit_reflection(&lobe, x, m, &eyes, &dirs, &weights, &residual, false).explained;
+        assert!(at(n) > 1.2 * at(turned), "{} vs {}", at(n), at(turned));
         // One scale for all three: their mean here (the channels' lobes are the same).
         let grey = fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &residual, true);
         assert!(grey.iter().all(|g| (g - 0.2).abs() < 1e-4), "{grey:?}");
