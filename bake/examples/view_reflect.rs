@@ -8,7 +8,7 @@
 //!
 //! with `T̄` the transport averaged toward the source cameras (what the asset stores
 //! today), `n` the density's outward normal (central differences of the field's density,
-//! 1 mm) and the scales fitted by [`nelf_bake::view::fit_reflection_scale`] on the
+//! 1 mm) and the scales fitted by [`nelf_bake::view::fit_reflection`] on the
 //! transport toward the bake's Fibonacci sphere of directions.
 //!
 //! Then, per held-aside target and per lobe exponent, bakes the capture with each voxel's

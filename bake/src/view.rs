@@ -273,27 +273,6 @@ pub fn seen_weights(x: DVec3, n: DVec3, eyes: &[DVec3], directions: &[Vec3]) -> 
         .collect()
 }
 
-/// The reflection-lobe candidate's per-voxel fit ([`nelf_render::reflection`]): the
-/// scales `s_c ≥ 0` minimising `Σ_d w_d Σ_i (R_d[c·128 + i] − s_c (h_i(r_d) − h̄_i))²`,
-/// `R_d` the residual `T(x, ω_d) − T̄(x)` toward `directions[d]` (`residual`, `D × 384`),
-/// `r_d` the mirror of `ω_d` about the unit outward normal `n`, `h̄` the lobe's mean over
-/// the directions toward `eyes` (those `T̄` averages over) and `w_d` = `weights[d]`
-/// ([`seen_weights`]). Zero where nothing is seen or the lobe explains nothing.
-/// `colourless`: one scale for the three channels (the sum of their squared errors).
-#[allow(clippy::too_many_arguments)] // a voxel, its samples and the lobe
-pub fn fit_reflection_scale(
-    lobe: &nelf_render::ReflectionLobe,
-    x: Vec3,
-    n: Vec3,
-    eyes: &[Vec3],
-    directions: &[Vec3],
-    weights: &[f64],
-    residual: &[f32],
-    colourless: bool,
-) -> [f32; 3] {
-    fit_reflection(lobe, x, n, eyes, directions, weights, residual, colourless).scales
-}
-
 /// A voxel's reflection-lobe fit.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ReflectionFit {
@@ -304,7 +283,13 @@ pub struct ReflectionFit {
     pub explained: f64,
 }
 
-/// [`fit_reflection_scale`] with what the fit explains.
+/// The reflection-lobe candidate's per-voxel fit ([`nelf_render::reflection`]): the
+/// scales `s_c ≥ 0` minimising `Σ_d w_d Σ_i (R_d[c·128 + i] − s_c (h_i(r_d) − h̄_i))²`,
+/// `R_d` the residual `T(x, ω_d) − T̄(x)` toward `directions[d]` (`residual`, `D × 384`),
+/// `r_d` the mirror of `ω_d` about the unit outward normal `n`, `h̄` the lobe's mean over
+/// the directions toward `eyes` (those `T̄` averages over) and `w_d` = `weights[d]`
+/// ([`seen_weights`]). Zero where nothing is seen or the lobe explains nothing.
+/// `colourless`: one scale for the three channels (the sum of their squared errors).
 #[allow(clippy::too_many_arguments)] // a voxel, its samples and the lobe
 pub fn fit_reflection(
     lobe: &nelf_render::ReflectionLobe,
@@ -690,7 +675,7 @@ mod tests {
                     .flat_map(move |s| (0..ENV_TEXELS).map(move |i| s * (h[i] - mean[i])))
             })
             .collect();
-        let fit = fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &residual, false);
+        let fit = fit_reflection(&lobe, x, n, &eyes, &dirs, &weights, &residual, false).scales;
         for (a, b) in fit.iter().zip(scales) {
             assert!((a - b).abs() < 1e-4 * b, "{fit:?}");
         }
@@ -699,18 +684,18 @@ mod tests {
         let at = |m: Vec3| fit_reflection(&lobe, x, m, &eyes, &dirs, &weights, &residual, false).explained;
         assert!(at(n) > 1.2 * at(turned), "{} vs {}", at(n), at(turned));
         // One scale for all three: their mean here (the channels' lobes are the same).
-        let grey = fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &residual, true);
+        let grey = fit_reflection(&lobe, x, n, &eyes, &dirs, &weights, &residual, true).scales;
         assert!(grey.iter().all(|g| (g - 0.2).abs() < 1e-4), "{grey:?}");
         // A view-independent voxel (no residual) gets no lobe; nor does a lobe pointing
         // the other way (negative scales clamp to zero).
         let zero = vec![0.0f32; residual.len()];
         assert_eq!(
-            fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &zero, false),
+            fit_reflection(&lobe, x, n, &eyes, &dirs, &weights, &zero, false).scales,
             [0.0; 3]
         );
         let negative: Vec<f32> = residual.iter().map(|r| -r).collect();
         assert_eq!(
-            fit_reflection_scale(&lobe, x, n, &eyes, &dirs, &weights, &negative, false),
+            fit_reflection(&lobe, x, n, &eyes, &dirs, &weights, &negative, false).scales,
             [0.0; 3]
         );
     }
