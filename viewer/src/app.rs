@@ -1014,10 +1014,13 @@ impl ViewerApp {
             response.drag_delta()
         };
         if self.fingers.count() >= 2 {
-            // Two or more fingers pan (their mean translation) and pinch-zoom (egui's zoom
-            // delta, below); the first finger, which egui also reports as a dragging
-            // pointer, does not orbit meanwhile.
-            if let Some(touch) = ui.input(egui::InputState::multi_touch) {
+            // Two or more fingers over the view pan (their mean translation) and
+            // pinch-zoom (egui's zoom delta, below); the first finger, which egui also
+            // reports as a dragging pointer, does not orbit meanwhile.
+            let touch = ui
+                .input(egui::InputState::multi_touch)
+                .filter(|_| response.hovered());
+            if let Some(touch) = touch {
                 let pan = touch.translation_delta;
                 orbit.pan(f64::from(pan.x), f64::from(pan.y), f64::from(rect.width()));
             }
