@@ -34,7 +34,7 @@ use std::sync::{Mutex, RwLock};
 
 use glam::{DVec3, Vec3};
 use nelf_bake::eval::{TruthCapture, load_truth_capture, score_view};
-use nelf_bake::view::{fit_reflection, sample_directions, seen_weights};
+use nelf_bake::view::{fit_reflection, normal_candidates, sample_directions, seen_weights};
 use nelf_bake::{BakeConfig, FieldBake, Progress, ViewChoice, bake_field, with_capture_job};
 use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
 use nelf_render::ReflectionLobe;
@@ -52,23 +52,6 @@ struct PointFit {
     /// `s_c` per lobe, and the normal it was fitted with (the density's, or the best of
     /// the candidates around it with `--fit-normal`).
     scale: Vec<([f32; 3], Vec3)>,
-}
-
-/// `n` and, for a search angle `deg > 0`, six normals at `deg / 2` and six at `deg` around
-/// it.
-fn normal_candidates(n: Vec3, deg: f32) -> Vec<Vec3> {
-    let mut out = vec![n];
-    if deg > 0.0 {
-        let (t, b) = n.any_orthonormal_pair();
-        for ring in [0.5 * deg, deg] {
-            let (sin, cos) = ring.to_radians().sin_cos();
-            for k in 0..6 {
-                let phi = k as f32 * std::f32::consts::TAU / 6.0 + ring.to_radians();
-                out.push((cos * n + sin * (phi.cos() * t + phi.sin() * b)).normalize());
-            }
-        }
-    }
-    out
 }
 
 /// The model as a field: the transport toward `current`'s eye under lobe `current.0`
@@ -208,7 +191,7 @@ impl FieldSource for Reflect<'_> {
                 if let (Some(m), Some(_)) = (lobe, fit.normal) {
                     let (scale, n) = fit.scale[m];
                     let mean = self.lobes[m].0.mean_transport(*p, n, &self.cams);
-                    let seen = self.lobes[m].0.transport_seen_from(*p, n, eye);
+                    let seen = self.lobes[m].0.transport((eye - *p).normalize_or_zero(), n);
                     for c in 0..3 {
                         for t in 0..ENV_TEXELS {
                             out[c * ENV_TEXELS + t] += scale[c] * (seen[t] - mean[t]);

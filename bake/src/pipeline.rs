@@ -31,7 +31,7 @@ use crate::rank::{
     light_texels, reduced_camera, reference_renders, relative_error_vs_images, test_environments,
     unquantized_radiance,
 };
-use crate::view::{ViewChoice, ViewReport, ViewSettings, choose_view};
+use crate::view::{ReflectionTarget, ViewChoice, ViewReport, ViewSettings, choose_view};
 
 /// The one 8-bit step floor for every component
 /// (`Coefficients::quantize_with_min_step`): uniform rounding with step `δ` adds
@@ -268,6 +268,7 @@ impl SampledField {
             pca: self.pca.model(self.top_rank).truncated(rank),
             coefficients: Coefficients::quantize_with_min_step(&truncated, rank, encoding, self.min_step)?,
             view: None,
+            reflection: None,
             metadata: serde_json::json!({}),
         };
         Ok(asset)
@@ -381,6 +382,23 @@ pub fn bake_field(
     Ok(output)
 }
 
+/// What the reflection part is fitted against under `policy`: the points it averages
+/// toward (at most [`nelf_format::asset::MAX_REFLECTION_EYES`], subsampled evenly), or
+/// `None` for a policy of fixed directions, where the part cannot say what `T̄` holds.
+pub fn reflection_target(policy: &ViewPolicy, world_from_light: glam::DMat3) -> Option<ReflectionTarget> {
+    let points = match policy {
+        ViewPolicy::TowardPoint(p) => vec![*p],
+        ViewPolicy::AverageTowardPoints(list) => list.clone(),
+        ViewPolicy::Direction(_) | ViewPolicy::AverageDirections(_) => return None,
+    };
+    let n = points.len();
+    let m = n.min(nelf_format::asset::MAX_REFLECTION_EYES);
+    (m > 0).then(|| ReflectionTarget {
+        eyes: (0..m).map(|i| points[i * n / m]).collect(),
+        world_from_light,
+    })
+}
+
 /// The view-dependence stage ([`crate::view`]): fits the residual of the field toward
 /// many directions, judges the candidates at the held-aside views (else the reference
 /// images), attaches the chosen part to the asset and records the decision in its
@@ -424,6 +442,7 @@ pub fn add_view_dependence(
         max_rank: config.max_view_rank,
         step_voxels: config.step_voxels,
     };
+    let reflect = reflection_target(&job.view_policy, output.asset.world_from_light);
     let report = choose_view(
         &mut output.asset,
         job.field,
@@ -433,6 +452,7 @@ pub fn add_view_dependence(
         &sampled.lt,
         &sampled.lt_weights,
         &job.cameras.iter().map(PinholeCamera::centre).collect::<Vec<_>>(),
+        reflect.as_ref(),
         &settings,
         judge,
         progress,

@@ -694,6 +694,114 @@ impl ViewDependence {
     }
 }
 
+/// Most eyes a reflection part may average over (format 1.3, `VREF`).
+pub const MAX_REFLECTION_EYES: usize = 16;
+
+/// Largest lobe exponent λ a reflection part may have (a narrower lobe is finer than the
+/// lobe table's nodes, 2.8° apart).
+pub const MAX_REFLECTION_EXPONENT: f32 = 200.0;
+
+/// The reflection-aligned view-dependent part (format 1.3, optional sections `VREF` and
+/// `VRCO`, SPEC.md §6): one glossy lobe about the mirror direction per voxel. Seen from
+/// world direction `ω` (unit, voxel toward the eye), with the voxel's unit normal `n`
+/// and the mirror direction `r = 2 (n·ω) n − ω`, the transport is
+///
+/// `T(x, ω)[c·128 + i] = T̄(x)[c·128 + i] + s(x) · (max(0, n·ω) g_i(r) − h̄_i(x))`,
+///
+/// `T̄` the PCA part, `g_i(r)` the lobe `max(0, r·ω')^λ` integrated over light texel `i`
+/// (interpolated from a table of directions, [`crate::conventions::lobe_table_corners`];
+/// `nelf_render::reflection` builds it) and `h̄_i(x) = mean_e max(0, n·ω_e) g_i(r_e)` the
+/// same toward the eyes the PCA part averages over, so a reader that ignores the part
+/// renders the view-averaged asset. One scale `s ≥ 0` for the three channels (measured
+/// as good as three, `docs/measurements/2026-11-27-reflection-lobe.md`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Reflection {
+    /// The lobe's exponent λ (`1 ..= 200`).
+    pub exponent: f32,
+    /// The eyes (world, metres) `T̄` averages over, `1 ..= 16`.
+    pub eyes_m: Vec<[f32; 3]>,
+    /// Per voxel, 8-bit: the octahedral normal `(u, v)`
+    /// ([`crate::conventions::octahedral_decode`]) and the scale `s`, rank 3.
+    pub coefficients: Coefficients,
+}
+
+impl Reflection {
+    /// Values per voxel in `VRCO`: normal `u`, normal `v`, scale.
+    pub const VALUES_PER_VOXEL: usize = 3;
+
+    /// Quantizes per-voxel unit normals and scales (`s ≥ 0`) into a reflection part.
+    pub fn new(exponent: f32, eyes_m: Vec<[f32; 3]>, normals: &[[f32; 3]], scales: &[f32]) -> Result<Self> {
+        if normals.len() != scales.len() {
+            return Err(FormatError::InvalidAsset(format!(
+                "reflection part: {} normals for {} scales",
+                normals.len(),
+                scales.len()
+            )));
+        }
+        let values: Vec<f32> = normals
+            .iter()
+            .zip(scales)
+            .flat_map(|(n, &s)| {
+                let (u, v) = crate::conventions::octahedral_encode(*n);
+                [u, v, s.max(0.0)]
+            })
+            .collect();
+        let coefficients = Coefficients::quantize(&values, Self::VALUES_PER_VOXEL, CoefficientEncoding::U8Affine)?;
+        let part = Self {
+            exponent,
+            eyes_m,
+            coefficients,
+        };
+        part.validate(normals.len())?;
+        Ok(part)
+    }
+
+    /// Unit normal and scale of voxel `voxel`.
+    pub fn voxel(&self, voxel: usize) -> ([f32; 3], f32) {
+        let mut v = [0.0f32; Self::VALUES_PER_VOXEL];
+        self.coefficients.voxel_f32(voxel, &mut v);
+        (crate::conventions::octahedral_decode(v[0], v[1]), v[2].max(0.0))
+    }
+
+    /// Checks the exponent, the eyes (finite, `1..=16`), that the values are 8-bit with
+    /// three per voxel, a scale that cannot be negative, and `voxels` voxels.
+    pub fn validate(&self, voxels: usize) -> Result<()> {
+        let bad = |reason: String| FormatError::InvalidView(format!("section VREF: {reason}"));
+        if !(1.0..=MAX_REFLECTION_EXPONENT).contains(&self.exponent) {
+            return Err(bad(format!(
+                "lobe exponent {} is not in 1..={MAX_REFLECTION_EXPONENT}",
+                self.exponent
+            )));
+        }
+        if !(1..=MAX_REFLECTION_EYES).contains(&self.eyes_m.len()) {
+            return Err(bad(format!(
+                "{} eyes, must be 1..={MAX_REFLECTION_EYES}",
+                self.eyes_m.len()
+            )));
+        }
+        if let Some(i) = self.eyes_m.iter().position(|e| e.iter().any(|v| !v.is_finite())) {
+            return Err(FormatError::NonFinite {
+                what: format!("section VREF eye {i}"),
+            });
+        }
+        match &self.coefficients {
+            Coefficients::U8Affine { rank: 3, offset, .. } => {
+                if offset[2] < 0.0 {
+                    return Err(bad(format!("the scale's offset {} is negative", offset[2])));
+                }
+            }
+            other => {
+                return Err(bad(format!(
+                    "values must be 8-bit, three per voxel (found {:?}, {} per voxel)",
+                    other.encoding(),
+                    other.rank()
+                )));
+            }
+        }
+        self.coefficients.validate(voxels, "VREF", "VRCO")
+    }
+}
+
 /// A whole `.nelf` asset in memory.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Asset {
@@ -711,6 +819,9 @@ pub struct Asset {
     pub coefficients: Coefficients,
     /// The view-dependent part (format 1.2), `None` for a view-independent asset.
     pub view: Option<ViewDependence>,
+    /// The reflection-aligned view-dependent part (format 1.3); at most one of `view`
+    /// and `reflection` is present.
+    pub reflection: Option<Reflection>,
     /// Metadata, a JSON object (provenance, bake settings, measured error).
     pub metadata: serde_json::Value,
 }
@@ -727,6 +838,9 @@ pub struct BrickData {
     /// Dequantized view-dependent coefficients (format 1.2), `512 × J·K_v`, voxel-major
     /// (`d_ji` of a voxel at `j·K_v + i`); empty when the file has no view-dependent part.
     pub view_coefficients: Vec<f32>,
+    /// Dequantized reflection values (format 1.3), `512 × 3`, voxel-major (octahedral
+    /// `u`, `v`, scale); empty when the file has no reflection part.
+    pub reflection: Vec<f32>,
 }
 
 impl Asset {
@@ -832,6 +946,14 @@ impl Asset {
         self.coefficients.validate(voxels, "QPRM", "COEF")?;
         if let Some(view) = &self.view {
             view.validate(voxels)?;
+        }
+        if let Some(reflection) = &self.reflection {
+            if self.view.is_some() {
+                return Err(FormatError::InvalidView(
+                    "an asset holds at most one view-dependent part: VDEP or VREF, not both".into(),
+                ));
+            }
+            reflection.validate(voxels)?;
         }
         if !self.metadata.is_object() {
             return Err(FormatError::MetadataNotObject {

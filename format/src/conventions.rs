@@ -545,6 +545,82 @@ pub fn nearest_point_to_axes(cameras: &[PinholeCamera]) -> Option<DVec3> {
     c.is_finite().then_some(c)
 }
 
+/// Octahedral decoding of a unit vector (format 1.3, `VRCO`; Meyer et al. 2010, "On
+/// floating-point normal vectors"): `(u, v) ∈ [−1, 1]²` (values outside are clamped)
+/// maps to `p = (u, v, 1 − |u| − |v|)`, whose `x, y` fold to
+/// `((1 − |v|) sgn u, (1 − |u|) sgn v)` where `p.z < 0` (`sgn 0 = +1`), normalised.
+pub fn octahedral_decode(u: f32, v: f32) -> [f32; 3] {
+    let (u, v) = (u.clamp(-1.0, 1.0), v.clamp(-1.0, 1.0));
+    let z = 1.0 - u.abs() - v.abs();
+    let sign = |a: f32| if a >= 0.0 { 1.0 } else { -1.0 };
+    let (x, y) = if z < 0.0 {
+        ((1.0 - v.abs()) * sign(u), (1.0 - u.abs()) * sign(v))
+    } else {
+        (u, v)
+    };
+    let len = (x * x + y * y + z * z).sqrt();
+    [x / len, y / len, z / len]
+}
+
+/// Octahedral encoding, the inverse of [`octahedral_decode`]: `(u, v) ∈ [−1, 1]²` of a
+/// direction (normalised here; zero or non-finite gives `(0, 0)`, which decodes to +z).
+pub fn octahedral_encode(n: [f32; 3]) -> (f32, f32) {
+    let l1 = n[0].abs() + n[1].abs() + n[2].abs();
+    if !(l1 > 0.0 && l1.is_finite()) {
+        return (0.0, 0.0);
+    }
+    let (x, y, z) = (n[0] / l1, n[1] / l1, n[2] / l1);
+    let sign = |a: f32| if a >= 0.0 { 1.0 } else { -1.0 };
+    if z < 0.0 {
+        ((1.0 - y.abs()) * sign(x), (1.0 - x.abs()) * sign(y))
+    } else {
+        (x, y)
+    }
+}
+
+/// Rows of the reflection lobe's direction table (format 1.3, SPEC.md §6 `VREF`).
+pub const LOBE_TABLE_H: usize = 64;
+/// Columns of the reflection lobe's direction table.
+pub const LOBE_TABLE_W: usize = 128;
+
+/// The four table nodes (row-major index `row·W + col`) and bilinear weights of a
+/// light-frame direction `d` in the reflection lobe's `LOBE_TABLE_H × LOBE_TABLE_W`
+/// lat-long table, whose node `(row, col)` sits at `θ = (row + ½)π/H`,
+/// `φ = (col + ½)2π/W − π` (the texel centres of a map that size): with `(θ, φ)` of `d`
+/// ([`theta_phi`]), `t = θH/π − ½` clamped to `[0, H − 1]`, `s = (φ + π)W/2π − ½`
+/// wrapping in `φ`; `f32` throughout. SPEC.md §6 and `shaders/reflect.wgsl` do the same.
+pub fn lobe_table_corners(d: [f32; 3]) -> [(usize, f32); 4] {
+    let (h, w) = (LOBE_TABLE_H as f32, LOBE_TABLE_W as f32);
+    let len = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
+    let (x, y, z) = if len > 0.0 && len.is_finite() {
+        (d[0] / len, d[1] / len, d[2] / len)
+    } else {
+        (0.0, 1.0, 0.0)
+    };
+    let theta = y.clamp(-1.0, 1.0).acos();
+    let phi = x.atan2(-z);
+    let t = (theta * h / std::f32::consts::PI - 0.5).clamp(0.0, h - 1.0);
+    let s = (phi + std::f32::consts::PI) * w / std::f32::consts::TAU - 0.5;
+    let (t0, s0) = (t.floor(), s.floor());
+    let (ft, fs) = (t - t0, s - s0);
+    let row0 = t0 as usize;
+    let row1 = (row0 + 1).min(LOBE_TABLE_H - 1);
+    let col0 = (s0 as isize).rem_euclid(LOBE_TABLE_W as isize) as usize;
+    let col1 = (col0 + 1) % LOBE_TABLE_W;
+    [
+        (row0 * LOBE_TABLE_W + col0, (1.0 - ft) * (1.0 - fs)),
+        (row0 * LOBE_TABLE_W + col1, (1.0 - ft) * fs),
+        (row1 * LOBE_TABLE_W + col0, ft * (1.0 - fs)),
+        (row1 * LOBE_TABLE_W + col1, ft * fs),
+    ]
+}
+
+/// Light-frame direction of node `index` (`row·W + col`) of the lobe table.
+pub fn lobe_table_direction(index: usize) -> DVec3 {
+    let (row, col) = (index / LOBE_TABLE_W, index % LOBE_TABLE_W);
+    texel_center_direction(row, col, LOBE_TABLE_H, LOBE_TABLE_W)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -721,5 +797,47 @@ mod tests {
         let mut broken = cam;
         broken.fx = f64::NAN;
         assert!(broken.validate().is_err());
+    }
+
+    #[test]
+    fn octahedral_normals_round_trip_and_8_bit_codes_stay_within_a_degree() {
+        for i in 0..500 {
+            let z = 1.0 - 2.0 * (i as f32 + 0.5) / 500.0;
+            let phi = i as f32 * 2.399_963;
+            let r = (1.0 - z * z).sqrt();
+            let n = [r * phi.cos(), r * phi.sin(), z];
+            let (u, v) = octahedral_encode(n);
+            let back = octahedral_decode(u, v);
+            let dot: f32 = n.iter().zip(back).map(|(a, b)| a * b).sum();
+            assert!(dot > 1.0 - 1e-6, "{n:?} -> {back:?}");
+            // Quantized to 255 steps over [−1, 1] as VRCO stores them.
+            let q = |a: f32| ((a + 1.0) * 127.5).round() / 127.5 - 1.0;
+            let coarse = octahedral_decode(q(u), q(v));
+            let dot: f32 = n.iter().zip(coarse).map(|(a, b)| a * b).sum();
+            assert!(dot > 1.0_f32.to_radians().cos(), "{n:?} -> {coarse:?}");
+        }
+    }
+
+    #[test]
+    fn lobe_table_corners_hit_nodes_and_wrap_in_azimuth() {
+        for index in [0, 77, LOBE_TABLE_W * 20 + 5, LOBE_TABLE_H * LOBE_TABLE_W - 1] {
+            let d = lobe_table_direction(index).as_vec3().to_array();
+            let corners = lobe_table_corners(d);
+            let (best, w) = corners
+                .iter()
+                .copied()
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap();
+            assert_eq!(best, index);
+            assert!(w > 0.999, "{corners:?}");
+        }
+        // Just past φ = π the right neighbour is column 0 of the same row.
+        let d = direction(0.5 * PI, PI - 0.001).as_vec3().to_array();
+        let corners = lobe_table_corners(d);
+        let row = LOBE_TABLE_H / 2 - 1;
+        assert!(corners.iter().any(|&(i, _)| i == row * LOBE_TABLE_W + LOBE_TABLE_W - 1));
+        assert!(corners.iter().any(|&(i, w)| i == (row + 1) * LOBE_TABLE_W && w >= 0.0));
+        let total: f32 = corners.iter().map(|c| c.1).sum();
+        assert!((total - 1.0).abs() < 1e-6);
     }
 }

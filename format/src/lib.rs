@@ -18,7 +18,7 @@ pub mod synthetic;
 pub mod write;
 
 pub use asset::{
-    Asset, BrickData, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, ViewDependence,
+    Asset, BrickData, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, Reflection, ViewDependence,
     encode_density, has_negative_density,
 };
 pub use error::FormatError;

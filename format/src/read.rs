@@ -23,17 +23,17 @@ use std::path::{Path, PathBuf};
 use half::f16;
 
 use crate::asset::{
-    Asset, BrickData, CoefficientEncoding, Coefficients, PcaModel, ViewDependence, json_type_name,
-    validate_bricks, validate_density, validate_quant_params,
+    Asset, BrickData, CoefficientEncoding, Coefficients, MAX_REFLECTION_EYES, PcaModel, Reflection,
+    ViewDependence, json_type_name, validate_bricks, validate_density, validate_quant_params,
 };
 use crate::conventions::{LT_DIM, VIEW_HARMONICS};
 use crate::error::{FormatError, Result};
 use crate::spec::{
     BRICK_VOXELS, CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header, KIND_BRICKS,
-    KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_VIEW,
-    KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, MAX_VIEW_PARAMS_BYTES,
+    KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_REFLECTION,
+    KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, REFLECTION_BYTES_PER_BRICK, MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, MAX_VIEW_PARAMS_BYTES,
     MAX_ZSTD_EXPANSION, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind, VIEW_HEADER_SIZE,
-    ViewHeader, checksum, header_checksum, is_known_kind, kind_name, u64_at, unshuffle,
+    ViewHeader, checksum, header_checksum, reflection_params_bytes, is_known_kind, kind_name, u64_at, unshuffle,
 };
 
 /// Reads and fully validates the `.nelf` file at `path`.
@@ -64,15 +64,19 @@ enum Chunked {
     Coefficients = 1,
     /// `VCOF`: the view-dependent coefficients (format 1.2, optional).
     View = 2,
+    /// `VRCO`: the reflection part's values (format 1.3, optional).
+    Reflection = 3,
 }
 
 impl Chunked {
-    const ALL: [Self; 3] = [Self::Density, Self::Coefficients, Self::View];
+    const ALL: [Self; 4] = [Self::Density, Self::Coefficients, Self::View, Self::Reflection];
 }
 
 /// A chunked section's entry and its parsed chunk table.
 #[derive(Debug, Clone)]
 struct ChunkedSection {
+    /// What it holds.
+    what: Chunked,
     entry: SectionEntry,
     /// The chunk table's bytes (the start of the section), kept for the section checksum.
     table_bytes: Vec<u8>,
@@ -104,8 +108,11 @@ pub struct AssetReader<R> {
     coefficients: Coefficients,
     /// The view-dependent part (`VDEP`) without voxels, if the file has one.
     view: Option<ViewDependence>,
+    /// The reflection part (`VREF`) without voxels, if the file has one.
+    reflection: Option<Reflection>,
     metadata: serde_json::Value,
-    /// `DENS`, `COEF`, then `VCOF` when there is a view-dependent part (see [`Chunked`]).
+    /// `DENS`, `COEF`, then `VCOF` or `VRCO` when there is a view-dependent part (see
+    /// [`Chunked`]).
     chunked: Vec<ChunkedSection>,
     cache: Option<CachedChunk>,
 }
@@ -233,6 +240,10 @@ impl<R: Read + Seek> AssetReader<R> {
             }
             _ => None,
         };
+        let reflection = match (find(KIND_REFLECTION), find(KIND_REFLECTION_VALUES)) {
+            (Some(params), Some(_)) => Some(reflection_params(&reader.whole_section(&params)?)?),
+            _ => None,
+        };
 
         let metadata = match find(KIND_METADATA) {
             Some(entry) => {
@@ -255,11 +266,15 @@ impl<R: Read + Seek> AssetReader<R> {
                 Chunked::Coefficients => (KIND_COEFFICIENTS, header.coefficient_bytes_per_brick()),
                 Chunked::View => match &view {
                     Some(v) => (KIND_VIEW_COEFFICIENTS, view_bytes_per_brick(v)),
-                    None => break,
+                    None => continue,
+                },
+                Chunked::Reflection => match &reflection {
+                    Some(_) => (KIND_REFLECTION_VALUES, REFLECTION_BYTES_PER_BRICK),
+                    None => continue,
                 },
             };
             let entry = find(kind).ok_or_else(|| missing(kind))?;
-            chunked.push(reader.chunk_table(&header, entry, bytes_per_brick)?);
+            chunked.push(reader.chunk_table(&header, which, entry, bytes_per_brick)?);
         }
 
         Ok(Self {
@@ -271,6 +286,7 @@ impl<R: Read + Seek> AssetReader<R> {
             pca,
             coefficients,
             view,
+            reflection,
             metadata,
             chunked,
             cache: None,
@@ -311,8 +327,15 @@ impl<R: Read + Seek> AssetReader<R> {
         self.view.as_ref()
     }
 
+    /// The reflection part's parameters (format 1.3, section `VREF`): exponent, eyes and
+    /// the values' dequantisation, or `None` for a file without one; its `coefficients`
+    /// hold no voxel ([`Self::read_brick`] gives each brick's values).
+    pub fn reflection_params(&self) -> Option<&Reflection> {
+        self.reflection.as_ref()
+    }
+
     /// Reads brick `index`: its coordinates, densities (1/m), dequantized coefficients
-    /// and view-dependent coefficients. Decodes (and checksums) only the chunk holding
+    /// and view-dependent coefficients or reflection values. Decodes (and checksums) only the chunk holding
     /// it in each chunked section; the last chunk decoded is kept, so reading bricks in
     /// order decodes each chunk once.
     pub fn read_brick(&mut self, index: usize) -> Result<BrickData> {
@@ -333,11 +356,13 @@ impl<R: Read + Seek> AssetReader<R> {
                     .collect::<Result<_>>()?,
             },
         };
+        let slots: Vec<Chunked> = self.chunked.iter().map(|c| c.what).collect();
         let cached = self.cache.insert(cached);
         let within = index - chunk * chunk_bricks;
         let brick = |which: Chunked| {
-            let n = self.chunked[which as usize].bytes_per_brick as usize;
-            &cached.raw[which as usize][within * n..(within + 1) * n]
+            let slot = slots.iter().position(|&w| w == which).unwrap_or(0);
+            let n = self.chunked[slot].bytes_per_brick as usize;
+            &cached.raw[slot][within * n..(within + 1) * n]
         };
         let first_voxel = index * BRICK_VOXELS;
         let density: Vec<f16> = f16s(brick(Chunked::Density));
@@ -351,12 +376,24 @@ impl<R: Read + Seek> AssetReader<R> {
                 .dequantize_stored(brick(Chunked::View), first_voxel, "VCOF")?,
             None => Vec::new(),
         };
+        let reflection = match &self.reflection {
+            Some(part) => part
+                .coefficients
+                .dequantize_stored(brick(Chunked::Reflection), first_voxel, "VRCO")?,
+            None => Vec::new(),
+        };
         Ok(BrickData {
             coord: self.bricks[index],
             density: density.iter().map(|d| d.to_f32()).collect(),
             coefficients,
             view_coefficients,
+            reflection,
         })
+    }
+
+    /// Index in `self.chunked` of the section holding `which`, if the file has it.
+    fn slot(&self, which: Chunked) -> Option<usize> {
+        self.chunked.iter().position(|c| c.what == which)
     }
 
     /// Checks every byte: all section checksums (unknown optional sections too), every
@@ -377,9 +414,15 @@ impl<R: Read + Seek> AssetReader<R> {
             coefficients.extend_from_stored(raw);
         })?;
         let mut view = self.view.clone();
-        if let Some(view) = &mut view {
-            self.visit_chunks(Chunked::View as usize, &mut |raw| {
+        if let (Some(view), Some(slot)) = (&mut view, self.slot(Chunked::View)) {
+            self.visit_chunks(slot, &mut |raw| {
                 view.coefficients.extend_from_stored(raw);
+            })?;
+        }
+        let mut reflection = self.reflection.clone();
+        if let (Some(part), Some(slot)) = (&mut reflection, self.slot(Chunked::Reflection)) {
+            self.visit_chunks(slot, &mut |raw| {
+                part.coefficients.extend_from_stored(raw);
             })?;
         }
         self.verify_other_sections()?;
@@ -391,6 +434,7 @@ impl<R: Read + Seek> AssetReader<R> {
             pca: self.pca,
             coefficients,
             view,
+            reflection,
             metadata: self.metadata,
         };
         asset.validate()?;
@@ -447,7 +491,7 @@ impl<R: Read + Seek> AssetReader<R> {
             hasher.update(&stored);
             drop(stored);
             let first_voxel = i * self.header.chunk_bricks as usize * BRICK_VOXELS;
-            match Chunked::ALL[which] {
+            match self.chunked[which].what {
                 Chunked::Density => {
                     validate_density(&f16s(&raw), first_voxel, self.header.signed_density())?;
                 }
@@ -455,6 +499,11 @@ impl<R: Read + Seek> AssetReader<R> {
                 Chunked::View => {
                     if let Some(view) = &self.view {
                         view.coefficients.check_stored(&raw, first_voxel, "VCOF")?;
+                    }
+                }
+                Chunked::Reflection => {
+                    if let Some(part) = &self.reflection {
+                        part.coefficients.check_stored(&raw, first_voxel, "VRCO")?;
                     }
                 }
             }
@@ -589,6 +638,7 @@ impl<R: Read + Seek> PartialReader<'_, R> {
     fn chunk_table(
         &mut self,
         header: &Header,
+        what: Chunked,
         entry: SectionEntry,
         bytes_per_brick: u64,
     ) -> Result<ChunkedSection> {
@@ -638,6 +688,7 @@ impl<R: Read + Seek> PartialReader<'_, R> {
             )));
         }
         Ok(ChunkedSection {
+            what,
             entry,
             table_bytes,
             chunks,
@@ -739,6 +790,41 @@ fn view_params(bytes: &[u8]) -> Result<(ViewHeader, ViewDependence)> {
     Ok((header, view))
 }
 
+/// Decodes `VREF` (format 1.3): eye count, exponent, eyes and the 8-bit parameters of
+/// `VRCO`, all checked; the returned part holds no voxel.
+fn reflection_params(bytes: &[u8]) -> Result<Reflection> {
+    let bad = |reason: String| FormatError::InvalidView(format!("section VREF: {reason}"));
+    if bytes.len() < 8 {
+        return Err(bad(format!("{} bytes, fewer than its 8-byte start", bytes.len())));
+    }
+    let eyes = u32::from_le_bytes([bytes[0], bytes[1], bytes[2], bytes[3]]) as usize;
+    if !(1..=MAX_REFLECTION_EYES).contains(&eyes) || reflection_params_bytes(eyes) != bytes.len() as u64 {
+        return Err(bad(format!(
+            "{eyes} eyes do not fit its {} bytes (32 + 12 per eye, 1..={MAX_REFLECTION_EYES} eyes)",
+            bytes.len()
+        )));
+    }
+    let floats = f32s(&bytes[4..]);
+    let eyes_m = floats[1..1 + 3 * eyes]
+        .chunks_exact(3)
+        .map(|e| [e[0], e[1], e[2]])
+        .collect();
+    let (scale, offset) = pairs(&floats[1 + 3 * eyes..]);
+    validate_quant_params(&scale, &offset, "VREF")?;
+    let part = Reflection {
+        exponent: floats[0],
+        eyes_m,
+        coefficients: Coefficients::U8Affine {
+            rank: Reflection::VALUES_PER_VOXEL,
+            scale,
+            offset,
+            codes: Vec::new(),
+        },
+    };
+    part.validate(0)?;
+    Ok(part)
+}
+
 /// Checks the section table: bounds, alignment, overlaps, duplicates, unknown
 /// required kinds, codecs and shuffles, and declared lengths against the header.
 fn validate_table(header: &Header, sections: &[SectionEntry]) -> Result<()> {
@@ -792,10 +878,18 @@ fn validate_table(header: &Header, sections: &[SectionEntry]) -> Result<()> {
             });
         }
     }
-    // The view-dependent part is optional, but whole: its parameters and coefficients.
+    // The view-dependent part is optional, but whole: its parameters and coefficients;
+    // and a file holds at most one (harmonic or reflection).
+    if has(KIND_VIEW) && has(KIND_REFLECTION) {
+        return Err(FormatError::InvalidView(
+            "sections VDEP and VREF are both present: a file holds at most one view-dependent part".into(),
+        ));
+    }
     for (present, absent) in [
         (KIND_VIEW, KIND_VIEW_COEFFICIENTS),
         (KIND_VIEW_COEFFICIENTS, KIND_VIEW),
+        (KIND_REFLECTION, KIND_REFLECTION_VALUES),
+        (KIND_REFLECTION_VALUES, KIND_REFLECTION),
     ] {
         if has(present) && !has(absent) {
             return Err(FormatError::InvalidView(format!(
@@ -812,7 +906,13 @@ fn validate_table(header: &Header, sections: &[SectionEntry]) -> Result<()> {
 /// length, and the rules of its codec. `VCOF`'s length, shuffle and chunk size depend on
 /// `VDEP`, so they are checked once that is read ([`validate_chunked_entry`]).
 fn validate_known_entry(header: &Header, s: &SectionEntry) -> Result<()> {
-    let chunked = [KIND_DENSITY, KIND_COEFFICIENTS, KIND_VIEW_COEFFICIENTS].contains(&s.kind);
+    let chunked = [
+        KIND_DENSITY,
+        KIND_COEFFICIENTS,
+        KIND_VIEW_COEFFICIENTS,
+        KIND_REFLECTION_VALUES,
+    ]
+    .contains(&s.kind);
     match (s.codec, chunked) {
         (SectionCodec::Raw, false) | (SectionCodec::ChunkedZstd, true) => {}
         (SectionCodec::Zstd, false) if s.kind != KIND_BRICKS => {}
@@ -829,6 +929,17 @@ fn validate_known_entry(header: &Header, s: &SectionEntry) -> Result<()> {
         KIND_DENSITY => return validate_chunked_entry(header, s, DENSITY_BYTES_PER_BRICK),
         KIND_COEFFICIENTS => return validate_chunked_entry(header, s, header.coefficient_bytes_per_brick()),
         KIND_VIEW_COEFFICIENTS => return Ok(()),
+        KIND_REFLECTION_VALUES => return validate_chunked_entry(header, s, REFLECTION_BYTES_PER_BRICK),
+        KIND_REFLECTION => {
+            let fits = (1..=MAX_REFLECTION_EYES).any(|e| reflection_params_bytes(e) == s.raw_length);
+            if !fits {
+                return Err(FormatError::InvalidView(format!(
+                    "section VREF declares {} decoded bytes, which is not 32 + 12 × (1..={MAX_REFLECTION_EYES} eyes)",
+                    s.raw_length
+                )));
+            }
+            s.raw_length
+        }
         KIND_BRICKS => 6 * bricks,
         KIND_PCA => 4 * LT_DIM as u64 * (rank + 1),
         KIND_QUANT_PARAMS => 8 * rank,

@@ -15,10 +15,13 @@ use crate::error::{FormatError, Result};
 pub const MAGIC: [u8; 8] = [0x89, b'N', b'E', b'L', b'F', 0x0D, 0x0A, 0x1A];
 /// Major version this crate reads and writes; a reader rejects any other.
 pub const VERSION_MAJOR: u16 = 1;
-/// Newest minor version this crate writes: 2 for an asset with a view-dependent part
-/// (`VDEP`, `VCOF`), [`VERSION_MINOR_WITHOUT_VIEW`] for one without. Readers accept any
-/// minor of their major.
-pub const VERSION_MINOR: u16 = 2;
+/// Newest minor version this crate writes: 3 for an asset with a reflection part (`VREF`,
+/// `VRCO`), [`VERSION_MINOR_VIEW`] for one with a harmonic view part, and
+/// [`VERSION_MINOR_WITHOUT_VIEW`] for one without. Readers accept any minor of their major.
+pub const VERSION_MINOR: u16 = 3;
+/// Minor version this crate writes for an asset with a harmonic view-dependent part
+/// (`VDEP`, `VCOF`): such a file is exactly what a 1.2 writer wrote.
+pub const VERSION_MINOR_VIEW: u16 = 2;
 /// Minor version this crate writes for an asset without a view-dependent part: such a
 /// file is exactly what a 1.1 writer wrote.
 pub const VERSION_MINOR_WITHOUT_VIEW: u16 = 1;
@@ -77,8 +80,14 @@ pub const KIND_VIEW: SectionKind = *b"VDEP";
 /// The view-dependent part's per-voxel coefficients (1.2, optional), `J·K_v` per voxel,
 /// `u8` or `f16`, chunked like [`KIND_COEFFICIENTS`].
 pub const KIND_VIEW_COEFFICIENTS: SectionKind = *b"VCOF";
+/// The reflection part's parameters (1.3, optional): lobe exponent, eyes and the 8-bit
+/// dequantisation of `VRCO` (SPEC.md §6).
+pub const KIND_REFLECTION: SectionKind = *b"VREF";
+/// The reflection part's per-voxel values (1.3, optional): octahedral normal and scale,
+/// `u8 × 3` per voxel, chunked like [`KIND_COEFFICIENTS`].
+pub const KIND_REFLECTION_VALUES: SectionKind = *b"VRCO";
 /// Every kind this reader knows, in the order the writer lays them out.
-pub const KNOWN_KINDS: [SectionKind; 8] = [
+pub const KNOWN_KINDS: [SectionKind; 10] = [
     KIND_BRICKS,
     KIND_DENSITY,
     KIND_PCA,
@@ -86,8 +95,17 @@ pub const KNOWN_KINDS: [SectionKind; 8] = [
     KIND_COEFFICIENTS,
     KIND_VIEW,
     KIND_VIEW_COEFFICIENTS,
+    KIND_REFLECTION,
+    KIND_REFLECTION_VALUES,
     KIND_METADATA,
 ];
+/// Decoded length of `VREF` with `eyes` eyes: `u32` eye count, `f32` exponent, the eyes
+/// as `f32` triples, then three `(scale, offset)` `f32` pairs.
+pub const fn reflection_params_bytes(eyes: usize) -> u64 {
+    8 + 12 * eyes as u64 + 24
+}
+/// Decoded bytes of one brick of `VRCO` (512 voxels × 3 bytes).
+pub const REFLECTION_BYTES_PER_BRICK: u64 = 3 * BRICK_VOXELS as u64;
 /// Size of the [`ViewHeader`] at the start of `VDEP`.
 pub const VIEW_HEADER_SIZE: usize = 16;
 /// Largest decoded `VDEP`: its header, 8 lobes, 384 basis vectors and 384 pairs of 8-bit

@@ -1,20 +1,22 @@
 //! `.nelf` writer: packs an [`Asset`] into the v1 layout of `SPEC.md` (header,
 //! section table, 8-byte aligned sections, chunked zstd for density and
 //! coefficients; version 1.2 with the optional view-dependent sections `VDEP` and
-//! `VCOF` when the asset has a view-dependent part, 1.1 otherwise) and writes it atomically (temporary file in the same folder,
+//! `VCOF` when the asset has a harmonic view-dependent part, 1.3 with `VREF` and `VRCO`
+//! when it has a reflection part, 1.1 otherwise) and writes it atomically (temporary file in the same folder,
 //! then rename). Output depends only on the asset and the options, so writing
 //! the same asset twice gives byte-identical files.
 
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
-use crate::asset::{Asset, CoefficientEncoding, Coefficients, has_negative_density};
+use crate::asset::{Asset, CoefficientEncoding, Coefficients, Reflection, has_negative_density};
 use crate::error::{FormatError, Result};
 use crate::spec::{
     BRICK_VOXELS, CHUNK_ENTRY_SIZE, FLAG_SIGNED_DENSITY, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header,
-    KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_VIEW,
-    KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, SECTION_ENTRY_SIZE, SectionCodec,
-    SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_WITHOUT_VIEW, ViewHeader,
+    KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_REFLECTION,
+    KIND_REFLECTION_VALUES, KIND_VIEW,
+    KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, REFLECTION_BYTES_PER_BRICK, SECTION_ENTRY_SIZE, SectionCodec,
+    SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_VIEW, VERSION_MINOR_WITHOUT_VIEW, ViewHeader,
     checksum, header_checksum, kind_name, shuffle,
 };
 
@@ -93,6 +95,7 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
     let view_brick_bytes = view_header.map_or(0, |h| h.bytes_per_brick());
     let largest_brick = coef_brick_bytes
         .max(view_brick_bytes)
+        .max(REFLECTION_BYTES_PER_BRICK)
         .max(2 * BRICK_VOXELS as u64);
     let max_chunk_bricks = (MAX_CHUNK_RAW_BYTES / largest_brick).max(1);
     let chunk_bricks = u64::from(options.chunk_bricks).clamp(1, max_chunk_bricks) as u32;
@@ -168,6 +171,26 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
         payloads.push(vcof);
     }
 
+    // The reflection part (1.3): optional sections as well.
+    if let Some(reflection) = &asset.reflection {
+        let mut params = (reflection.eyes_m.len() as u32).to_le_bytes().to_vec();
+        params.extend(reflection.exponent.to_le_bytes());
+        params.extend(reflection.eyes_m.iter().flatten().flat_map(|v| v.to_le_bytes()));
+        params.extend(quant_param_bytes(&reflection.coefficients));
+        let mut vref = zstd.whole(KIND_REFLECTION, &params, 0)?;
+        vref.entry.required = false;
+        payloads.push(vref);
+        let mut vrco = zstd.chunked(
+            KIND_REFLECTION_VALUES,
+            &reflection.coefficients.value_bytes(),
+            REFLECTION_BYTES_PER_BRICK as usize,
+            chunk_bricks as usize,
+            shuffle_width(Reflection::VALUES_PER_VOXEL as u32),
+        )?;
+        vrco.entry.required = false;
+        payloads.push(vrco);
+    }
+
     let metadata = serde_json::to_vec(&asset.metadata)?;
     if metadata.len() as u64 > MAX_METADATA_BYTES {
         return Err(FormatError::CountTooLarge {
@@ -191,8 +214,10 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
     let file_size = offset;
     let header = Header {
         version_major: VERSION_MAJOR,
-        version_minor: if asset.view.is_some() {
+        version_minor: if asset.reflection.is_some() {
             VERSION_MINOR
+        } else if asset.view.is_some() {
+            VERSION_MINOR_VIEW
         } else {
             VERSION_MINOR_WITHOUT_VIEW
         },

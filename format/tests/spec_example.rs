@@ -125,6 +125,7 @@ fn example_asset() -> Asset {
             codes,
         },
         view: None,
+        reflection: None,
         metadata: serde_json::json!({"example": "SPEC.md section 17"}),
     }
 }

@@ -56,6 +56,7 @@ use rayon::prelude::*;
 use crate::error::RenderError;
 use crate::grid::{BrickGrid, Lookup};
 use crate::light::{project_light, voxel_radiance};
+use crate::reflection::{FilteredEnvironment, ReflectionLobe, reflection_seen_from};
 use crate::view::{project_view_light, radiance_seen_from, voxel_lobe_radiance};
 
 /// Largest [`MarchSettings::pixel_grid`] (256 rays per pixel).
@@ -559,10 +560,28 @@ pub fn asset_density(asset: &Asset) -> Vec<f32> {
     asset.density.iter().map(|d| d.to_f32()).collect()
 }
 
+/// The lighting `env` (turned by `world_from_env`) filtered by the lobe of an asset's
+/// reflection part ([`crate::reflection`]), once per lighting change.
+pub fn filtered_environment(
+    asset: &Asset,
+    reflection: &nelf_format::Reflection,
+    env: &LatLong,
+    world_from_env: glam::DMat3,
+) -> Result<FilteredEnvironment, RenderError> {
+    if !nelf_format::conventions::is_rotation(world_from_env, 1e-5) {
+        return Err(RenderError::NotARotation {
+            what: "world_from_env",
+            matrix: world_from_env.to_cols_array(),
+        });
+    }
+    let light = nelf_format::conventions::project_envmap(env, world_from_env.transpose() * asset.world_from_light)?;
+    Ok(ReflectionLobe::new(reflection.exponent, asset.world_from_light).filter(&light))
+}
+
 /// Everything for one asset, camera and lighting: checks the asset, projects `env`
 /// (turned by `world_from_env`) onto its basis, computes per-voxel radiance with the
 /// first `rank` components (default all), adds a view-dependent asset's lobes toward the
-/// camera centre ([`crate::view`]) and ray-marches.
+/// camera centre ([`crate::view`], [`crate::reflection`]) and ray-marches.
 pub fn render_asset(
     asset: &Asset,
     camera: &PinholeCamera,
@@ -579,6 +598,10 @@ pub fn render_asset(
         let view_light = project_view_light(view, asset.world_from_light, env, world_from_env)?;
         let lobes = voxel_lobe_radiance(view, &view_light, radiance.len());
         radiance = radiance_seen_from(asset, &radiance, &lobes, camera.centre());
+    }
+    if let Some(reflection) = &asset.reflection {
+        let filtered = filtered_environment(asset, reflection, env, world_from_env)?;
+        radiance = reflection_seen_from(asset, reflection, &radiance, &filtered, camera.centre());
     }
     render_volume(&grid, &asset_density(asset), &radiance, camera, settings)
 }
