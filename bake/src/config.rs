@@ -227,11 +227,13 @@ pub struct BakeConfig {
     #[arg(long, default_value_t = 0.1)]
     pub quantization_share: f64,
     /// View-dependent light transport (sheen, highlights): `auto` fits the candidates
-    /// (3 learned lobes at view ranks 4, 8, 16; sh1 and sh2 at 8) and keeps the best
-    /// (the smallest within 0.1 dB of it) only when it gains more than
-    /// --view-min-gain-db at the judging views (the capture's held-aside targets, else
-    /// its own views); `off`; `sh1`/`sh2` (spherical harmonics of the outgoing direction
-    /// up to degree 1 / 2); or N (1..=9) lobes learned per asset.
+    /// (a reflection lobe at exponents 10, 20, 40; 3 learned lobes at view ranks 4, 8,
+    /// 16; sh1 and sh2 at 8) and keeps the best (the smallest within 0.1 dB of it) only
+    /// when it gains more than --view-min-gain-db at the judging views (the capture's
+    /// held-aside targets, else its own views); `off`; `reflect` (one glossy lobe about
+    /// each voxel's mirror direction, format 1.3, the exponent chosen at the judging
+    /// views); `sh1`/`sh2` (spherical harmonics of the outgoing direction up to degree
+    /// 1 / 2); or N (1..=9) lobes learned per asset.
     #[arg(long, default_value_t = ViewChoice::Auto)]
     #[serde(default)]
     pub view_dependence: ViewChoice,

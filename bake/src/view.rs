@@ -369,7 +369,13 @@ pub fn fit_reflection(
             }
         }
     }
-    let scales: [f64; 3] = std::array::from_fn(|c| if den[c] > 0.0 { (num[c] / den[c]).max(0.0) } else { 0.0 });
+    let scales: [f64; 3] = std::array::from_fn(|c| {
+        if den[c] > 0.0 {
+            (num[c] / den[c]).max(0.0)
+        } else {
+            0.0
+        }
+    });
     ReflectionFit {
         scales: scales.map(|s| s as f32),
         explained: (0..3).map(|c| scales[c] * num[c]).sum(),
@@ -397,7 +403,11 @@ fn fit_summed_scale(
 ) -> (f32, f64) {
     let mean = lobe.mean_transport(x, n, eyes);
     let (mut num, mut den) = (0.0f64, 0.0f64);
-    for ((d, w), r) in directions.iter().zip(weights).zip(summed.chunks_exact(ENV_TEXELS)) {
+    for ((d, w), r) in directions
+        .iter()
+        .zip(weights)
+        .zip(summed.chunks_exact(ENV_TEXELS))
+    {
         if *w <= 0.0 {
             continue;
         }
@@ -434,12 +444,26 @@ fn fit_reflection_voxel(
     }
     let middle = &lobes[lobes.len() / 2];
     let mut best = (density_normal, f64::NEG_INFINITY);
-    for n in normal_candidates(density_normal, REFLECT_NORMAL_SEARCH_DEG) {
-        let (_, explained) = fit_summed_scale(middle, x, n, eyes, directions, weights, summed);
-        if explained > best.1 {
-            best = (n, explained);
+    // Rings at 6° and 12° around the density's normal, then at 1.5° and 3° around the
+    // best of those (measured on a sphere whose normal is known: 0.9° median error
+    // against 2.8° with the first search alone).
+    let mut try_normals = |candidates: Vec<Vec3>, best: &mut (Vec3, f64)| {
+        for n in candidates {
+            let (_, explained) = fit_summed_scale(middle, x, n, eyes, directions, weights, summed);
+            if explained > best.1 {
+                *best = (n, explained);
+            }
         }
-    }
+    };
+    try_normals(
+        normal_candidates(density_normal, REFLECT_NORMAL_SEARCH_DEG),
+        &mut best,
+    );
+    let coarse = best.0;
+    try_normals(
+        normal_candidates(coarse, 0.25 * REFLECT_NORMAL_SEARCH_DEG)[1..].to_vec(),
+        &mut best,
+    );
     let n = best.0;
     let scales = lobes
         .iter()
@@ -636,7 +660,10 @@ pub fn fit_view(
                 let fitted = reflect.map(|t| {
                     let summed: Vec<f32> = rv
                         .chunks_exact(LT_DIM)
-                        .flat_map(|r| (0..ENV_TEXELS).map(move |i| (r[i] + r[ENV_TEXELS + i] + r[2 * ENV_TEXELS + i]) as f32))
+                        .flat_map(|r| {
+                            (0..ENV_TEXELS)
+                                .map(move |i| (r[i] + r[ENV_TEXELS + i] + r[2 * ENV_TEXELS + i]) as f32)
+                        })
                         .collect();
                     fit_reflection_voxel(
                         &reflect_lobes,
