@@ -1,4 +1,4 @@
-/* Prints a .nelf file's size and the radiance of one voxel under white light.
+/* Prints a .nelf file's size, the radiance of one voxel under white light and its reflection part.
  * cc -std=c99 -O2 -I include include/example.c -o nelf_example -lzstd -lxxhash -lm */
 #define NELF_IMPLEMENTATION
 #include "nelf.h"
@@ -19,6 +19,8 @@ int main(int argc, char **argv) {
     const nelf_header *h = nelf_get_header(reader);
     printf("%u bricks, rank %u, %.1f mm voxels\n", (unsigned)h->brick_count, (unsigned)h->pca_rank,
            1000.0 * h->voxel_size_m);
+    const nelf_reflection *part = nelf_get_reflection(reader); /* format 1.3, NULL without one */
+    if (part) printf("reflection part: lobe exponent %g, %u eyes\n", part->exponent, (unsigned)part->eye_count);
     for (int t = 0; t < NELF_ENV_TEXELS * 3; t++) white[t] = 1.0f;
     nelf_project_light(reader, white, &light);          /* once per lighting change */
     if (h->brick_count > 0 && (rc = nelf_read_brick(reader, 0, &brick)) == NELF_OK) {
@@ -26,6 +28,10 @@ int main(int argc, char **argv) {
         nelf_relight(&light, c, h->pca_rank, rgb);
         printf("brick (%u, %u, %u) voxel 100: density %g 1/m, radiance %g %g %g\n", brick.coord[0], brick.coord[1],
                brick.coord[2], brick.density[100], rgb[0], rgb[1], rgb[2]);
+        if (brick.reflection) { /* its normal and the scale of its glossy lobe */
+            float n[3], s = nelf_reflection_voxel(brick.reflection + 100 * NELF_REFLECTION_VALUES, n);
+            printf("voxel 100 reflects: normal %.3f %.3f %.3f, scale %g\n", n[0], n[1], n[2], s);
+        }
     }
     if (rc != NELF_OK) fprintf(stderr, "%s\n", nelf_error_detail(reader));
     nelf_destroy(reader);

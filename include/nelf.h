@@ -1,7 +1,8 @@
 /*
  * nelf.h: single-header C99 reader for `.nelf` relightable light-transport files
  * (format version 1.x, see format/SPEC.md in the nelf repository), including the
- * optional view-dependent part of version 1.2 (sections VDEP and VCOF).
+ * optional view-dependent parts of version 1.2 (sections VDEP and VCOF: harmonic lobes)
+ * and 1.3 (sections VREF and VRCO: a glossy lobe about the mirror direction).
  *
  * Use:   in exactly one .c file,
  *            #define NELF_IMPLEMENTATION
@@ -13,15 +14,17 @@
  * distinct `nelf_result` code with a message naming where it is. Every allocation is
  * bounded before it is made: by the actual file length (brick list, chunk tables,
  * stored bytes of a section read from a FILE), or by the format's limits (PCA model
- * <= 591 360 bytes, QPRM <= 3 KiB, VDEP <= 593 236 bytes, metadata <= 1 MiB, one decoded
- * chunk <= 4 MiB and <= 32768 x its stored size).
+ * <= 591 360 bytes, QPRM <= 3 KiB, VDEP <= 593 236 bytes, VREF <= 224 bytes, metadata
+ * <= 1 MiB, one decoded chunk <= 4 MiB and <= 32768 x its stored size).
  *
  * Numbers: reconstruction, relighting and shading follow the reference's arithmetic
  * operation by operation (float sums in ascending index order starting from -0.0f,
  * the light projection in double, the direction's length with sqrtf), so results are
  * bit-identical to the Rust reader when the compiler does not contract a*b+c into fused
  * multiply-adds: GCC in -std=c99 mode does not; otherwise pass -ffp-contract=off.
- * FLT_EVAL_METHOD must be 0 (any SSE2 or AArch64 target).
+ * FLT_EVAL_METHOD must be 0 (any SSE2 or AArch64 target). nelf_lobe_table_corners calls
+ * acosf and atan2f, which Rust's f32::acos and f32::atan2 take from the platform's C math
+ * library too: its corners are bit-identical where both use the same one.
  *
  * A reader is not thread-safe (it caches one decoded chunk); use one per thread.
  *
@@ -63,6 +66,11 @@ extern "C" {
 #define NELF_ENCODING_F16 2
 #define NELF_FLAG_SIGNED_DENSITY 1u  /* header flag bit 0: DENS may hold negative values */
 #define NELF_VIEW_HARMONICS 9        /* harmonics a view lobe weighs: degrees 0, 1 and 2 (1.2) */
+#define NELF_REFLECTION_VALUES 3     /* VRCO values per voxel: octahedral normal u, v and scale s (1.3) */
+#define NELF_MAX_REFLECTION_EYES 16  /* eyes a reflection part averages over: 1..16 (1.3) */
+#define NELF_MAX_REFLECTION_EXPONENT 200.0f /* the lobe exponent lies in 1..200 (1.3) */
+#define NELF_LOBE_TABLE_HEIGHT 64    /* rows of the reflection lobe's direction table (1.3) */
+#define NELF_LOBE_TABLE_WIDTH 128    /* columns of the reflection lobe's direction table (1.3) */
 #define NELF_DETAIL_SIZE 512
 
 /*
@@ -121,8 +129,8 @@ extern "C" {
     X(NELF_ERR_NONFINITE_COEFFICIENT, "non-finite f16 coefficient")                          \
     X(NELF_ERR_NONZERO_PADDING, "non-zero padding byte between sections")                    \
     X(NELF_ERR_BRICK_OUT_OF_RANGE, "brick index out of range")                               \
-    X(NELF_ERR_BAD_VIEW, "malformed view-dependent part (VDEP and VCOF)")                    \
-    X(NELF_ERR_NONFINITE_VIEW, "non-finite value in the view lobes, basis or parameters")
+    X(NELF_ERR_BAD_VIEW, "malformed view-dependent part (VDEP and VCOF, or VREF and VRCO)")  \
+    X(NELF_ERR_NONFINITE_VIEW, "non-finite value in the view part (lobes, basis, eyes, parameters)")
 
 #define NELF__ENUM_ENTRY(name, text) name,
 typedef enum nelf_result { NELF__RESULTS(NELF__ENUM_ENTRY) NELF_RESULT_COUNT } nelf_result;
@@ -176,6 +184,11 @@ typedef struct nelf_brick {
      * voxel-major, d_ji of a voxel at j * K_v + i; and as stored (u8 or f16). */
     const float *view_coefficients;
     const unsigned char *stored_view_coefficients;
+    /* The reflection part (1.3), NULL without one: 512 x 3 dequantized values, voxel-major
+     * (octahedral normal u, v, then the scale s; nelf_reflection_voxel decodes them); and
+     * the 512 x 3 stored u8 codes. */
+    const float *reflection;
+    const unsigned char *stored_reflection;
 } nelf_brick;
 
 /* The view-dependent part's parameters (format 1.2, section VDEP, SPEC.md section 6):
@@ -191,6 +204,19 @@ typedef struct nelf_view {
     const float *scale;            /* R 8-bit dequantization steps, NULL for f16 */
     const float *offset;           /* R 8-bit offsets, NULL for f16 */
 } nelf_view;
+
+/* The reflection part's parameters (format 1.3, section VREF, SPEC.md section 6): one glossy
+ * lobe about the mirror direction r = 2 (n.w) n - w per voxel. Seen from world direction w
+ * (voxel toward the eye), T(x, w)[c 128 + i] = T_pca[c 128 + i] + s (max(0, n.w) g_i(r) - hbar_i)
+ * with g_i the Phong lobe max(0, r.w')^exponent integrated over light texel i (tabulated on
+ * the lobe table, nelf_lobe_table_corners) and hbar_i the same averaged over the eyes. */
+typedef struct nelf_reflection {
+    uint32_t eye_count;            /* E, 1..16 */
+    float exponent;                /* the lobe exponent, 1..200 */
+    float eyes_m[NELF_MAX_REFLECTION_EYES][3]; /* the first E: world positions (metres) T_pca averages over */
+    float scale[NELF_REFLECTION_VALUES];       /* VRCO dequantization: value_k = offset[k] + scale[k] code_k */
+    float offset[NELF_REFLECTION_VALUES];      /* offset[2] >= 0: the scale s is never negative */
+} nelf_reflection;
 
 /* Lighting projected onto the PCA basis (SPEC.md section 8): the radiance of a voxel
  * with coefficients c is mean_rgb + sum_k c_k component_rgb[k]. */
@@ -215,8 +241,9 @@ NELF_API nelf_reader *nelf_create(void);
 NELF_API void nelf_destroy(nelf_reader *reader);
 /* Opens a file held in memory. The reader borrows `data` (no copy): keep it alive
  * and unchanged until the reader is destroyed or reopened. Validates the header, the
- * section table, the brick list, the PCA model, the 8-bit parameters, the metadata and
- * both chunk tables; chunks are decoded later (nelf_read_brick, nelf_verify). */
+ * section table, the brick list, the PCA model, the 8-bit parameters, the view-dependent
+ * or reflection part's parameters, the metadata and the chunk tables; chunks are decoded
+ * later (nelf_read_brick, nelf_verify). */
 NELF_API nelf_result nelf_open_memory(nelf_reader *reader, const void *data, size_t size);
 /* Opens the file at `path` for random access (kept open; sizes up to LONG_MAX). */
 NELF_API nelf_result nelf_open_path(nelf_reader *reader, const char *path);
@@ -247,6 +274,9 @@ NELF_API const float *nelf_quant_offset(const nelf_reader *reader);
 NELF_API const char *nelf_metadata(const nelf_reader *reader, size_t *length);
 /* The view-dependent part's parameters (1.2), NULL when the file has none (or none is open). */
 NELF_API const nelf_view *nelf_get_view(const nelf_reader *reader);
+/* The reflection part's parameters (1.3), NULL when the file has none (or none is open). A
+ * file holds at most one of the two view-dependent parts. */
+NELF_API const nelf_reflection *nelf_get_reflection(const nelf_reader *reader);
 
 /* --- bricks and voxels --- */
 /* Reads brick `index`: decodes (and checksums) only the chunk holding it, keeping
@@ -281,6 +311,22 @@ NELF_API void nelf_add_view_transport(const nelf_reader *reader, const float *vi
  * view part, nelf_add_view_transport (reads the brick). */
 NELF_API nelf_result nelf_voxel_transport_toward(nelf_reader *reader, uint32_t brick_index, uint32_t local,
                                                  const float omega[3], float out_lt[NELF_LT_DIM]);
+
+/* --- the reflection part (format 1.3) --- */
+/* Octahedral decoding of a unit vector: (u, v), each clamped to [-1, 1], maps to
+ * p = (u, v, 1 - |u| - |v|), whose x, y fold to ((1 - |v|) sgn u, (1 - |u|) sgn v) where
+ * p.z < 0 (sgn 0 = +1); then p / |p|, in float with sqrtf. */
+NELF_API void nelf_octahedral_decode(float u, float v, float out[3]);
+/* One voxel's reflection: its three dequantized values (brick.reflection + 3 * local) give
+ * the unit normal (nelf_octahedral_decode of values 0 and 1) in out_normal; returns the
+ * scale s = max(0, values[2]). */
+NELF_API float nelf_reflection_voxel(const float values[NELF_REFLECTION_VALUES], float out_normal[3]);
+/* The four nodes (row-major index row * 128 + col) and bilinear weights of light-frame
+ * direction d in the 64 x 128 lat-long lobe table, node (row, col) at theta = (row + 1/2) pi / 64,
+ * phi = (col + 1/2) 2 pi / 128 - pi: d normalised (zero or non-finite: +y), theta = acosf(y),
+ * phi = atan2f(x, -z), t = theta 64 / pi - 1/2 clamped to [0, 63], s = (phi + pi) 128 / (2 pi) - 1/2
+ * wrapping in phi; corners (t0, s0), (t0, s0 + 1), (t0 + 1, s0), (t0 + 1, s0 + 1), float throughout. */
+NELF_API void nelf_lobe_table_corners(const float d[3], uint32_t out_index[4], float out_weight[4]);
 
 /* --- lighting --- */
 /* `light_rgb`: 128 texels x 3 channels (texel-major: light_rgb[t * 3 + c]), the mean
@@ -337,11 +383,19 @@ NELF_API float nelf_half_to_float(uint16_t bits);
     ((uint64_t)NELF__VIEW_HEADER_SIZE + 4u * NELF_VIEW_HARMONICS * NELF_VIEW_HARMONICS + \
      4u * (uint64_t)NELF_LT_DIM * NELF_LT_DIM + 8u * NELF_LT_DIM)
 
-enum { NELF__BRCK, NELF__DENS, NELF__PCAB, NELF__QPRM, NELF__COEF, NELF__VDEP, NELF__VCOF, NELF__META, NELF__KNOWN };
-static const char nelf__kinds[NELF__KNOWN][5] = {"BRCK", "DENS", "PCAB", "QPRM", "COEF", "VDEP", "VCOF", "META"};
-/* The chunked sections, in the order a full read visits them (index "which"). */
+/* Decoded VREF with E eyes: u32 E, f32 exponent, E x 3 f32 eyes, 3 (scale, offset) pairs. */
+#define NELF__REFLECTION_PARAMS_BYTES(eyes) (32u + 12u * (uint64_t)(eyes))
+#define NELF__REFLECTION_BYTES_PER_BRICK ((uint64_t)NELF_REFLECTION_VALUES * NELF_BRICK_VOXELS)
+
+enum {
+    NELF__BRCK, NELF__DENS, NELF__PCAB, NELF__QPRM, NELF__COEF, NELF__VDEP, NELF__VCOF, NELF__VREF, NELF__VRCO,
+    NELF__META, NELF__KNOWN
+};
+static const char nelf__kinds[NELF__KNOWN][5] = {"BRCK", "DENS", "PCAB", "QPRM", "COEF",
+                                                 "VDEP", "VCOF", "VREF", "VRCO", "META"};
+/* The chunked sections, in the order a full read visits them (index "which"): DENS, COEF,
+ * then the view-dependent part's values (VCOF or VRCO; a file holds at most one part). */
 #define NELF__CHUNKED 3
-static const int nelf__chunked_kind[NELF__CHUNKED] = {NELF__DENS, NELF__COEF, NELF__VCOF};
 
 struct nelf_reader {
     nelf_result status;
@@ -363,8 +417,11 @@ struct nelf_reader {
     int has_view;                  /* VDEP and VCOF present */
     nelf_view view;
     float *view_params;            /* lobes, basis, scale[R], offset[R] (see view) */
-    int chunked;                   /* chunked sections: 2, or 3 with a view part */
-    unsigned char *chunk_table[NELF__CHUNKED]; /* DENS, COEF, VCOF: 24 bytes per chunk */
+    int has_reflection;            /* VREF and VRCO present */
+    nelf_reflection reflection;
+    int chunked;                   /* chunked sections: 2, or 3 with a view or reflection part */
+    int chunked_kind[NELF__CHUNKED]; /* the known kind of each: DENS, COEF, then VCOF or VRCO */
+    unsigned char *chunk_table[NELF__CHUNKED]; /* 24 bytes per chunk */
     uint64_t chunk_count;
     uint64_t bytes_per_brick[NELF__CHUNKED];
     /* working memory */
@@ -376,6 +433,7 @@ struct nelf_reader {
     float *brick_density;   /* 512 */
     float *brick_coef;      /* 512 K */
     float *brick_view;      /* 512 R */
+    float *brick_reflection; /* 512 x 3 */
 };
 
 /* ---------------------------------------------------------------- small helpers */
@@ -1019,11 +1077,11 @@ static uint64_t nelf__expected_raw(const nelf_header *h, int kind) {
     case NELF__BRCK: return 6 * bricks;
     case NELF__PCAB: return 4u * NELF_LT_DIM * (rank + 1);
     case NELF__QPRM: return 8 * rank;
-    default: return UINT64_MAX; /* metadata, VDEP: variable */
+    default: return UINT64_MAX; /* metadata, VDEP, VREF: variable */
     }
 }
 
-/* Checks a chunked section's entry (DENS, COEF, VCOF) whose bricks decode to `per_brick`
+/* Checks a chunked section's entry (DENS, COEF, VCOF, VRCO) whose bricks decode to `per_brick`
  * bytes: decoded length B x per_brick, shuffle dividing a brick, a chunk <= 4 MiB. */
 static nelf_result nelf__check_chunked_entry(nelf_reader *r, const nelf_section *s, uint64_t per_brick) {
     const nelf_header *h = &r->header;
@@ -1046,7 +1104,7 @@ static nelf_result nelf__check_chunked_entry(nelf_reader *r, const nelf_section 
 static nelf_result nelf__check_entry(nelf_reader *r, const nelf_section *s, int kind) {
     const nelf_header *h = &r->header;
     char name[17];
-    int chunked = kind == NELF__DENS || kind == NELF__COEF || kind == NELF__VCOF;
+    int chunked = kind == NELF__DENS || kind == NELF__COEF || kind == NELF__VCOF || kind == NELF__VRCO;
     uint64_t width = s->shuffle;
     nelf__kind_text(s->kind, name);
     if (!((s->codec == 0 && !chunked) || (s->codec == 2 && chunked) || (s->codec == 1 && !chunked && kind != NELF__BRCK)))
@@ -1054,6 +1112,7 @@ static nelf_result nelf__check_entry(nelf_reader *r, const nelf_section *s, int 
     if (kind == NELF__DENS) return nelf__check_chunked_entry(r, s, 2u * NELF_BRICK_VOXELS);
     if (kind == NELF__COEF) return nelf__check_chunked_entry(r, s, nelf__coef_bytes_per_brick(h));
     if (kind == NELF__VCOF) return NELF_OK; /* checked once VDEP gives its brick size */
+    if (kind == NELF__VRCO) return nelf__check_chunked_entry(r, s, NELF__REFLECTION_BYTES_PER_BRICK);
     if (kind == NELF__META) {
         if (s->raw_length > NELF__MAX_METADATA_BYTES)
             return nelf__fail(r, NELF_ERR_METADATA_TOO_LARGE,
@@ -1064,6 +1123,14 @@ static nelf_result nelf__check_entry(nelf_reader *r, const nelf_section *s, int 
             return nelf__fail(r, NELF_ERR_BAD_VIEW,
                               "invalid view-dependent part: section VDEP declares %llu decoded bytes, more than the largest possible %llu",
                               (unsigned long long)s->raw_length, (unsigned long long)NELF__MAX_VIEW_PARAMS_BYTES);
+    } else if (kind == NELF__VREF) {
+        /* 32 + 12 E bytes for 1..16 eyes; the eye count itself is checked once it is read. */
+        uint64_t extra = s->raw_length - 32u;
+        if (s->raw_length < NELF__REFLECTION_PARAMS_BYTES(1) ||
+            s->raw_length > NELF__REFLECTION_PARAMS_BYTES(NELF_MAX_REFLECTION_EYES) || extra % 12u != 0)
+            return nelf__fail(r, NELF_ERR_BAD_VIEW,
+                              "invalid view-dependent part: section VREF declares %llu decoded bytes, which is not 32 + 12 x (1..=%d eyes)",
+                              (unsigned long long)s->raw_length, NELF_MAX_REFLECTION_EYES);
     } else {
         uint64_t expected = nelf__expected_raw(h, kind);
         if (expected != s->raw_length)
@@ -1150,14 +1217,24 @@ static nelf_result nelf__check_table(nelf_reader *r) {
             if (r->known[required[i]] < 0)
                 return nelf__fail(r, NELF_ERR_MISSING_SECTION, "required section %s is missing", nelf__kinds[required[i]]);
     }
-    /* The view-dependent part is optional, but whole. */
-    if ((r->known[NELF__VDEP] >= 0) != (r->known[NELF__VCOF] >= 0)) {
-        int present = r->known[NELF__VDEP] >= 0 ? NELF__VDEP : NELF__VCOF;
-        return nelf__fail(r, NELF_ERR_BAD_VIEW, "invalid view-dependent part: section %s is present without section %s",
-                          nelf__kinds[present], nelf__kinds[present == NELF__VDEP ? NELF__VCOF : NELF__VDEP]);
+    /* A view-dependent part is optional, but whole; and a file holds at most one. */
+    if (r->known[NELF__VDEP] >= 0 && r->known[NELF__VREF] >= 0)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW,
+                          "invalid view-dependent part: sections VDEP and VREF are both present: a file holds at most one view-dependent part");
+    {
+        static const int pairs[4][2] = {
+            {NELF__VDEP, NELF__VCOF}, {NELF__VCOF, NELF__VDEP}, {NELF__VREF, NELF__VRCO}, {NELF__VRCO, NELF__VREF}};
+        for (i = 0; i < 4; i++)
+            if (r->known[pairs[i][0]] >= 0 && r->known[pairs[i][1]] < 0)
+                return nelf__fail(r, NELF_ERR_BAD_VIEW, "invalid view-dependent part: section %s is present without section %s",
+                                  nelf__kinds[pairs[i][0]], nelf__kinds[pairs[i][1]]);
     }
     r->has_view = r->known[NELF__VDEP] >= 0;
-    r->chunked = r->has_view ? 3 : 2;
+    r->has_reflection = r->known[NELF__VREF] >= 0;
+    r->chunked_kind[0] = NELF__DENS;
+    r->chunked_kind[1] = NELF__COEF;
+    r->chunked_kind[2] = r->has_view ? NELF__VCOF : NELF__VRCO;
+    r->chunked = r->has_view || r->has_reflection ? 3 : 2;
     return NELF_OK;
 }
 
@@ -1188,10 +1265,11 @@ static nelf_result nelf__whole_section(nelf_reader *r, const nelf_section *s, un
     return NELF_OK;
 }
 
-/* Reads and checks the chunk table at the start of chunked section `which` (DENS, COEF, VCOF). */
+/* Reads and checks the chunk table at the start of chunked section `which` (DENS, COEF,
+ * then VCOF or VRCO). */
 static nelf_result nelf__chunk_table(nelf_reader *r, int which) {
     const nelf_header *h = &r->header;
-    const nelf_section *s = &r->sections[r->known[nelf__chunked_kind[which]]];
+    const nelf_section *s = &r->sections[r->known[r->chunked_kind[which]]];
     const unsigned char *view;
     uint64_t count = r->chunk_count, table_length = count * NELF__CHUNK_ENTRY_SIZE, expected, i;
     size_t cap = 0;
@@ -1230,7 +1308,7 @@ static nelf_result nelf__chunk_table(nelf_reader *r, int which) {
     return NELF_OK;
 }
 
-/* Checks 8-bit dequantization parameters (QPRM, the end of VDEP) as the reference does:
+/* Checks 8-bit dequantization parameters (QPRM, the end of VDEP or VREF) as the reference does:
  * scale, offset and offset + 255 scale finite, then scale >= 0 (-0 passes). */
 static nelf_result nelf__check_qparams(nelf_reader *r, const float *scale, const float *offset, uint64_t count,
                                        const char *section) {
@@ -1313,6 +1391,48 @@ static nelf_result nelf__parse_view(nelf_reader *r, const unsigned char *bytes, 
     return NELF_OK;
 }
 
+/* Decodes VREF (`length` bytes, SPEC.md section 6): u32 E, f32 exponent, E eyes of 3 f32,
+ * then 3 (scale, offset) f32 pairs; checked in the reference's order (eye count and length,
+ * the parameters as QPRM's, the exponent, finite eyes, a non-negative offset of the scale). */
+static nelf_result nelf__parse_reflection(nelf_reader *r, const unsigned char *bytes, uint64_t length) {
+    nelf_reflection *part = &r->reflection;
+    const unsigned char *pairs;
+    uint64_t eyes;
+    uint32_t e, k;
+    nelf_result rc;
+    if (length < 8)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW,
+                          "invalid view-dependent part: section VREF: %llu bytes, fewer than its 8-byte start",
+                          (unsigned long long)length);
+    eyes = nelf__u32(bytes);
+    if (eyes == 0 || eyes > NELF_MAX_REFLECTION_EYES || NELF__REFLECTION_PARAMS_BYTES(eyes) != length)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW,
+                          "invalid view-dependent part: section VREF: %llu eyes do not fit its %llu bytes (32 + 12 per eye, 1..=%d eyes)",
+                          (unsigned long long)eyes, (unsigned long long)length, NELF_MAX_REFLECTION_EYES);
+    memset(part, 0, sizeof *part);
+    part->eye_count = (uint32_t)eyes;
+    part->exponent = nelf__f32(bytes + 4);
+    for (e = 0; e < part->eye_count; e++)
+        for (k = 0; k < 3; k++) part->eyes_m[e][k] = nelf__f32(bytes + 8 + 12 * e + 4 * k);
+    pairs = bytes + 8 + 12 * eyes;
+    for (k = 0; k < NELF_REFLECTION_VALUES; k++) {
+        part->scale[k] = nelf__f32(pairs + 8 * k);
+        part->offset[k] = nelf__f32(pairs + 8 * k + 4);
+    }
+    if ((rc = nelf__check_qparams(r, part->scale, part->offset, NELF_REFLECTION_VALUES, "VREF")) != NELF_OK) return rc;
+    if (!(part->exponent >= 1.0f && part->exponent <= NELF_MAX_REFLECTION_EXPONENT))
+        return nelf__fail(r, NELF_ERR_BAD_VIEW, "invalid view-dependent part: section VREF: lobe exponent %.9g is not in 1..=200",
+                          (double)part->exponent);
+    for (e = 0; e < part->eye_count; e++)
+        for (k = 0; k < 3; k++)
+            if (!nelf__finite32(part->eyes_m[e][k]))
+                return nelf__fail(r, NELF_ERR_NONFINITE_VIEW, "non-finite value in section VREF eye %lu", (unsigned long)e);
+    if (part->offset[2] < 0.0f)
+        return nelf__fail(r, NELF_ERR_BAD_VIEW, "invalid view-dependent part: section VREF: the scale's offset %.9g is negative",
+                          (double)part->offset[2]);
+    return NELF_OK;
+}
+
 /* ---------------------------------------------------------------- open / close */
 
 static void nelf__release(nelf_reader *r) {
@@ -1328,6 +1448,8 @@ static void nelf__release(nelf_reader *r) {
     r->view_params = NULL;
     memset(&r->view, 0, sizeof r->view);
     r->has_view = 0;
+    memset(&r->reflection, 0, sizeof r->reflection);
+    r->has_reflection = 0;
     r->chunked = 0;
     for (i = 0; i < NELF__CHUNKED; i++) {
         NELF_FREE(r->chunk_table[i]);
@@ -1342,6 +1464,8 @@ static void nelf__release(nelf_reader *r) {
     NELF_FREE(r->brick_coef);
     NELF_FREE(r->brick_view);
     r->brick_view = NULL;
+    NELF_FREE(r->brick_reflection);
+    r->brick_reflection = NULL;
     r->bricks = NULL;
     r->pca = NULL;
     r->qparams = NULL;
@@ -1494,6 +1618,17 @@ static nelf_result nelf__open(nelf_reader *r) {
             return rc;
     }
 
+    /* VREF: the reflection part's eyes, exponent and 8-bit parameters (VRCO's entry was
+     * checked with the table: its brick size is fixed). */
+    if (r->has_reflection) {
+        if ((rc = nelf__whole_section(r, &r->sections[r->known[NELF__VREF]], &bytes)) != NELF_OK) return rc;
+        rc = nelf__parse_reflection(r, bytes, r->sections[r->known[NELF__VREF]].raw_length);
+        NELF_FREE(bytes);
+        bytes = NULL;
+        if (rc != NELF_OK) return rc;
+        r->bytes_per_brick[2] = NELF__REFLECTION_BYTES_PER_BRICK;
+    }
+
     /* META: a JSON object. */
     if (r->known[NELF__META] >= 0) {
         const nelf_section *s = &r->sections[r->known[NELF__META]];
@@ -1511,6 +1646,10 @@ static nelf_result nelf__open(nelf_reader *r) {
     if (r->has_view) {
         r->brick_view = (float *)NELF_MALLOC((size_t)NELF_BRICK_VOXELS * r->view.coefficients_per_voxel * sizeof(float));
         if (!r->brick_view) return nelf__fail(r, NELF_ERR_OUT_OF_MEMORY, "out of memory for brick buffers");
+    }
+    if (r->has_reflection) {
+        r->brick_reflection = (float *)NELF_MALLOC((size_t)NELF__REFLECTION_BYTES_PER_BRICK * sizeof(float));
+        if (!r->brick_reflection) return nelf__fail(r, NELF_ERR_OUT_OF_MEMORY, "out of memory for brick buffers");
     }
     r->is_open = 1;
     return nelf__ok(r);
@@ -1569,17 +1708,17 @@ NELF_API const char *nelf_error_detail(const nelf_reader *r) {
 
 /* ---------------------------------------------------------------- chunks and values */
 
-/* Reads chunk `index` of chunked section `which` (DENS, COEF, VCOF), checks its checksum,
+/* Reads chunk `index` of chunked section `which` (DENS, COEF, VCOF or VRCO), checks its checksum,
  * decodes it into r->raw[which]; feeds the stored bytes to `section_hash` if given. */
 static nelf_result nelf__decode_chunk(nelf_reader *r, int which, uint64_t index, XXH3_state_t *section_hash) {
-    const nelf_section *s = &r->sections[r->known[nelf__chunked_kind[which]]];
+    const nelf_section *s = &r->sections[r->known[r->chunked_kind[which]]];
     const unsigned char *e = r->chunk_table[which] + index * NELF__CHUNK_ENTRY_SIZE;
     uint64_t offset = s->offset + nelf__u64(e), length = nelf__u64(e + 8), sum = nelf__u64(e + 16), computed;
     uint64_t raw_length = nelf__bricks_in_chunk(&r->header, index) * r->bytes_per_brick[which];
     const unsigned char *stored;
     char what[48];
     nelf_result rc;
-    snprintf(what, sizeof what, "section %s chunk %llu", nelf__kinds[nelf__chunked_kind[which]], (unsigned long long)index);
+    snprintf(what, sizeof what, "section %s chunk %llu", nelf__kinds[r->chunked_kind[which]], (unsigned long long)index);
     if ((rc = nelf__view(r, offset, length, &stored, what)) != NELF_OK) return rc;
     computed = XXH3_64bits(stored, (size_t)length);
     if (nelf__checksums_differ(sum, computed))
@@ -1615,7 +1754,7 @@ static nelf_result nelf__check_f16_coefficients(nelf_reader *r, int which, const
     for (i = 0; i < count; i++)
         if (!nelf__half_finite(nelf__u16(raw + 2 * i)))
             return nelf__fail(r, NELF_ERR_NONFINITE_COEFFICIENT, "non-finite value in section %s voxel %llu component %llu",
-                              nelf__kinds[nelf__chunked_kind[which]], (unsigned long long)(first_voxel + i / rank),
+                              nelf__kinds[r->chunked_kind[which]], (unsigned long long)(first_voxel + i / rank),
                               (unsigned long long)(i % rank));
     return NELF_OK;
 }
@@ -1626,7 +1765,7 @@ static nelf_result nelf__check_values(nelf_reader *r, int which, const unsigned 
     if (which == 0) return nelf__check_density(r, raw, voxels, first_voxel);
     if (which == 1 && r->header.coefficient_encoding == NELF_ENCODING_F16)
         return nelf__check_f16_coefficients(r, 1, raw, voxels * r->header.pca_rank, r->header.pca_rank, first_voxel);
-    if (which == 2 && r->view.encoding == NELF_ENCODING_F16)
+    if (which == 2 && r->has_view && r->view.encoding == NELF_ENCODING_F16)
         return nelf__check_f16_coefficients(r, 2, raw, voxels * r->view.coefficients_per_voxel,
                                             r->view.coefficients_per_voxel, first_voxel);
     return NELF_OK;
@@ -1693,7 +1832,7 @@ static nelf_result nelf__verify(nelf_reader *r, XXH3_state_t *state) {
     nelf_result rc;
     r->cached_chunk = -1;
     for (which = 0; which < r->chunked; which++) {
-        const nelf_section *s = &r->sections[r->known[nelf__chunked_kind[which]]];
+        const nelf_section *s = &r->sections[r->known[r->chunked_kind[which]]];
         uint64_t computed;
         XXH3_64bits_reset(state);
         XXH3_64bits_update(state, r->chunk_table[which], (size_t)(r->chunk_count * NELF__CHUNK_ENTRY_SIZE));
@@ -1706,12 +1845,13 @@ static nelf_result nelf__verify(nelf_reader *r, XXH3_state_t *state) {
         computed = XXH3_64bits_digest(state);
         if (nelf__checksums_differ(s->checksum, computed))
             return nelf__fail(r, NELF_ERR_SECTION_CHECKSUM, "checksum mismatch in section %s: stored 0x%016llx, computed 0x%016llx",
-                              nelf__kinds[nelf__chunked_kind[which]], (unsigned long long)s->checksum,
+                              nelf__kinds[r->chunked_kind[which]], (unsigned long long)s->checksum,
                               (unsigned long long)computed);
     }
     for (a = 0; a < n; a++) {
         const nelf_section *s = &r->sections[a];
-        if ((int)a == r->known[NELF__DENS] || (int)a == r->known[NELF__COEF] || (int)a == r->known[NELF__VCOF]) continue;
+        if ((int)a == r->known[NELF__DENS] || (int)a == r->known[NELF__COEF] || (int)a == r->known[r->chunked_kind[2]])
+            continue;
         if ((rc = nelf__stream_checksum(r, s, state)) != NELF_OK) return rc;
     }
     /* Every byte outside the header, the table and the sections is zero. */
@@ -1750,7 +1890,7 @@ NELF_API nelf_result nelf_verify(nelf_reader *r) {
 NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick *out) {
     const nelf_header *h;
     uint64_t chunk, within, i, rank, first_voxel;
-    const unsigned char *dens, *coef, *view = NULL;
+    const unsigned char *dens, *coef, *view = NULL, *reflection = NULL;
     int which;
     nelf_result rc;
     if (!r || !out) return NELF_ERR_INVALID_ARGUMENT;
@@ -1780,6 +1920,11 @@ NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick 
         nelf__dequantize(r->brick_view, view, (uint64_t)NELF_BRICK_VOXELS * r->view.coefficients_per_voxel,
                          r->view.coefficients_per_voxel, r->view.scale, r->view.offset);
     }
+    if (r->has_reflection) { /* u8 codes: any is valid */
+        reflection = r->raw[2] + within * r->bytes_per_brick[2];
+        nelf__dequantize(r->brick_reflection, reflection, NELF__REFLECTION_BYTES_PER_BRICK, NELF_REFLECTION_VALUES,
+                         r->reflection.scale, r->reflection.offset);
+    }
     for (i = 0; i < NELF_BRICK_VOXELS; i++) r->brick_density[i] = nelf_half_to_float(nelf__u16(dens + 2 * i));
     out->index = index;
     memcpy(out->coord, r->bricks + 3 * (uint64_t)index, sizeof out->coord);
@@ -1788,6 +1933,8 @@ NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick 
     out->stored_coefficients = coef;
     out->view_coefficients = view ? r->brick_view : NULL;
     out->stored_view_coefficients = view;
+    out->reflection = reflection ? r->brick_reflection : NULL;
+    out->stored_reflection = reflection;
     return nelf__ok(r);
 }
 
@@ -1807,6 +1954,9 @@ NELF_API const float *nelf_quant_offset(const nelf_reader *r) {
 }
 NELF_API const nelf_view *nelf_get_view(const nelf_reader *r) {
     return r && r->is_open && r->has_view ? &r->view : NULL;
+}
+NELF_API const nelf_reflection *nelf_get_reflection(const nelf_reader *r) {
+    return r && r->is_open && r->has_reflection ? &r->reflection : NULL;
 }
 NELF_API const char *nelf_metadata(const nelf_reader *r, size_t *length) {
     if (!r || !r->is_open) {
@@ -1939,6 +2089,73 @@ NELF_API nelf_result nelf_voxel_transport_toward(nelf_reader *r, uint32_t brick_
     if (brick.view_coefficients)
         nelf_add_view_transport(r, brick.view_coefficients + (size_t)local * r->view.coefficients_per_voxel, omega, out);
     return NELF_OK;
+}
+
+/* ---------------------------------------------------------------- the reflection part */
+
+static float nelf__clamp_unit(float a) { return a < -1.0f ? -1.0f : a > 1.0f ? 1.0f : a; }
+static float nelf__sign(float a) { return a >= 0.0f ? 1.0f : -1.0f; }
+
+NELF_API void nelf_octahedral_decode(float u, float v, float out[3]) {
+    float x, y, z, len;
+    if (!out) return;
+    u = nelf__clamp_unit(u);
+    v = nelf__clamp_unit(v);
+    z = 1.0f - fabsf(u) - fabsf(v);
+    if (z < 0.0f) {
+        x = (1.0f - fabsf(v)) * nelf__sign(u);
+        y = (1.0f - fabsf(u)) * nelf__sign(v);
+    } else {
+        x = u;
+        y = v;
+    }
+    len = sqrtf(x * x + y * y + z * z);
+    out[0] = x / len;
+    out[1] = y / len;
+    out[2] = z / len;
+}
+
+NELF_API float nelf_reflection_voxel(const float values[NELF_REFLECTION_VALUES], float out_normal[3]) {
+    if (!values) return 0.0f;
+    nelf_octahedral_decode(values[0], values[1], out_normal);
+    return values[2] > 0.0f ? values[2] : 0.0f;
+}
+
+NELF_API void nelf_lobe_table_corners(const float d[3], uint32_t out_index[4], float out_weight[4]) {
+    const float pi = 3.14159265358979323846f, tau = 6.28318530717958647692f;
+    const float h = (float)NELF_LOBE_TABLE_HEIGHT, w = (float)NELF_LOBE_TABLE_WIDTH;
+    float len, x = 0.0f, y = 1.0f, z = 0.0f, theta, phi, t, s, t0, s0, ft, fs;
+    uint32_t row0, row1, col0, col1;
+    long cs;
+    if (!d || !out_index || !out_weight) return;
+    len = sqrtf(d[0] * d[0] + d[1] * d[1] + d[2] * d[2]);
+    if (len > 0.0f && nelf__finite32(len)) {
+        x = d[0] / len;
+        y = d[1] / len;
+        z = d[2] / len;
+    }
+    theta = acosf(nelf__clamp_unit(y));
+    phi = atan2f(x, -z);
+    t = theta * h / pi - 0.5f;
+    t = t < 0.0f ? 0.0f : t > h - 1.0f ? h - 1.0f : t;
+    s = (phi + pi) * w / tau - 0.5f;
+    t0 = floorf(t);
+    s0 = floorf(s);
+    ft = t - t0;
+    fs = s - s0;
+    row0 = (uint32_t)t0;
+    row1 = row0 + 1 < NELF_LOBE_TABLE_HEIGHT ? row0 + 1 : NELF_LOBE_TABLE_HEIGHT - 1;
+    cs = (long)s0 % NELF_LOBE_TABLE_WIDTH; /* s0 is in [-1, 128]: wrap it into 0..127 */
+    col0 = (uint32_t)(cs < 0 ? cs + NELF_LOBE_TABLE_WIDTH : cs);
+    col1 = (col0 + 1) % NELF_LOBE_TABLE_WIDTH;
+    out_index[0] = row0 * NELF_LOBE_TABLE_WIDTH + col0;
+    out_index[1] = row0 * NELF_LOBE_TABLE_WIDTH + col1;
+    out_index[2] = row1 * NELF_LOBE_TABLE_WIDTH + col0;
+    out_index[3] = row1 * NELF_LOBE_TABLE_WIDTH + col1;
+    out_weight[0] = (1.0f - ft) * (1.0f - fs);
+    out_weight[1] = (1.0f - ft) * fs;
+    out_weight[2] = ft * (1.0f - fs);
+    out_weight[3] = ft * fs;
 }
 
 static float nelf__project_vector(const float *v, const float *light_rgb, int c) {

@@ -746,7 +746,8 @@ impl Reflection {
                 [u, v, s.max(0.0)]
             })
             .collect();
-        let coefficients = Coefficients::quantize(&values, Self::VALUES_PER_VOXEL, CoefficientEncoding::U8Affine)?;
+        let coefficients =
+            Coefficients::quantize(&values, Self::VALUES_PER_VOXEL, CoefficientEncoding::U8Affine)?;
         let part = Self {
             exponent,
             eyes_m,

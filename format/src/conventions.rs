@@ -835,8 +835,16 @@ mod tests {
         let d = direction(0.5 * PI, PI - 0.001).as_vec3().to_array();
         let corners = lobe_table_corners(d);
         let row = LOBE_TABLE_H / 2 - 1;
-        assert!(corners.iter().any(|&(i, _)| i == row * LOBE_TABLE_W + LOBE_TABLE_W - 1));
-        assert!(corners.iter().any(|&(i, w)| i == (row + 1) * LOBE_TABLE_W && w >= 0.0));
+        assert!(
+            corners
+                .iter()
+                .any(|&(i, _)| i == row * LOBE_TABLE_W + LOBE_TABLE_W - 1)
+        );
+        assert!(
+            corners
+                .iter()
+                .any(|&(i, w)| i == (row + 1) * LOBE_TABLE_W && w >= 0.0)
+        );
         let total: f32 = corners.iter().map(|c| c.1).sum();
         assert!((total - 1.0).abs() < 1e-6);
     }

@@ -1,5 +1,6 @@
 //! A summary of a `.nelf` file for people and scripts (`nelf inspect`): header,
-//! sections with stored and decoded sizes, counts, bounding box, metadata, and the
+//! sections with stored and decoded sizes, counts, bounding box, the view-dependent part
+//! (harmonic lobes of format 1.2, or the reflection part of 1.3), metadata, and the
 //! result of checking every checksum and value ([`crate::read::AssetReader::verify`]).
 
 use std::fmt::Write as _;
@@ -7,9 +8,13 @@ use std::path::Path;
 
 use serde::Serialize;
 
+use crate::asset::{Coefficients, Reflection};
 use crate::error::Result;
 use crate::read::AssetReader;
-use crate::spec::{BRICK_SIZE, KIND_VIEW, KIND_VIEW_COEFFICIENTS, SectionEntry, is_known_kind};
+use crate::spec::{
+    BRICK_SIZE, KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, SectionEntry,
+    SectionKind, is_known_kind,
+};
 
 /// One section as `nelf inspect` reports it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -79,6 +84,52 @@ pub struct ViewSummary {
     pub raw_bytes: u64,
 }
 
+/// The reflection part (format 1.3, sections `VREF` and `VRCO`) as `nelf inspect` reports
+/// it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct ReflectionSummary {
+    /// The lobe exponent λ.
+    pub exponent: f32,
+    /// The eyes (world, metres) the PCA part averages over.
+    pub eyes_m: Vec<[f32; 3]>,
+    /// The scales `s` the 8-bit values can hold, `[offset, offset + 255 · step]`: the
+    /// dequantisation range of `VRCO`'s third value.
+    pub scale_range: [f32; 2],
+    /// Stored bytes of `VREF` and `VRCO` together.
+    pub stored_bytes: u64,
+    /// Decoded bytes of `VREF` and `VRCO` together.
+    pub raw_bytes: u64,
+}
+
+impl ReflectionSummary {
+    fn new(part: &Reflection, sections: &[SectionEntry]) -> Self {
+        let scale_range = match &part.coefficients {
+            Coefficients::U8Affine { scale, offset, .. } if scale.len() > 2 && offset.len() > 2 => {
+                [offset[2], offset[2] + 255.0 * scale[2]]
+            }
+            _ => [0.0, 0.0],
+        };
+        let (stored_bytes, raw_bytes) = section_bytes(sections, [KIND_REFLECTION, KIND_REFLECTION_VALUES]);
+        Self {
+            exponent: part.exponent,
+            eyes_m: part.eyes_m.clone(),
+            scale_range,
+            stored_bytes,
+            raw_bytes,
+        }
+    }
+}
+
+/// Stored and decoded bytes of the sections of kinds `kinds` together.
+fn section_bytes(sections: &[SectionEntry], kinds: [SectionKind; 2]) -> (u64, u64) {
+    sections
+        .iter()
+        .filter(|s| kinds.contains(&s.kind))
+        .fold((0, 0), |(stored, raw), s| {
+            (stored + s.stored_length, raw + s.raw_length)
+        })
+}
+
 /// Everything `nelf inspect` prints.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Inspection {
@@ -116,8 +167,10 @@ pub struct Inspection {
     pub pca_rank: u32,
     /// Coefficient encoding name.
     pub coefficient_encoding: String,
-    /// The view-dependent part, if the file has one.
+    /// The harmonic view-dependent part (1.2), if the file has one.
     pub view: Option<ViewSummary>,
+    /// The reflection part (1.3), if the file has one (a file holds at most one of the two).
+    pub reflection: Option<ReflectionSummary>,
     /// Sections in table order.
     pub sections: Vec<SectionSummary>,
     /// Decoded bytes over all sections.
@@ -145,19 +198,19 @@ pub fn inspect(path: &Path) -> Result<Inspection> {
     let rows = h.world_from_light.transpose().to_cols_array_2d();
     let voxel_count = h.voxel_count();
     let view = reader.view_params().map(|v| {
-        let parts = reader
-            .sections()
-            .iter()
-            .filter(|s| s.kind == KIND_VIEW || s.kind == KIND_VIEW_COEFFICIENTS);
+        let (stored_bytes, raw_bytes) = section_bytes(reader.sections(), [KIND_VIEW, KIND_VIEW_COEFFICIENTS]);
         ViewSummary {
             lobes: v.lobe_count(),
             rank: v.rank(),
             coefficients_per_voxel: v.coefficients.rank(),
             encoding: v.coefficients.encoding().name().to_string(),
-            stored_bytes: parts.clone().map(|s| s.stored_length).sum(),
-            raw_bytes: parts.map(|s| s.raw_length).sum(),
+            stored_bytes,
+            raw_bytes,
         }
     });
+    let reflection = reader
+        .reflection_params()
+        .map(|part| ReflectionSummary::new(part, reader.sections()));
     Ok(Inspection {
         file: path.display().to_string(),
         file_size: h.file_size,
@@ -177,6 +230,7 @@ pub fn inspect(path: &Path) -> Result<Inspection> {
         pca_rank: h.pca_rank,
         coefficient_encoding: h.coefficient_encoding.name().to_string(),
         view,
+        reflection,
         sections,
         raw_payload_bytes: raw,
         stored_payload_bytes: stored,
@@ -252,6 +306,29 @@ impl Inspection {
             }
             None => {
                 let _ = writeln!(s, "view dependence:   none");
+            }
+        }
+        match &self.reflection {
+            Some(r) => {
+                let _ = writeln!(
+                    s,
+                    "reflection:        lobe exponent {}, {} eyes, scale {} … {} (8-bit), {} bytes stored, {} decoded",
+                    r.exponent,
+                    r.eyes_m.len(),
+                    r.scale_range[0],
+                    r.scale_range[1],
+                    r.stored_bytes,
+                    r.raw_bytes
+                );
+                let eyes: Vec<String> = r
+                    .eyes_m
+                    .iter()
+                    .map(|e| format!("({:.3}, {:.3}, {:.3})", e[0], e[1], e[2]))
+                    .collect();
+                let _ = writeln!(s, "reflection eyes:   {} m", eyes.join(" "));
+            }
+            None => {
+                let _ = writeln!(s, "reflection:        none");
             }
         }
         for (i, r) in self.world_from_light.iter().enumerate() {

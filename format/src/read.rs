@@ -31,9 +31,10 @@ use crate::error::{FormatError, Result};
 use crate::spec::{
     BRICK_VOXELS, CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header, KIND_BRICKS,
     KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_REFLECTION,
-    KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, REFLECTION_BYTES_PER_BRICK, MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, MAX_VIEW_PARAMS_BYTES,
-    MAX_ZSTD_EXPANSION, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind, VIEW_HEADER_SIZE,
-    ViewHeader, checksum, header_checksum, reflection_params_bytes, is_known_kind, kind_name, u64_at, unshuffle,
+    KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES,
+    MAX_VIEW_PARAMS_BYTES, MAX_ZSTD_EXPANSION, REFLECTION_BYTES_PER_BRICK, SECTION_ENTRY_SIZE, SectionCodec,
+    SectionEntry, SectionKind, VIEW_HEADER_SIZE, ViewHeader, checksum, header_checksum, is_known_kind,
+    kind_name, reflection_params_bytes, u64_at, unshuffle,
 };
 
 /// Reads and fully validates the `.nelf` file at `path`.
@@ -377,9 +378,10 @@ impl<R: Read + Seek> AssetReader<R> {
             None => Vec::new(),
         };
         let reflection = match &self.reflection {
-            Some(part) => part
-                .coefficients
-                .dequantize_stored(brick(Chunked::Reflection), first_voxel, "VRCO")?,
+            Some(part) => {
+                part.coefficients
+                    .dequantize_stored(brick(Chunked::Reflection), first_voxel, "VRCO")?
+            }
             None => Vec::new(),
         };
         Ok(BrickData {
@@ -805,7 +807,7 @@ fn reflection_params(bytes: &[u8]) -> Result<Reflection> {
         )));
     }
     let floats = f32s(&bytes[4..]);
-    let eyes_m = floats[1..1 + 3 * eyes]
+    let eyes_m = floats[1..=3 * eyes]
         .chunks_exact(3)
         .map(|e| [e[0], e[1], e[2]])
         .collect();

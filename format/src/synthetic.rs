@@ -24,7 +24,8 @@ use std::f64::consts::PI;
 use glam::DVec3;
 
 use crate::asset::{
-    Asset, CoefficientEncoding, Coefficients, Reflection, GridGeometry, PcaModel, ViewDependence, encode_density,
+    Asset, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, Reflection, ViewDependence,
+    encode_density,
 };
 use crate::conventions::{
     ENV_H, ENV_W, LT_DIM, VIEW_HARMONICS, lt_index, rotation_y, texel_center_direction, texel_solid_angle,
@@ -332,7 +333,11 @@ pub fn synthetic_view(
 /// part is fitted on the bake's band only). Set it with
 /// `asset.reflection = Some(synthetic_reflection(&asset, …)?)`.
 pub fn synthetic_reflection(asset: &Asset, exponent: f32, seed: u64) -> Result<Reflection> {
-    let hash = |a: u64, b: u64| unit(splitmix(seed ^ splitmix(a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ b)));
+    let hash = |a: u64, b: u64| {
+        unit(splitmix(
+            seed ^ splitmix(a.wrapping_mul(0x9E37_79B9_7F4A_7C15) ^ b),
+        ))
+    };
     let eyes_m: Vec<[f32; 3]> = (0..5)
         .map(|e| {
             let angle = (e as f64 - 2.0) * 0.3;
@@ -344,12 +349,20 @@ pub fn synthetic_reflection(asset: &Asset, exponent: f32, seed: u64) -> Result<R
     let mut scales = Vec::with_capacity(voxels);
     for v in 0..voxels {
         let p = asset.voxel_position_m(v);
-        let turn = DVec3::new(hash(1, 3 * v as u64), hash(1, 3 * v as u64 + 1), hash(1, 3 * v as u64 + 2));
+        let turn = DVec3::new(
+            hash(1, 3 * v as u64),
+            hash(1, 3 * v as u64 + 1),
+            hash(1, 3 * v as u64 + 2),
+        );
         let n = (p.normalize_or(DVec3::Y) + 0.17 * turn).normalize_or(DVec3::Y);
         normals.push(n.as_vec3().to_array());
         let smooth = 0.5 + 0.5 * (11.0 * p.x).sin() * (7.0 * p.y + 1.0).cos();
         let keep = hash(2, v as u64) > -0.5;
-        scales.push(if keep { (0.05 * (smooth + 0.1 * hash(3, v as u64))).max(0.0) as f32 } else { 0.0 });
+        scales.push(if keep {
+            (0.05 * (smooth + 0.1 * hash(3, v as u64))).max(0.0) as f32
+        } else {
+            0.0
+        });
     }
     Reflection::new(exponent, eyes_m, &normals, &scales)
 }

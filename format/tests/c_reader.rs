@@ -6,12 +6,15 @@
 //!
 //! * on valid files written by our writer (both coefficient encodings, signed density,
 //!   ranks 1 to 384, zero bricks, raw and compressed sections, unknown optional
-//!   sections), checks that every number the C reader gives equals the Rust reader's
-//!   **bit for bit**: header, section table, metadata bytes, PCA model, every voxel's
-//!   density, centre, dequantized coefficients and reconstructed `T`, and its radiance
-//!   under a fixed 8 × 16 map both through the projected lighting and as a plain dot
-//!   product (the Rust side of the projection mirrors `nelf_render::light`, which this
-//!   crate cannot depend on);
+//!   sections, harmonic view parts (1.2) and reflection parts (1.3)), checks that every
+//!   number the C reader gives equals the Rust reader's **bit for bit**: header, section
+//!   table, metadata bytes, PCA model, every voxel's density, centre, dequantized
+//!   coefficients and reconstructed `T`, and its radiance under a fixed 8 × 16 map both
+//!   through the projected lighting and as a plain dot product (the Rust side of the
+//!   projection mirrors `nelf_render::light`, which this crate cannot depend on); with a
+//!   view part its view coefficients and `T` toward an eye; with a reflection part its
+//!   parameters, every voxel's values, decoded normal and scale, and the octahedral
+//!   decoding and lobe-table corners of fixed directions;
 //! * on every damaged file of `common::damage` (the generator `damage.rs` uses) and on
 //!   metadata edge cases, checks that the C reader refuses exactly the files the Rust
 //!   reader refuses, with the matching error code and a message naming the same
@@ -34,14 +37,16 @@ use std::sync::OnceLock;
 use common::damage::{self, Expect};
 use common::{FileParts, small_asset};
 use nelf_format::conventions::VIEW_HARMONICS;
-use nelf_format::conventions::{ENV_TEXELS, LT_DIM, LatLong, shade, view_harmonics};
+use nelf_format::conventions::{
+    ENV_TEXELS, LT_DIM, LatLong, lobe_table_corners, octahedral_decode, shade, view_harmonics,
+};
 use nelf_format::spec::{
     BRICK_VOXELS, KIND_METADATA, KIND_PCA, SectionCodec, SectionEntry, checksum, shuffle, unshuffle,
 };
-use nelf_format::synthetic::{SyntheticField, synthetic_view};
+use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};
 use nelf_format::{
-    Asset, AssetReader, CoefficientEncoding, Coefficients, FormatError, PcaModel, WriteOptions, encode_asset,
-    encode_density, read_asset_bytes,
+    Asset, AssetReader, CoefficientEncoding, Coefficients, FormatError, PcaModel, Reflection, WriteOptions,
+    encode_asset, encode_density, read_asset_bytes,
 };
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
@@ -189,7 +194,7 @@ fn random_pca_asset(rank: usize, encoding: CoefficientEncoding, seed: u64) -> As
     field.asset_with(pca, coefficients).unwrap()
 }
 
-/// `asset` without any brick (nor view coefficients).
+/// `asset` without any brick (nor view coefficients or reflection values).
 fn without_bricks(mut asset: Asset) -> Asset {
     asset.bricks.clear();
     asset.density.clear();
@@ -201,6 +206,49 @@ fn without_bricks(mut asset: Asset) -> Asset {
     if let Some(view) = &mut asset.view {
         clear(&mut view.coefficients);
     }
+    if let Some(part) = &mut asset.reflection {
+        clear(&mut part.coefficients);
+    }
+    asset
+}
+
+/// `asset` with a synthetic reflection part (format 1.3) of lobe exponent `exponent`.
+fn with_reflection(mut asset: Asset, exponent: f32) -> Asset {
+    asset.reflection = Some(synthetic_reflection(&asset, exponent, 19).unwrap());
+    asset
+}
+
+/// `asset` with a reflection part of `eyes` eyes around the grid (1 to 16), random unit
+/// normals and scales spread over 0..0.2 (some exactly 0), lobe exponent `exponent`.
+fn with_random_reflection(mut asset: Asset, exponent: f32, eyes: usize, seed: u64) -> Asset {
+    let mut rng = Pcg64::seed_from_u64(seed);
+    let voxels = asset.voxel_count();
+    let normals: Vec<[f32; 3]> = (0..voxels)
+        .map(|_| {
+            let n = glam::Vec3::new(
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+                rng.random_range(-1.0..1.0),
+            );
+            n.normalize_or(glam::Vec3::Y).to_array()
+        })
+        .collect();
+    let scales: Vec<f32> = (0..voxels)
+        .map(|v| {
+            if v % 5 == 0 {
+                0.0
+            } else {
+                rng.random_range(0.0..0.2)
+            }
+        })
+        .collect();
+    let eyes_m: Vec<[f32; 3]> = (0..eyes)
+        .map(|e| {
+            let angle = e as f32 * 0.4;
+            [0.5 * angle.sin(), 0.1 * (e % 3) as f32, 0.5 * angle.cos()]
+        })
+        .collect();
+    asset.reflection = Some(Reflection::new(exponent, eyes_m, &normals, &scales).unwrap());
     asset
 }
 
@@ -402,6 +450,40 @@ fn valid_files() -> Vec<(&'static str, Vec<u8>, bool)> {
             false,
         ),
         (
+            "reflection λ 20, PCA u8",
+            encode(&with_reflection(small_asset(U8Affine, 4, 21), 20.0), default),
+            true,
+        ),
+        (
+            "reflection 1 eye λ 1, PCA f16, one-brick chunks",
+            encode(&with_random_reflection(small_asset(F16, 3, 5), 1.0, 1, 41), one),
+            true,
+        ),
+        (
+            "reflection 16 eyes λ 200, PCA u8 rank 1, unshuffled",
+            encode(
+                &with_random_reflection(small_asset(U8Affine, 1, 7), 200.0, 16, 42),
+                plain,
+            ),
+            true,
+        ),
+        (
+            "reflection zero bricks",
+            encode(
+                &without_bricks(with_reflection(small_asset(U8Affine, 3, 2), 40.0)),
+                default,
+            ),
+            true,
+        ),
+        (
+            "reflection λ 30, PCA f16 rank 8, 40k voxels, one chunk",
+            encode(
+                &with_reflection(SyntheticField::new(40_000, 3).asset(8, F16).unwrap(), 30.0),
+                huge_chunks,
+            ),
+            false,
+        ),
+        (
             "u8 rank 16, 40k voxels",
             encode(
                 &SyntheticField::new(40_000, 3).asset(16, U8Affine).unwrap(),
@@ -474,6 +556,34 @@ const HARMONIC_DIRECTIONS: [[f32; 3]; 8] = [
     [1e-30, 2e-30, -1e-30],
     [1e20, 0.0, 1.0],
     [f32::NAN, 1.0, 1.0],
+];
+
+/// The octahedral `(u, v)` pairs whose decoding `nelf_dump` prints (inside, on and
+/// outside the square, −0).
+const OCTAHEDRAL_POINTS: [[f32; 2]; 8] = [
+    [0.0, 0.0],
+    [1.0, 1.0],
+    [-1.0, 1.0],
+    [0.3, -0.9],
+    [2.0, -3.0],
+    [-0.5, -0.5],
+    [0.0, -1.0],
+    [-0.0, 0.7],
+];
+
+/// The light-frame directions whose lobe-table corners `nelf_dump` prints (poles, either
+/// side of the seam at φ = ±π, unnormalised, zero, overflowing).
+const LOBE_DIRECTIONS: [[f32; 3]; 10] = [
+    [0.0, 1.0, 0.0],
+    [0.0, -1.0, 0.0],
+    [0.0, 0.0, 1.0],
+    [1e-4, 0.0, 1.0],
+    [-1e-4, 0.2, 1.0],
+    [3.0, 4.0, -12.0],
+    [-0.3, 0.7, 0.2],
+    [0.0, 0.0, 0.0],
+    [1e20, 1e20, 0.0],
+    [0.6, -0.3, -0.74],
 ];
 
 /// What `nelf_dump dump` must print for `bytes`, from the Rust reader.
@@ -582,6 +692,35 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
             s.push('\n');
         }
     }
+    if let Some(part) = &asset.reflection {
+        writeln!(
+            s,
+            "reflection {} {:08x}",
+            part.eyes_m.len(),
+            part.exponent.to_bits()
+        )
+        .unwrap();
+        s.push_str("reflection_eyes");
+        hex32(&mut s, part.eyes_m.iter().flatten());
+        if let Coefficients::U8Affine { scale, offset, .. } = &part.coefficients {
+            s.push_str("\nreflection_scale");
+            hex32(&mut s, scale);
+            s.push_str("\nreflection_offset");
+            hex32(&mut s, offset);
+        }
+        s.push('\n');
+    }
+    s.push_str("octahedral");
+    for [u, v] in OCTAHEDRAL_POINTS {
+        hex32(&mut s, &octahedral_decode(u, v));
+    }
+    s.push_str("\nlobe_corners");
+    for d in LOBE_DIRECTIONS {
+        for (index, weight) in lobe_table_corners(d) {
+            write!(s, " {index}:{:08x}", weight.to_bits()).unwrap();
+        }
+    }
+    s.push('\n');
     s.push_str("harmonics");
     for omega in HARMONIC_DIRECTIONS {
         hex32(&mut s, &view_harmonics(omega));
@@ -600,6 +739,9 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
     let per_view = asset.view.as_ref().map_or(0, |v| v.coefficients.rank());
     let mut d = vec![0.0f32; per_view];
     for (b, coord) in asset.bricks.iter().enumerate() {
+        // The reflection part's three values per voxel, then its normal and scale.
+        let mut reflection_values = Vec::new();
+        let mut shapes = Vec::new();
         let mut view_coefficients = Vec::with_capacity(per_view * BRICK_VOXELS);
         let mut toward = Vec::with_capacity(LT_DIM * BRICK_VOXELS);
         let mut density = Vec::with_capacity(BRICK_VOXELS);
@@ -629,6 +771,14 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
                 let omega = (EYE - asset.voxel_position_m(v)).as_vec3().to_array();
                 toward.extend(asset.reconstruct_lt_toward(v, omega));
             }
+            if let Some(part) = &asset.reflection {
+                let mut values = [0.0f32; Reflection::VALUES_PER_VOXEL];
+                part.coefficients.voxel_f32(v, &mut values);
+                reflection_values.extend(values);
+                let (normal, scale) = part.voxel(v);
+                shapes.extend(normal);
+                shapes.push(scale);
+            }
         }
         if full {
             writeln!(s, "brick {b} {} {} {}", coord[0], coord[1], coord[2]).unwrap();
@@ -657,6 +807,12 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
                     s.push_str(" |");
                     hex32(&mut s, &toward[LT_DIM * local..LT_DIM * (local + 1)]);
                 }
+                if asset.reflection.is_some() {
+                    s.push_str(" |");
+                    hex32(&mut s, &reflection_values[3 * local..3 * local + 3]);
+                    s.push_str(" |");
+                    hex32(&mut s, &shapes[4 * local..4 * local + 4]);
+                }
                 s.push('\n');
             }
         } else {
@@ -679,6 +835,15 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
                     "view_brick {b} {:016x} {:016x}",
                     hash_f32(&view_coefficients),
                     hash_f32(&toward)
+                )
+                .unwrap();
+            }
+            if asset.reflection.is_some() {
+                writeln!(
+                    s,
+                    "reflection_brick {b} {:016x} {:016x}",
+                    hash_f32(&reflection_values),
+                    hash_f32(&shapes)
                 )
                 .unwrap();
             }
@@ -788,6 +953,28 @@ fn example_program_runs() {
         "{text}"
     );
     assert!(text.contains("voxel 100: density"), "{text}");
+    assert!(!text.contains("reflect"), "{text}");
+    // With a reflection part (format 1.3): its exponent, eyes and one voxel's normal.
+    let reflecting = with_reflection(asset, 20.0);
+    std::fs::write(
+        &path,
+        encode_asset(&reflecting, &WriteOptions::default()).unwrap().0,
+    )
+    .unwrap();
+    let output = run(&programs.example, &[path.as_os_str()]);
+    let text = String::from_utf8(output.stdout).unwrap();
+    assert!(output.status.success(), "{text}");
+    assert!(
+        text.contains("\nreflection part: lobe exponent 20, 5 eyes\n"),
+        "{text}"
+    );
+    let (n, s) = reflecting.reflection.as_ref().unwrap().voxel(100);
+    let want = format!(
+        "voxel 100 reflects: normal {:.3} {:.3} {:.3}, scale",
+        n[0], n[1], n[2]
+    );
+    assert!(text.contains(&want), "{text} lacks {want}");
+    assert!(s >= 0.0);
     // A damaged file: a message and exit status 1.
     std::fs::write(&path, b"not a nelf file at all").unwrap();
     let output = Command::new(&programs.example).arg(&path).output().unwrap();
@@ -823,7 +1010,7 @@ fn c_code(err: &FormatError) -> &'static str {
         E::UnsupportedFeature { .. } => "NELF_ERR_UNSUPPORTED_FEATURE",
         E::NonFinite { what } if what.starts_with("header field") => "NELF_ERR_NONFINITE_HEADER",
         E::NonFinite { what } if what.starts_with("PCA") => "NELF_ERR_NONFINITE_PCA",
-        E::NonFinite { what } if what.contains("VDEP") => "NELF_ERR_NONFINITE_VIEW",
+        E::NonFinite { what } if what.contains("VDEP") || what.contains("VREF") => "NELF_ERR_NONFINITE_VIEW",
         E::NonFinite { what } if what.contains("QPRM") => "NELF_ERR_NONFINITE_QPRM",
         E::NonFinite { what } if what.contains("DENS") => "NELF_ERR_NONFINITE_DENSITY",
         E::NonFinite { what } if what.contains("COEF") || what.contains("VCOF") => {
@@ -864,12 +1051,14 @@ fn c_code(err: &FormatError) -> &'static str {
 /// The places a Rust error message names (known section kinds, "chunk 3", "voxel 700",
 /// "offset 1234", ...), which the C reader's message must name too.
 fn anchors(message: &str) -> Vec<String> {
-    let mut out: Vec<String> = ["BRCK", "DENS", "PCAB", "QPRM", "COEF", "VDEP", "VCOF", "META"]
-        .into_iter()
-        .filter(|k| message.contains(k))
-        .map(String::from)
-        .collect();
-    for key in ["chunk", "voxel", "component", "brick", "offset", "element"] {
+    let mut out: Vec<String> = [
+        "BRCK", "DENS", "PCAB", "QPRM", "COEF", "VDEP", "VCOF", "VREF", "VRCO", "META",
+    ]
+    .into_iter()
+    .filter(|k| message.contains(k))
+    .map(String::from)
+    .collect();
+    for key in ["chunk", "voxel", "component", "brick", "offset", "element", "eye"] {
         let pattern = format!("{key} ");
         for (i, _) in message.match_indices(&pattern) {
             let digits: String = message[i + pattern.len()..]
@@ -1203,6 +1392,24 @@ fn fuzz_seeds_are_read_by_the_c_reader() {
         };
         seeds.push((
             format!("seed-view-{i}.nelf"),
+            encode_asset(&asset, &options).unwrap().0,
+        ));
+    }
+    // Reflection parts (format 1.3): several eyes, and one eye with one-brick chunks.
+    for (i, (eyes, chunk_bricks)) in [(5, 2), (1, 1)].into_iter().enumerate() {
+        let base = field.asset(2, U8Affine).unwrap();
+        let asset = if eyes == 5 {
+            with_reflection(base, 20.0)
+        } else {
+            with_random_reflection(base, 8.0, eyes, 3)
+        };
+        let options = WriteOptions {
+            zstd_level: 3,
+            chunk_bricks,
+            shuffle: i == 0,
+        };
+        seeds.push((
+            format!("seed-reflection-{i}.nelf"),
             encode_asset(&asset, &options).unwrap().0,
         ));
     }

@@ -1,5 +1,6 @@
 //! Damaged and hostile `.nelf` files: truncations at every boundary and at random
-//! offsets, bit flips in every section, hand-made hostile headers and sections, and a
+//! offsets, bit flips in every section, hand-made hostile headers and sections (the
+//! view-dependent parts of formats 1.2 and 1.3 included), and a
 //! seeded mini-fuzzer (all made by `common::damage`, which `c_reader.rs` shares). Every
 //! case must give a typed error naming the problem (never a panic); the allocation
 //! bound is checked in `alloc.rs`.
@@ -84,6 +85,28 @@ fn hostile_view_sections_give_named_errors() {
     assert_eq!(accepted.len(), 2);
     for asset in accepted {
         assert_eq!(asset.view.unwrap().lobe_count(), 3);
+    }
+}
+
+#[test]
+fn every_byte_of_the_reflection_sections_is_checked() {
+    check(damage::reflection_byte_flips());
+}
+
+#[test]
+fn hostile_reflection_sections_give_named_errors() {
+    // Valid, per encoding: the exponents 1 and 200 and an offset of −0 for the scale.
+    let accepted = check(damage::hostile_reflection_sections());
+    assert_eq!(accepted.len(), 6);
+    let mut exponents: Vec<f32> = accepted
+        .iter()
+        .map(|asset| asset.reflection.as_ref().unwrap().exponent)
+        .collect();
+    exponents.sort_by(f32::total_cmp);
+    assert_eq!(exponents, [1.0, 1.0, 20.0, 20.0, 200.0, 200.0]);
+    for asset in &accepted {
+        asset.validate().unwrap();
+        assert!(asset.view.is_none());
     }
 }
 

@@ -1,5 +1,6 @@
 //! The reflection part (format 1.3, `VREF`/`VRCO`): round trip, version, brick access
 //! and the rule of one view-dependent part per file.
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
 use nelf_format::spec::{KIND_REFLECTION, KIND_REFLECTION_VALUES, VERSION_MINOR};
 use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};

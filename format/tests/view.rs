@@ -2,7 +2,8 @@
 //! view-dependent assets (both encodings, several lobe counts and ranks, zero bricks)
 //! bit for bit; files without a view part unchanged (version 1.1, the bytes the 1.1
 //! writer wrote); the view sections optional, so that a reader that does not know them
-//! reads the view-averaged asset; random access to view coefficients; `nelf inspect`.
+//! reads the view-averaged asset; random access to view coefficients; `nelf inspect`
+//! (which reports the reflection part of format 1.3 the same way).
 //! Damaged view sections are in `common::damage` (shared with the C reader's tests).
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
@@ -14,9 +15,9 @@ use common::{FileParts, small_asset};
 use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS};
 use nelf_format::spec::{
     BRICK_VOXELS, KIND_COEFFICIENTS, KIND_METADATA, KIND_VIEW, KIND_VIEW_COEFFICIENTS, SectionCodec,
-    VERSION_MINOR, VERSION_MINOR_WITHOUT_VIEW,
+    VERSION_MINOR, VERSION_MINOR_VIEW, VERSION_MINOR_WITHOUT_VIEW,
 };
-use nelf_format::synthetic::{SyntheticField, synthetic_view};
+use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};
 use nelf_format::{
     Asset, AssetReader, CoefficientEncoding, Coefficients, FormatError, WriteOptions, encode_asset,
     read_asset_bytes, write_asset,
@@ -80,8 +81,12 @@ fn view_dependent_assets_round_trip_bit_for_bit() {
                 for (o, options) in options.iter().enumerate() {
                     let what = format!("{pca_encoding:?}/{view_encoding:?} J {lobes} K_v {rank} options {o}");
                     let (bytes, sections) = encode_asset(&asset, options).unwrap();
-                    assert_eq!(version_minor(&bytes), VERSION_MINOR, "{what}");
-                    assert_eq!(VERSION_MINOR, 2);
+                    assert_eq!(version_minor(&bytes), VERSION_MINOR_VIEW, "{what}");
+                    assert_eq!(VERSION_MINOR_VIEW, 2);
+                    assert_eq!(
+                        VERSION_MINOR, 3,
+                        "the newest minor is the reflection part's (1.3)"
+                    );
                     let back = read_asset_bytes(&bytes).unwrap();
                     assert!(back == asset, "{what}");
                     let (a, b) = (asset.view.as_ref().unwrap(), back.view.as_ref().unwrap());
@@ -431,4 +436,64 @@ fn inspect_reports_the_view_part() {
     assert_eq!(inspection.version, "1.1");
     assert!(inspection.view.is_none());
     assert!(inspection.to_text().contains("view dependence:   none"));
+}
+
+#[test]
+fn inspect_reports_the_reflection_part() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("reflection.nelf");
+    let mut asset = small_asset(CoefficientEncoding::U8Affine, 3, 1);
+    let part = synthetic_reflection(&asset, 20.0, 4).unwrap();
+    let Coefficients::U8Affine { scale, offset, .. } = &part.coefficients else {
+        panic!("reflection values are 8-bit")
+    };
+    let range = [offset[2], offset[2] + 255.0 * scale[2]];
+    asset.reflection = Some(part.clone());
+    let report = write_asset(&path, &asset, &WriteOptions::default()).unwrap();
+    let inspection = nelf_format::inspect::inspect(&path).unwrap();
+    assert_eq!(inspection.version, "1.3");
+    assert!(inspection.view.is_none());
+    let r = inspection.reflection.as_ref().unwrap();
+    assert_eq!(r.exponent, 20.0);
+    assert_eq!(r.eyes_m, part.eyes_m);
+    assert_eq!(r.scale_range, range);
+    assert!(range[0] >= 0.0 && range[1] > range[0], "{range:?}");
+    let sections = report
+        .sections
+        .iter()
+        .filter(|s| s.kind == *b"VREF" || s.kind == *b"VRCO");
+    assert_eq!(
+        r.stored_bytes,
+        sections.clone().map(|s| s.stored_length).sum::<u64>()
+    );
+    assert_eq!(r.raw_bytes, sections.map(|s| s.raw_length).sum::<u64>());
+    let text = inspection.to_text();
+    assert!(text.contains("view dependence:   none"), "{text}");
+    assert!(
+        text.contains(&format!(
+            "reflection:        lobe exponent 20, 5 eyes, scale {} … {} (8-bit)",
+            range[0], range[1]
+        )),
+        "{text}"
+    );
+    assert!(text.contains("reflection eyes:   ("), "{text}");
+    assert!(
+        text.contains("  VREF no ") && text.contains("  VRCO no "),
+        "{text}"
+    );
+    let json = serde_json::to_value(&inspection).unwrap();
+    assert_eq!(json["reflection"]["eyes_m"].as_array().unwrap().len(), 5);
+    assert_eq!(json["reflection"]["exponent"], 20.0);
+
+    // Without one: "none".
+    let plain = dir.path().join("plain.nelf");
+    write_asset(
+        &plain,
+        &small_asset(CoefficientEncoding::F16, 2, 1),
+        &WriteOptions::default(),
+    )
+    .unwrap();
+    let inspection = nelf_format::inspect::inspect(&plain).unwrap();
+    assert!(inspection.reflection.is_none());
+    assert!(inspection.to_text().contains("reflection:        none"));
 }

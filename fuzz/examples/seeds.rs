@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 
-use nelf_format::synthetic::{SyntheticField, synthetic_view};
+use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};
 use nelf_format::{CoefficientEncoding, FormatError, WriteOptions, encode_asset};
 
 fn main() -> Result<(), FormatError> {
@@ -35,5 +35,16 @@ fn main() -> Result<(), FormatError> {
         let path = dir.join(format!("seed-{i}.nelf"));
         std::fs::write(&path, bytes).map_err(|source| FormatError::Io { path, source })?;
     }
+    // Format 1.3: a reflection part (VREF, VRCO): 5 eyes, lobe exponent 20.
+    let mut asset = field.asset(2, CoefficientEncoding::U8Affine)?;
+    asset.reflection = Some(synthetic_reflection(&asset, 20.0, 1)?);
+    let options = WriteOptions {
+        zstd_level: 3,
+        chunk_bricks: 1,
+        shuffle: true,
+    };
+    let (bytes, _) = encode_asset(&asset, &options)?;
+    let path = dir.join("seed-reflection.nelf");
+    std::fs::write(&path, bytes).map_err(|source| FormatError::Io { path, source })?;
     Ok(())
 }

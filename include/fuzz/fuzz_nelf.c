@@ -38,6 +38,11 @@ static void exercise(nelf_reader *r) {
     for (s = 0; s < nelf_section_count(r); s++) g_sink += (float)nelf_get_section(r, s)->raw_length;
     for (i = 0; i < NELF_ENV_TEXELS * 3; i++) map[i] = (float)(i % 5) - 1.0f;
     if (nelf_project_light(r, map, &light) != NELF_OK) abort();
+    if (nelf_get_reflection(r)) {
+        const nelf_reflection *part = nelf_get_reflection(r);
+        if (part->eye_count < 1 || part->eye_count > NELF_MAX_REFLECTION_EYES) abort();
+        g_sink += part->exponent + part->eyes_m[part->eye_count - 1][2] + part->offset[2];
+    }
     /* Random access: the last brick, the first, then up to 64 in order. */
     n = h->brick_count < 64 ? h->brick_count : 64;
     for (b = 0; b < n + 2 && h->brick_count > 0; b++) {
@@ -55,6 +60,16 @@ static void exercise(nelf_reader *r) {
             if (nelf_voxel_center(r, index, (unsigned)(i % 8), (unsigned)(i / 8 % 8), (unsigned)(i / 64), centre) != NELF_OK)
                 abort();
             g_sink += (float)centre[0];
+            if (brick.reflection) { /* format 1.3: the voxel's normal, scale and lobe-table corners */
+                float normal[3], weight[4];
+                uint32_t node[4];
+                g_sink += nelf_reflection_voxel(brick.reflection + i * NELF_REFLECTION_VALUES, normal);
+                nelf_lobe_table_corners(normal, node, weight);
+                if (node[0] >= NELF_LOBE_TABLE_HEIGHT * NELF_LOBE_TABLE_WIDTH ||
+                    node[3] >= NELF_LOBE_TABLE_HEIGHT * NELF_LOBE_TABLE_WIDTH)
+                    abort();
+                g_sink += normal[0] + weight[0] + (float)brick.stored_reflection[i * NELF_REFLECTION_VALUES];
+            }
         }
     }
     if (h->brick_count > 0) (void)nelf_voxel_transport(r, h->brick_count / 2, 511, lt);

@@ -5,11 +5,13 @@
  *   nelf_dump dump FILE LIGHT mem|path full|hashed
  *       Opens FILE (from memory or by path), verifies it, and prints the header, the
  *       section table, the metadata, the PCA model, the view-dependent parameters (if
- *       any), the view harmonics of a few fixed directions, then every brick's voxels
- *       (full: one line per voxel with density, centre, coefficients, T and the
- *       relit radiance under LIGHT both ways, and with a view part the view
- *       coefficients and T toward the eye at EYE; hashed: one line per brick with XXH3
- *       hashes of the same numbers). Floats are printed as their bit patterns in hex
+ *       any), the reflection part's parameters (if any), the view harmonics, octahedral
+ *       decodings and lobe-table corners of a few fixed directions, then every brick's
+ *       voxels (full: one line per voxel with density, centre, coefficients, T and the
+ *       relit radiance under LIGHT both ways, with a view part the view coefficients and
+ *       T toward the eye at EYE, with a reflection part its three values, the decoded
+ *       normal and the scale; hashed: one line per brick with XXH3 hashes of the same
+ *       numbers). Floats are printed as their bit patterns in hex
  *       so that the Rust side compares them exactly. Exit 1 with "error NAME detail"
  *       if the file is refused.
  *   nelf_dump check BUNDLE SCRATCH
@@ -128,6 +130,18 @@ static const float HARMONIC_DIRECTIONS[][3] = {
     {-0.3f, 0.7f, 0.2f}, {1e-30f, 2e-30f, -1e-30f}, {1e20f, 0.0f, 1.0f}, {0.0f, 0.0f, 0.0f},
 };
 
+/* Octahedral (u, v) pairs whose decoding is printed (inside, on and outside the square). */
+static const float OCTAHEDRAL_POINTS[][2] = {
+    {0.0f, 0.0f}, {1.0f, 1.0f}, {-1.0f, 1.0f}, {0.3f, -0.9f}, {2.0f, -3.0f}, {-0.5f, -0.5f}, {0.0f, -1.0f}, {-0.0f, 0.7f},
+};
+
+/* Light-frame directions whose lobe-table corners are printed (poles, the seam at phi = +-pi,
+ * unnormalised, zero, non-finite). */
+static const float LOBE_DIRECTIONS[][3] = {
+    {0.0f, 1.0f, 0.0f}, {0.0f, -1.0f, 0.0f}, {0.0f, 0.0f, 1.0f}, {1e-4f, 0.0f, 1.0f}, {-1e-4f, 0.2f, 1.0f},
+    {3.0f, 4.0f, -12.0f}, {-0.3f, 0.7f, 0.2f}, {0.0f, 0.0f, 0.0f}, {1e20f, 1e20f, 0.0f}, {0.6f, -0.3f, -0.74f},
+};
+
 static int dump(int argc, char **argv) {
     const char *path, *mode;
     unsigned char *data = NULL;
@@ -139,6 +153,7 @@ static int dump(int argc, char **argv) {
     nelf_projected_light *projected;
     const char *meta;
     const nelf_view *view;
+    const nelf_reflection *reflection;
     int full;
     uint32_t b, k, rank, per_view = 0;
     if (argc != 6) die("usage: dump FILE LIGHT mem|path full|hashed");
@@ -227,6 +242,26 @@ static int dump(int argc, char **argv) {
             print_floats("view_offset", view->offset, per_view);
         }
     }
+    reflection = nelf_get_reflection(r);
+    if (reflection) {
+        printf("reflection %lu %08lx\n", (unsigned long)reflection->eye_count, (unsigned long)fbits(reflection->exponent));
+        print_floats("reflection_eyes", &reflection->eyes_m[0][0], 3 * (size_t)reflection->eye_count);
+        print_floats("reflection_scale", reflection->scale, NELF_REFLECTION_VALUES);
+        print_floats("reflection_offset", reflection->offset, NELF_REFLECTION_VALUES);
+    }
+    {
+        float n[3 * 8];
+        for (i = 0; i < 8; i++) nelf_octahedral_decode(OCTAHEDRAL_POINTS[i][0], OCTAHEDRAL_POINTS[i][1], n + 3 * i);
+        print_floats("octahedral", n, 3 * 8);
+        printf("lobe_corners");
+        for (i = 0; i < 10; i++) {
+            uint32_t index[4];
+            float weight[4];
+            nelf_lobe_table_corners(LOBE_DIRECTIONS[i], index, weight);
+            for (k = 0; k < 4; k++) printf(" %lu:%08lx", (unsigned long)index[k], (unsigned long)fbits(weight[k]));
+        }
+        printf("\n");
+    }
     {
         float y[NELF_VIEW_HARMONICS * 8];
         float nan_direction[3];
@@ -247,9 +282,10 @@ static int dump(int argc, char **argv) {
         float *toward = (float *)malloc(sizeof(float) * NELF_LT_DIM * NELF_BRICK_VOXELS);
         float *relit = (float *)malloc(sizeof(float) * 6 * NELF_BRICK_VOXELS);
         double *centre = (double *)malloc(sizeof(double) * 3 * NELF_BRICK_VOXELS);
+        float *shape = (float *)malloc(sizeof(float) * 4 * NELF_BRICK_VOXELS); /* normal and scale */
         float check[NELF_LT_DIM];
         uint32_t v;
-        if (!lt || !toward || !relit || !centre) die("out of memory");
+        if (!lt || !toward || !relit || !centre || !shape) die("out of memory");
         rc = nelf_read_brick(r, b, &brick);
         if (rc != NELF_OK) {
             printf("error %s %s\n", nelf_error_name(rc), nelf_error_detail(r));
@@ -257,9 +293,12 @@ static int dump(int argc, char **argv) {
             free(toward);
             free(relit);
             free(centre);
+            free(shape);
             break;
         }
         if ((brick.view_coefficients != NULL) != (view != NULL)) die("view coefficients without a view part");
+        if ((brick.reflection != NULL) != (reflection != NULL)) die("reflection values without a reflection part");
+        if ((brick.stored_reflection != NULL) != (reflection != NULL)) die("stored reflection codes without a reflection part");
         if (nelf_find_brick(r, brick.coord[0], brick.coord[1], brick.coord[2]) != (int64_t)b) die("find_brick disagrees");
         for (v = 0; v < NELF_BRICK_VOXELS; v++) {
             const float *c = brick.coefficients + (size_t)v * rank;
@@ -274,6 +313,14 @@ static int dump(int argc, char **argv) {
                 memcpy(toward + (size_t)v * NELF_LT_DIM, t, sizeof(float) * NELF_LT_DIM);
                 nelf_add_view_transport(r, brick.view_coefficients + (size_t)v * per_view, omega,
                                         toward + (size_t)v * NELF_LT_DIM);
+            }
+            if (reflection) {
+                const float *values = brick.reflection + (size_t)v * NELF_REFLECTION_VALUES;
+                const unsigned char *codes = brick.stored_reflection + (size_t)v * NELF_REFLECTION_VALUES;
+                for (k = 0; k < NELF_REFLECTION_VALUES; k++) /* the dequantization rule, applied to the codes */
+                    if (fbits(values[k]) != fbits(reflection->offset[k] + reflection->scale[k] * (float)codes[k]))
+                        die("reflection values disagree with their codes");
+                shape[4 * v + 3] = nelf_reflection_voxel(values, shape + 4 * v);
             }
         }
         if (view) { /* nelf_voxel_transport_toward gives the same T(x, omega) */
@@ -304,6 +351,13 @@ static int dump(int argc, char **argv) {
                     printf(" |");
                     for (k = 0; k < NELF_LT_DIM; k++) printf(" %08lx", (unsigned long)fbits(toward[(size_t)v * NELF_LT_DIM + k]));
                 }
+                if (reflection) {
+                    printf(" |");
+                    for (k = 0; k < NELF_REFLECTION_VALUES; k++)
+                        printf(" %08lx", (unsigned long)fbits(brick.reflection[(size_t)v * NELF_REFLECTION_VALUES + k]));
+                    printf(" |");
+                    for (k = 0; k < 4; k++) printf(" %08lx", (unsigned long)fbits(shape[4 * v + k]));
+                }
                 printf("\n");
             }
         } else {
@@ -317,7 +371,12 @@ static int dump(int argc, char **argv) {
                 printf("view_brick %lu %016llx %016llx\n", (unsigned long)b,
                        (unsigned long long)hash_floats(brick.view_coefficients, (size_t)NELF_BRICK_VOXELS * per_view),
                        (unsigned long long)hash_floats(toward, (size_t)NELF_LT_DIM * NELF_BRICK_VOXELS));
+            if (reflection)
+                printf("reflection_brick %lu %016llx %016llx\n", (unsigned long)b,
+                       (unsigned long long)hash_floats(brick.reflection, (size_t)NELF_REFLECTION_VALUES * NELF_BRICK_VOXELS),
+                       (unsigned long long)hash_floats(shape, 4 * (size_t)NELF_BRICK_VOXELS));
         }
+        free(shape);
         free(toward);
         free(lt);
         free(relit);

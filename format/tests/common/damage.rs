@@ -4,17 +4,19 @@
 //! (`include/nelf.h`) and checks it fails with the same error.
 //!
 //! Cases: truncations at every boundary and at random offsets, bit flips in every
-//! section and in the header and table, hand-made hostile headers and sections, and a
-//! seeded mini-fuzzer (truncations, bit flips, extreme header values, insertions and
-//! deletions). Every generator is deterministic (fixed seeds).
+//! section and in the header and table, hand-made hostile headers and sections (the
+//! view-dependent parts of format 1.2, `VDEP`/`VCOF`, and 1.3, `VREF`/`VRCO`, included),
+//! and a seeded mini-fuzzer (truncations, bit flips, extreme header values, insertions
+//! and deletions). Every generator is deterministic (fixed seeds).
 
 use super::{FileParts, boundaries, chunked_payload, resign, small_asset};
 use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS};
 use nelf_format::spec::{
     BRICK_VOXELS, HEADER_SIZE, KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA,
-    KIND_QUANT_PARAMS, KIND_VIEW, KIND_VIEW_COEFFICIENTS, SECTION_ENTRY_SIZE, SectionCodec,
+    KIND_QUANT_PARAMS, KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS,
+    REFLECTION_BYTES_PER_BRICK, SECTION_ENTRY_SIZE, SectionCodec,
 };
-use nelf_format::synthetic::{SyntheticField, synthetic_view};
+use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};
 use nelf_format::{
     Asset, CoefficientEncoding, Coefficients, FormatError, ViewDependence, WriteOptions, encode_asset,
 };
@@ -99,8 +101,17 @@ pub fn encoded_view(encoding: CoefficientEncoding) -> (Asset, Vec<u8>) {
     (asset, bytes)
 }
 
-/// Every intact file the generators damage, named: both encodings, without and with a
-/// view-dependent part.
+/// The intact reflection (format 1.3) asset and file: the PCA part with `encoding`
+/// (rank 4, about 8 bricks), a reflection part of 5 eyes and lobe exponent 20.
+pub fn encoded_reflection(encoding: CoefficientEncoding) -> (Asset, Vec<u8>) {
+    let mut asset = small_asset(encoding, 4, 21);
+    asset.reflection = Some(synthetic_reflection(&asset, 20.0, 5).unwrap());
+    let bytes = encode_asset(&asset, &options()).unwrap().0;
+    (asset, bytes)
+}
+
+/// Every intact file the generators damage, named: both encodings, without a
+/// view-dependent part, with a harmonic one and with a reflection part.
 fn intact_files() -> Vec<(String, Vec<u8>)> {
     ENCODINGS
         .into_iter()
@@ -108,6 +119,7 @@ fn intact_files() -> Vec<(String, Vec<u8>)> {
             [
                 (format!("{e:?}"), encoded(e).1),
                 (format!("{e:?} view"), encoded_view(e).1),
+                (format!("{e:?} reflection"), encoded_reflection(e).1),
             ]
         })
         .collect()
@@ -138,7 +150,7 @@ pub fn truncations() -> Vec<Damaged> {
 
 /// Single bit flips: 40 in every section (the error must name the section), every
 /// bit position of the header and table (some bit per byte), and 300 anywhere; in the
-/// view-dependent files, 40 in every section.
+/// view-dependent and reflection files, 40 in every section.
 pub fn bit_flips() -> Vec<Damaged> {
     let mut rng = Pcg64::seed_from_u64(2);
     let mut out = Vec::new();
@@ -157,7 +169,7 @@ pub fn bit_flips() -> Vec<Damaged> {
                 ));
             }
         }
-        if file.contains("view") {
+        if file.contains("view") || file.contains("reflection") {
             continue;
         }
         let encoding = file;
@@ -1054,6 +1066,405 @@ pub fn hostile_view_sections() -> Vec<Damaged> {
     out
 }
 
+/// One bit flipped in every byte of `VREF` and of `VRCO` (chunk table and chunk) of a
+/// one-brick reflection file, per encoding of the PCA part: each must be refused naming
+/// the section.
+pub fn reflection_byte_flips() -> Vec<Damaged> {
+    let mut out = Vec::new();
+    for encoding in ENCODINGS {
+        let field = SyntheticField::new(1, 3);
+        let mut asset = field.asset(2, encoding).unwrap();
+        asset.reflection = Some(synthetic_reflection(&asset, 12.0, 8).unwrap());
+        let bytes = encode_asset(&asset, &options()).unwrap().0;
+        let parts = FileParts::parse(&bytes);
+        for (entry, _) in &parts.sections {
+            if entry.kind != KIND_REFLECTION && entry.kind != KIND_REFLECTION_VALUES {
+                continue;
+            }
+            for i in 0..entry.stored_length as usize {
+                let at = entry.offset as usize + i;
+                let mut damaged = bytes.clone();
+                damaged[at] ^= 1 << (i % 8);
+                let name = entry.name();
+                out.push(Damaged::new(
+                    format!("{encoding:?} reflection flip at {at} in {name}"),
+                    damaged,
+                    Expect::error(move |e| e.to_string().contains(&name)),
+                ));
+            }
+        }
+    }
+    out
+}
+
+/// The decoded bytes of a `VREF` section: eye count, lobe exponent, eyes, then the
+/// `(scale, offset)` pairs of `VRCO`'s three values.
+fn vref_bytes(eye_count: u32, exponent: f32, eyes: &[[f32; 3]], pairs: &[[f32; 2]]) -> Vec<u8> {
+    let mut out = eye_count.to_le_bytes().to_vec();
+    out.extend(exponent.to_le_bytes());
+    out.extend(eyes.iter().flatten().flat_map(|v| v.to_le_bytes()));
+    out.extend(pairs.iter().flatten().flat_map(|v| v.to_le_bytes()));
+    out
+}
+
+/// Hand-made hostile reflection sections (format 1.3) with valid checksums: one of `VREF`
+/// and `VRCO` without the other, both view-dependent parts in one file, eye counts and
+/// lengths that disagree, the lobe exponent out of range, non-finite eyes, bad 8-bit
+/// parameters (a negative offset of the scale among them), bad zstd, a `VRCO` of the
+/// wrong length, shuffle, codec or chunk table, chunks over 4 MiB; each with the error it
+/// must give, which names the section. Exponents 1 and 200 and an offset of −0 are valid.
+pub fn hostile_reflection_sections() -> Vec<Damaged> {
+    let mut out = Vec::new();
+    let mut push = |parts: FileParts, what: &str, expect: Expect| {
+        out.push(Damaged::new(
+            format!("hostile reflection: {what}"),
+            parts.build(),
+            expect,
+        ));
+    };
+    let invalid_view = |needle: &'static str| {
+        Expect::error(move |e| matches!(e, FormatError::InvalidView(m) if m.contains(needle)))
+    };
+    for encoding in ENCODINGS {
+        let (asset, bytes) = encoded_reflection(encoding);
+        let part = asset.reflection.as_ref().unwrap();
+        let Coefficients::U8Affine {
+            scale, offset, codes, ..
+        } = &part.coefficients
+        else {
+            unreachable!("reflection values are 8-bit")
+        };
+        let pairs: Vec<[f32; 2]> = scale.iter().zip(offset).map(|(&s, &o)| [s, o]).collect();
+        let (exponent, eyes) = (part.exponent, part.eyes_m.clone());
+        let count = eyes.len() as u32;
+        let with_vref = |raw: Vec<u8>| {
+            let mut p = FileParts::parse(&bytes);
+            let n = raw.len() as u64;
+            p.replace(KIND_REFLECTION, SectionCodec::Raw, 0, raw, n);
+            p
+        };
+
+        // One section without the other, and two view-dependent parts in one file.
+        for (gone, name) in [
+            (KIND_REFLECTION, "VRCO without VREF"),
+            (KIND_REFLECTION_VALUES, "VREF without VRCO"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            p.sections.retain(|(e, _)| e.kind != gone);
+            push(p, name, invalid_view("without section"));
+        }
+        let view = FileParts::parse(&encoded_view(encoding).1);
+        for (kinds, name) in [
+            (
+                &[KIND_VIEW, KIND_VIEW_COEFFICIENTS][..],
+                "VDEP and VCOF beside VREF and VRCO",
+            ),
+            (&[KIND_VIEW][..], "VDEP beside VREF and VRCO"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            let at = p.sections.len() - 1;
+            for (i, kind) in kinds.iter().enumerate() {
+                let section = view
+                    .sections
+                    .iter()
+                    .find(|(e, _)| e.kind == *kind)
+                    .unwrap()
+                    .clone();
+                p.sections.insert(at + i, section);
+            }
+            push(p, name, invalid_view("VDEP and VREF are both present"));
+        }
+
+        // Eye counts and lengths.
+        for (n, name) in [
+            (0, "no eye"),
+            (17, "17 eyes"),
+            (count - 1, "one eye fewer than stored"),
+            (count + 1, "one eye more than stored"),
+        ] {
+            push(
+                with_vref(vref_bytes(n, exponent, &eyes, &pairs)),
+                name,
+                invalid_view("eyes do not fit"),
+            );
+        }
+        let mut long = vref_bytes(count, exponent, &eyes, &pairs);
+        long.extend([0; 4]);
+        push(
+            with_vref(long),
+            "VREF 4 bytes too long",
+            invalid_view("decoded bytes"),
+        );
+        let seventeen = vec![[0.1, 0.2, 0.3]; 17];
+        push(
+            with_vref(vref_bytes(17, exponent, &seventeen, &pairs)),
+            "VREF of 17 eyes",
+            invalid_view("decoded bytes"),
+        );
+        push(
+            with_vref(vref_bytes(count, exponent, &[], &[])),
+            "VREF shorter than one eye",
+            invalid_view("decoded bytes"),
+        );
+        let full = vref_bytes(count, exponent, &eyes, &pairs);
+        push(
+            with_vref(full[..full.len() - 12].to_vec()),
+            "VREF cut by one eye's bytes",
+            invalid_view("eyes do not fit"),
+        );
+        let mut p = FileParts::parse(&bytes);
+        p.section_mut(KIND_REFLECTION).0.raw_length = 1 << 40;
+        push(p, "VREF huge", invalid_view("decoded bytes"));
+        let mut p = with_vref(full.clone());
+        p.section_mut(KIND_REFLECTION).0.raw_length += 12;
+        push(
+            p,
+            "VREF stored raw, declaring one eye more",
+            Expect::error(|e| matches!(e, FormatError::BadCodec { section, .. } if section == "VREF")),
+        );
+        // zstd that decodes short, and zstd garbage.
+        let n = full.len() as u64;
+        for (stored, name) in [
+            (
+                zstd::bulk::compress(&full[..full.len() - 12], 3).unwrap(),
+                "VREF zstd short",
+            ),
+            (vec![0x28, 0xb5, 0x2f, 0xfd, 1, 2, 3, 4, 5], "VREF zstd garbage"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            p.replace(KIND_REFLECTION, SectionCodec::Zstd, 0, stored, n);
+            push(
+                p,
+                name,
+                Expect::error(|e| matches!(e, FormatError::Zstd { what, .. } if what.contains("VREF"))),
+            );
+        }
+
+        // The lobe exponent: 1..=200.
+        for (value, name) in [
+            (0.5, "exponent 0.5"),
+            (0.0, "exponent 0"),
+            (-20.0, "negative exponent"),
+            (200.5, "exponent 200.5"),
+            (f32::NAN, "NaN exponent"),
+            (f32::INFINITY, "infinite exponent"),
+        ] {
+            push(
+                with_vref(vref_bytes(count, value, &eyes, &pairs)),
+                name,
+                invalid_view("lobe exponent"),
+            );
+        }
+        for value in [1.0, 200.0] {
+            push(
+                with_vref(vref_bytes(count, value, &eyes, &pairs)),
+                &format!("exponent {value} (accepted)"),
+                Expect::Anything,
+            );
+        }
+
+        // Non-finite eyes, named.
+        for (eye, axis, value) in [(2, 1, f32::NAN), (0, 2, f32::NEG_INFINITY)] {
+            let mut e = eyes.clone();
+            e[eye][axis] = value;
+            let needle = format!("section VREF eye {eye}");
+            push(
+                with_vref(vref_bytes(count, exponent, &e, &pairs)),
+                &format!("non-finite eye {eye}"),
+                Expect::error(move |e| matches!(e, FormatError::NonFinite { what } if *what == needle)),
+            );
+        }
+
+        // The 8-bit parameters: a negative offset of the scale (−0 is fine), then the rules
+        // of QPRM (values chosen to print alike in C and Rust).
+        let mut negative = pairs.clone();
+        negative[2][1] = -0.5;
+        push(
+            with_vref(vref_bytes(count, exponent, &eyes, &negative)),
+            "negative offset of the scale",
+            invalid_view("offset -0.5 is negative"),
+        );
+        let mut zero = pairs.clone();
+        zero[2][1] = -0.0;
+        push(
+            with_vref(vref_bytes(count, exponent, &eyes, &zero)),
+            "offset -0 of the scale (accepted)",
+            Expect::Anything,
+        );
+        for (k, pair, name) in [
+            (0, [-0.5, 2.0], "negative VREF scale"),
+            (1, [f32::NAN, 2.0], "NaN VREF scale"),
+            (2, [2e36, 2.0], "VREF offset + 255 scale overflows"),
+            (1, [0.25, f32::INFINITY], "infinite VREF offset"),
+        ] {
+            let mut p = pairs.clone();
+            p[k] = pair;
+            let needle = format!("section VREF component {k}");
+            push(
+                with_vref(vref_bytes(count, exponent, &eyes, &p)),
+                name,
+                Expect::error(move |e| {
+                    matches!(
+                        e,
+                        FormatError::NonFinite { what } | FormatError::InvalidValue { what, .. }
+                            if what.starts_with(&needle)
+                    )
+                }),
+            );
+        }
+
+        // VRCO's entry and chunk table.
+        for (shuffle, name) in [
+            (None, "VRCO raw length one brick more"),
+            (Some(5), "VRCO shuffle 5"),
+            (Some(1024), "VRCO shuffle 1024"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            let (e, _) = p.section_mut(KIND_REFLECTION_VALUES);
+            match shuffle {
+                Some(width) => e.shuffle = width,
+                None => e.raw_length += REFLECTION_BYTES_PER_BRICK,
+            }
+            push(
+                p,
+                name,
+                Expect::error(|e| {
+                    matches!(
+                        e,
+                        FormatError::SectionLength { section, .. } | FormatError::BadCodec { section, .. }
+                            if section == "VRCO"
+                    )
+                }),
+            );
+        }
+        for (kind, codec, name) in [
+            (KIND_REFLECTION_VALUES, SectionCodec::Zstd, "VRCO codec 1"),
+            (KIND_REFLECTION_VALUES, SectionCodec::Raw, "VRCO codec 0"),
+            (KIND_REFLECTION, SectionCodec::ChunkedZstd, "VREF codec 2"),
+            (KIND_REFLECTION, SectionCodec::Unknown(9), "VREF codec 9"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            p.section_mut(kind).0.codec = codec;
+            let want = kind_text(kind);
+            push(
+                p,
+                name,
+                Expect::error(
+                    move |e| matches!(e, FormatError::BadCodec { section, .. } if *section == want),
+                ),
+            );
+        }
+        let (entry, table) = FileParts::parse(&bytes)
+            .section_mut(KIND_REFLECTION_VALUES)
+            .clone();
+        let mut lying = table.clone();
+        lying[8..16].copy_from_slice(&u64::MAX.to_le_bytes());
+        let mut p = FileParts::parse(&bytes);
+        p.replace(
+            KIND_REFLECTION_VALUES,
+            SectionCodec::ChunkedZstd,
+            entry.shuffle,
+            lying,
+            entry.raw_length,
+        );
+        push(
+            p,
+            "VRCO chunk length",
+            Expect::error(|e| matches!(e, FormatError::BadChunkTable { section, .. } if section == "VRCO")),
+        );
+        let chunks = asset.bricks.len().div_ceil(CHUNK_BRICKS);
+        let mut empty = Vec::new();
+        for _ in 0..chunks {
+            empty.extend_from_slice(&((24 * chunks) as u64).to_le_bytes());
+            empty.extend_from_slice(&0u64.to_le_bytes());
+            empty.extend_from_slice(&nelf_format::spec::checksum(&[]).to_le_bytes());
+        }
+        let mut p = FileParts::parse(&bytes);
+        p.replace(
+            KIND_REFLECTION_VALUES,
+            SectionCodec::ChunkedZstd,
+            entry.shuffle,
+            empty,
+            entry.raw_length,
+        );
+        push(
+            p,
+            "VRCO empty chunks",
+            Expect::error(
+                |e| matches!(e, FormatError::ImplausibleLength { what, .. } if what.contains("VRCO")),
+            ),
+        );
+        // A chunk of a damaged VRCO (valid checksum) that decodes to too few bytes.
+        // Chunk 0 re-encoded one voxel short, the table's tiling and checksums kept valid.
+        let brick_bytes = REFLECTION_BYTES_PER_BRICK as usize;
+        let intact = chunked_payload(codes, brick_bytes, CHUNK_BRICKS, 3);
+        let short = &codes[..CHUNK_BRICKS * brick_bytes - 3];
+        let first = zstd::bulk::compress(&nelf_format::spec::shuffle(short, 3), 3).unwrap();
+        let short_chunk = replace_chunk(&intact, 0, &first);
+        let mut p = FileParts::parse(&bytes);
+        p.replace(
+            KIND_REFLECTION_VALUES,
+            SectionCodec::ChunkedZstd,
+            3,
+            short_chunk,
+            entry.raw_length,
+        );
+        push(
+            p,
+            "VRCO chunk 0 decodes short",
+            Expect::error(|e| matches!(e, FormatError::Zstd { what, .. } if what == "section VRCO chunk 0")),
+        );
+
+        // VRCO chunks over 4 MiB: rank 1 (at most 1024 bytes a brick elsewhere) with 4096-brick
+        // chunks passes the header's limit, but VRCO's 1536 bytes a brick do not.
+        let mut small = small_asset(encoding, 1, 21);
+        small.reflection = Some(synthetic_reflection(&small, 20.0, 5).unwrap());
+        let mut p = FileParts::parse(&encode_asset(&small, &options()).unwrap().0);
+        p.header[108..112].copy_from_slice(&4096u32.to_le_bytes());
+        push(
+            p,
+            "VRCO chunks over 4 MiB",
+            Expect::error(
+                |e| matches!(e, FormatError::CountTooLarge { what, .. } if what.contains("VRCO chunk")),
+            ),
+        );
+    }
+    out
+}
+
+/// `kind` as the reader names it.
+fn kind_text(kind: [u8; 4]) -> String {
+    String::from_utf8_lossy(&kind).into_owned()
+}
+
+/// The chunked section `section` (chunk table and chunks) with chunk `index` replaced by
+/// `stored`: the table's offsets, lengths and checksums follow.
+fn replace_chunk(section: &[u8], index: usize, stored: &[u8]) -> Vec<u8> {
+    let first = u64::from_le_bytes(section[..8].try_into().unwrap()) as usize;
+    let count = first / 24;
+    let mut chunks: Vec<Vec<u8>> = (0..count)
+        .map(|i| {
+            let e = &section[24 * i..24 * i + 24];
+            let offset = u64::from_le_bytes(e[..8].try_into().unwrap()) as usize;
+            let length = u64::from_le_bytes(e[8..16].try_into().unwrap()) as usize;
+            section[offset..offset + length].to_vec()
+        })
+        .collect();
+    chunks[index] = stored.to_vec();
+    let mut table = Vec::new();
+    let mut offset = first as u64;
+    for c in &chunks {
+        table.extend_from_slice(&offset.to_le_bytes());
+        table.extend_from_slice(&(c.len() as u64).to_le_bytes());
+        table.extend_from_slice(&nelf_format::spec::checksum(c).to_le_bytes());
+        offset += c.len() as u64;
+    }
+    for c in &chunks {
+        table.extend_from_slice(c);
+    }
+    table
+}
+
 /// [`options`] with `chunk_bricks` bricks per chunk.
 fn options_with(chunk_bricks: u32) -> WriteOptions {
     WriteOptions {
@@ -1070,6 +1481,8 @@ pub fn all() -> Vec<Damaged> {
     out.extend(hostile_sections());
     out.extend(view_byte_flips());
     out.extend(hostile_view_sections());
+    out.extend(reflection_byte_flips());
+    out.extend(hostile_reflection_sections());
     out.extend(mutations());
     out
 }
