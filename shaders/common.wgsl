@@ -6,9 +6,10 @@
 //   x and y, so slot coordinates are bit operations.
 // * March grid: per cube of voxels, the distance to σ > 0 and the slot of its brick cell.
 // * Writing a voxel into the atlas: the texels (own slot and neighbours' aprons) that
-//   hold it, from its brick's neighbour block; shared by the relight and view passes.
+//   hold it, from its brick's neighbour block (the store itself, which names the atlas
+//   binding, is atlas_store.wgsl's); shared by the relight, view and reflect passes.
 // * f16 ↔ f32 by hand, the view harmonics of format 1.2 and the per-voxel lobe buffer layout
-//   the relight pass writes for the view pass.
+//   the relight pass writes for the view and reflect passes.
 // * Full-screen triangle, ray–box slab test, hashing for jitter, ACES (Narkowicz 2015 fit) tone mapping,
 //   and the sRGB transfer function (IEC 61966-2-1).
 
@@ -72,22 +73,9 @@ fn voxel_octant(local: vec3<i32>) -> u32 {
 // neighbour's in the apron, and 0 where that brick is missing (never written: wgpu
 // creates textures zeroed; the CPU reference counts missing voxels as 0) — so hardware
 // trilinear filtering inside a slot equals the reference's trilinear across brick
-// borders. A pass writes `value` with
-//
-//   let border = voxel_border(local);
-//   for (var ez = 0u; ez <= border.z; ez++) {
-//       for (var ey = 0u; ey <= border.y; ey++) {
-//           for (var ex = 0u; ex <= border.x; ex++) {
-//               let texel = voxel_texel(block_low, block_high, packing, local, vec3<u32>(ex, ey, ez));
-//               if texel.w != 0 { textureStore(atlas, texel.xyz, value); }
-//           }
-//       }
-//   }
-//
-// (`block_low`/`block_high`: entries 0–3 and 4–7 of the voxel's neighbour block). The
-// store stays in the pass: a storage texture cannot be a function argument in GLSL, which
-// the shaders are exported to, and gathering the texels in an array for the caller made
-// the relight pass ≈ 10 % slower on lavapipe.
+// borders. A pass writes a voxel's value with atlas_store.wgsl's `store_voxel_texels`,
+// which visits entries e ≤ voxel_border(local) of the voxel's neighbour block
+// (`block_low`/`block_high`: entries 0–3 and 4–7).
 
 // 1 on the axes where voxel `local` borders the neighbouring cell of its octant.
 fn voxel_border(local: vec3<i32>) -> vec3<u32> {
@@ -187,13 +175,20 @@ fn view_harmonics(omega: vec3<f32>) -> array<vec4<f32>, 3> {
 }
 
 // The per-voxel lobe buffer of a view-dependent asset (written by relight.wgsl's
-// `relight_lobes` once per lighting change, read by view.wgsl per camera move): per
+// `relight_lobes` once per lighting change, read by view.wgsl or reflect.wgsl per camera
+// move; a reflection asset's has no lobes, J = 0: the radiance and σ only): per
 // voxel, halves (f16) h = 0, 1, 2: the view-independent radiance (rgb), h = 3: σ (the
 // stored f16 bits), h = 4 + 3j + c: lobe j's colour in channel c; two halves per u32
 // word, low half first, word-major like the coefficients (word q of voxel v at
 // q · voxels + v). Words per voxel for `lobes` lobes:
 fn lobe_buffer_words(lobes: u32) -> u32 {
     return 2u + (3u * lobes + 1u) / 2u;
+}
+
+// The view-independent radiance (rgb) and σ (a) of a voxel from its first two lobe-buffer
+// words (word 0 of the voxel: halves 0, 1; word 1: halves 2, 3).
+fn lobe_buffer_radiance(word0: u32, word1: u32) -> vec4<f32> {
+    return vec4<f32>(half_of(word0, 0u), half_of(word0, 1u), half_of(word1, 0u), half_of(word1, 1u));
 }
 
 // Largest lobe count (nelf_format::conventions::VIEW_HARMONICS, 9).

@@ -10,7 +10,7 @@
 // `relight`: one invocation per stored voxel (brick b, local l ∈ [0, 8)³; `relight_marked`:
 // per voxel of the list a marking march made, viewer/src/gpu/marks.rs): its K-term
 // dot product, with its density, is written to every atlas texel that holds it — its own
-// slot and the aprons of the neighbouring slots (common.wgsl, `voxel_texel`). rgb =
+// slot and the aprons of the neighbouring slots (atlas_store.wgsl). rgb =
 // radiance, a = σ (1/m). Each voxel is shaded once however many texels show it.
 //
 // `relight_lobes` (view-dependent assets, format 1.2; mirrors nelf_render::view): the
@@ -19,9 +19,11 @@
 // the view coefficients' dequantisation the same way: c_j = lobe_mean_j + Σ_i q_ji ·
 // view_light[j·K_v + i]), written as halves to the per-voxel lobe buffer (common.wgsl,
 // `lobe_buffer_words`) instead of the atlas: view.wgsl adds the lobes toward the eye and
-// fills the atlas whenever the camera moves.
+// fills the atlas whenever the camera moves. A reflection asset (format 1.3) runs it with
+// no lobes (J = 0: radiance and σ only) before reflect.wgsl.
 
 #import "common.wgsl"
+#import "atlas_store.wgsl"
 
 // Mirrors `RelightParams` in viewer/src/shaders.rs.
 struct RelightParams {
@@ -54,10 +56,7 @@ const MAX_RANK: u32 = 384u;
 @group(0) @binding(2) var<storage, read> coefficients: array<u32>;
 // Density σ (1/m) as f16, two voxels per word.
 @group(0) @binding(3) var<storage, read> density: array<u32>;
-// Per present brick and octant, the atlas slots its voxels can be written to
-// (common.wgsl, `voxel_texel`).
-@group(0) @binding(4) var<storage, read> neighbour_blocks: array<vec4<u32>>;
-@group(0) @binding(5) var atlas: texture_storage_3d<rgba16float, write>;
+// Bindings 4 (neighbour blocks) and 5 (the atlas): atlas_store.wgsl.
 
 // relight_lobes only. The view lighting folded with the view dequantisation: entry
 // j < MAX_LOBES is lobe j's mean colour (rgb), entry MAX_LOBES + n the per-code colour of
@@ -154,23 +153,7 @@ fn store_voxel(v: u32, radiance: vec3<f32>) {
     if params.words.z == 1u {
         rgb = abs(rgb);
     }
-    let value = vec4<f32>(rgb, voxel_density(v));
-    let local = voxel_local(v);
-    let block = (v / 512u * 8u + voxel_octant(local)) * 2u;
-    let block_low = neighbour_blocks[block];
-    let block_high = neighbour_blocks[block + 1u];
-    let packing = SlotPacking(params.atlas.x, params.atlas.y);
-    let border = voxel_border(local);
-    for (var ez = 0u; ez <= border.z; ez++) {
-        for (var ey = 0u; ey <= border.y; ey++) {
-            for (var ex = 0u; ex <= border.x; ex++) {
-                let texel = voxel_texel(block_low, block_high, packing, local, vec3<u32>(ex, ey, ez));
-                if texel.w != 0 {
-                    textureStore(atlas, texel.xyz, value);
-                }
-            }
-        }
-    }
+    store_voxel_texels(v, SlotPacking(params.atlas.x, params.atlas.y), vec4<f32>(rgb, voxel_density(v)));
 }
 
 // Shades the voxels `v` (`count` ≤ 4 of them valid; the others repeat a valid one) and

@@ -10,12 +10,13 @@
 // the relight pass wrote once per lighting change (common.wgsl, `lobe_buffer_words`).
 // The direction is taken per voxel, not per sample, so the march is unchanged: the
 // result is written with σ into every atlas texel that holds the voxel (its slot and the
-// neighbours' aprons, common.wgsl `voxel_texel`), as the relight pass does for a
+// neighbours' aprons, atlas_store.wgsl), as the relight pass does for a
 // view-independent asset. Positions are lattice coordinates (voxel centres at
 // 8·cell + local), which give world directions: the lattice is the world scaled and
 // shifted.
 
 #import "common.wgsl"
+#import "atlas_store.wgsl"
 
 // Mirrors `ViewParams` in viewer/src/shaders.rs.
 struct ViewParams {
@@ -35,10 +36,7 @@ struct ViewParams {
 @group(0) @binding(1) var<storage, read> voxel_lobes: array<u32>;
 // Brick-cell coordinates of every present brick (common.wgsl, `brick_cell`).
 @group(0) @binding(2) var<storage, read> brick_cells: array<vec2<u32>>;
-// Per present brick and octant, the atlas slots its voxels can be written to
-// (common.wgsl, `voxel_texel`).
-@group(0) @binding(3) var<storage, read> neighbour_blocks: array<vec4<u32>>;
-@group(0) @binding(4) var atlas: texture_storage_3d<rgba16float, write>;
+// Bindings 4 (neighbour blocks) and 5 (the atlas): atlas_store.wgsl.
 
 @compute @workgroup_size(64, 1, 1)
 fn view(@builtin(global_invocation_id) gid: vec3<u32>) {
@@ -51,9 +49,8 @@ fn view(@builtin(global_invocation_id) gid: vec3<u32>) {
     let cell = brick_cell(brick_cells[v / 512u]);
     let local = voxel_local(v);
     let y = view_harmonics(params.eye_u.xyz - vec3<f32>(cell * BRICK + local));
-    let base_rg = voxel_lobes[v];
-    let base_b_sigma = voxel_lobes[voxels + v];
-    var rgb = vec3<f32>(half_of(base_rg, 0u), half_of(base_rg, 1u), half_of(base_b_sigma, 0u));
+    let base = lobe_buffer_radiance(voxel_lobes[v], voxel_lobes[voxels + v]);
+    var rgb = base.rgb;
     for (var j = 0u; j < lobes; j++) {
         let weight = dot(params.lobes[3u * j], y[0]) + dot(params.lobes[3u * j + 1u], y[1])
             + dot(params.lobes[3u * j + 2u], y[2]);
@@ -68,20 +65,5 @@ fn view(@builtin(global_invocation_id) gid: vec3<u32>) {
         );
         rgb += weight * colour;
     }
-    let value = vec4<f32>(rgb, half_of(base_b_sigma, 1u));
-    let block = (v / 512u * 8u + voxel_octant(local)) * 2u;
-    let block_low = neighbour_blocks[block];
-    let block_high = neighbour_blocks[block + 1u];
-    let packing = SlotPacking(params.atlas.x, params.atlas.y);
-    let border = voxel_border(local);
-    for (var ez = 0u; ez <= border.z; ez++) {
-        for (var ey = 0u; ey <= border.y; ey++) {
-            for (var ex = 0u; ex <= border.x; ex++) {
-                let texel = voxel_texel(block_low, block_high, packing, local, vec3<u32>(ex, ey, ez));
-                if texel.w != 0 {
-                    textureStore(atlas, texel.xyz, value);
-                }
-            }
-        }
-    }
+    store_voxel_texels(v, SlotPacking(params.atlas.x, params.atlas.y), vec4<f32>(rgb, base.a));
 }

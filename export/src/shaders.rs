@@ -1,5 +1,5 @@
-//! Engine shaders: the viewer's relight, march, display and view passes translated from
-//! our WGSL (the same `#import`-resolved source the viewer compiles,
+//! Engine shaders: the viewer's relight, march, display, view and reflect passes
+//! translated from our WGSL (the same `#import`-resolved source the viewer compiles,
 //! `nelf_render::wgsl`) to GLSL 4.50 (one file per entry point, as GLSL has one
 //! `main`) and HLSL (Shader Model 5.1, one file per pass) by naga's back ends, never
 //! by hand, so an engine port starts from exactly what our viewer runs.
@@ -20,18 +20,20 @@ use std::path::{Path, PathBuf};
 
 use naga::back::{glsl, hlsl};
 use naga::valid::{Capabilities, ValidationFlags, Validator};
-use nelf_render::wgsl::{DISPLAY_WGSL, MARCH_WGSL, RELIGHT_WGSL, VIEW_WGSL, preprocess};
+use nelf_render::wgsl::{DISPLAY_WGSL, MARCH_WGSL, REFLECT_WGSL, RELIGHT_WGSL, VIEW_WGSL, preprocess};
 use serde::Serialize;
 
 use crate::ExportError;
 
 /// The passes an engine needs: (file stem, WGSL text). `view` only for a view-dependent
-/// asset (format 1.2): per voxel toward the eye, after the relight, before the march.
+/// asset (format 1.2) and `reflect` only for a reflection asset (format 1.3): per voxel
+/// toward the eye, after the relight, before the march.
 pub const ENGINE_PASSES: &[(&str, &str)] = &[
     ("relight", RELIGHT_WGSL),
     ("march", MARCH_WGSL),
     ("display", DISPLAY_WGSL),
     ("view", VIEW_WGSL),
+    ("reflect", REFLECT_WGSL),
 ];
 
 /// One translated entry point.

@@ -574,7 +574,8 @@ pub fn filtered_environment(
             matrix: world_from_env.to_cols_array(),
         });
     }
-    let light = nelf_format::conventions::project_envmap(env, world_from_env.transpose() * asset.world_from_light)?;
+    let light =
+        nelf_format::conventions::project_envmap(env, world_from_env.transpose() * asset.world_from_light)?;
     Ok(ReflectionLobe::new(reflection.exponent, asset.world_from_light).filter(&light))
 }
 

@@ -112,7 +112,10 @@ impl ReflectionLobe {
         let mut out = [0.0f32; ENV_TEXELS];
         for (node, w) in lobe_table_corners((self.light_from_world * r).to_array()) {
             if w > 0.0 {
-                for (o, g) in out.iter_mut().zip(&self.table[node * ENV_TEXELS..(node + 1) * ENV_TEXELS]) {
+                for (o, g) in out
+                    .iter_mut()
+                    .zip(&self.table[node * ENV_TEXELS..(node + 1) * ENV_TEXELS])
+                {
                     *o += w * g;
                 }
             }
@@ -180,8 +183,8 @@ impl FilteredEnvironment {
     pub fn at(&self, r: Vec3) -> [f32; 3] {
         let mut out = [0.0f32; 3];
         for (node, w) in lobe_table_corners((self.light_from_world * r).to_array()) {
-            for c in 0..3 {
-                out[c] += w * self.nodes[node][c];
+            for (o, e) in out.iter_mut().zip(self.nodes[node]) {
+                *o += w * e;
             }
         }
         out
@@ -319,7 +322,10 @@ mod tests {
             let e = filtered.at(r);
             for c in 0..3 {
                 let want: f32 = g.iter().zip(&texels).map(|(g, l)| g * l[c]).sum();
-                assert!((e[c] - want).abs() <= 1e-4 * want.abs().max(1.0), "{e:?} vs {want}");
+                assert!(
+                    (e[c] - want).abs() <= 1e-4 * want.abs().max(1.0),
+                    "{e:?} vs {want}"
+                );
             }
             // And toward an eye it is the cosine times E at the mirror direction.
             let n = (r + Vec3::Z).normalize();
@@ -327,7 +333,10 @@ mod tests {
             let h = lobe.transport(toward, n);
             let seen = filtered.toward(toward, n);
             let want: f32 = h.iter().zip(&texels).map(|(h, l)| h * l[1]).sum();
-            assert!((seen[1] - want).abs() <= 1e-4 * want.max(1.0), "{seen:?} vs {want}");
+            assert!(
+                (seen[1] - want).abs() <= 1e-4 * want.max(1.0),
+                "{seen:?} vs {want}"
+            );
         }
     }
 

@@ -28,11 +28,21 @@ pub const DISPLAY_WGSL: &str = include_str!("../../shaders/display.wgsl");
 /// The view pass of view-dependent assets (format 1.2; compute, one invocation per
 /// voxel, run when the eye or the lighting changed).
 pub const VIEW_WGSL: &str = include_str!("../../shaders/view.wgsl");
+/// The reflect pass of reflection assets (format 1.3; compute: `reflect_mean` per lighting
+/// change, `reflect_toward_eye` per voxel when the eye or the lighting changed).
+pub const REFLECT_WGSL: &str = include_str!("../../shaders/reflect.wgsl");
+/// Writing a voxel into the atlas, shared by the passes that fill it (imported; declares
+/// their neighbour-block and atlas bindings).
+pub const ATLAS_STORE_WGSL: &str = include_str!("../../shaders/atlas_store.wgsl");
 /// The benchmark's bare dense-texture march (the speed ceiling of a texture march).
 pub const DENSE_MARCH_WGSL: &str = include_str!("../../shaders/dense_march.wgsl");
 
 /// Files that `#import` may name, with their text.
-pub const LIBRARY: &[(&str, &str)] = &[("common.wgsl", COMMON_WGSL), ("march_core.wgsl", MARCH_CORE_WGSL)];
+pub const LIBRARY: &[(&str, &str)] = &[
+    ("common.wgsl", COMMON_WGSL),
+    ("march_core.wgsl", MARCH_CORE_WGSL),
+    ("atlas_store.wgsl", ATLAS_STORE_WGSL),
+];
 
 /// The entry shaders: (file name, text).
 pub const PASSES: &[(&str, &str)] = &[
@@ -41,6 +51,7 @@ pub const PASSES: &[(&str, &str)] = &[
     ("display.wgsl", DISPLAY_WGSL),
     ("dense_march.wgsl", DENSE_MARCH_WGSL),
     ("view.wgsl", VIEW_WGSL),
+    ("reflect.wgsl", REFLECT_WGSL),
 ];
 
 /// A problem found while resolving `#import` lines.

@@ -40,8 +40,9 @@ pub struct ExportArgs {
 pub enum ExportCommand {
     /// One OpenVDB file (OpenVDB 10): density, relit colour, PCA coefficient grids.
     Vdb(VdbArgs),
-    /// The relight, march and display passes as GLSL 4.50 and HLSL (translated from our
-    /// WGSL by naga), with `shaders.json` naming entry points and bindings.
+    /// The relight, march, display, view and reflect passes as GLSL 4.50 and HLSL
+    /// (translated from our WGSL by naga), with `shaders.json` naming entry points and
+    /// bindings.
     Shaders(ShadersArgs),
     /// A self-contained web page (the viewer built for the browser, WebGPU or WebGL2; the
     /// asset; its map) that any static file server can host.

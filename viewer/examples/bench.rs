@@ -3,13 +3,16 @@
 //! compare ratios taken in one run).
 //!
 //! ```text
-//! cargo run --release -p nelf-viewer --example bench -- [ASSET.nelf ...] [--reps N] [--view]
+//! cargo run --release -p nelf-viewer --example bench -- [ASSET.nelf ...] [--reps N] [--view] [--reflect]
 //! ```
 //!
 //! Without assets it builds a synthetic portrait-sized asset (`nelf_format::synthetic`,
 //! ≈ 300 k voxels, K = 12, 8-bit coefficients). `--view` gives every asset without one a
 //! synthetic view-dependent part (format 1.2: J = 3 lobes, `K_v` = 8, 8-bit coefficients;
-//! `nelf_format::synthetic::synthetic_view`). For each asset it prints, as markdown:
+//! `nelf_format::synthetic::synthetic_view`); `--reflect` gives every asset with neither
+//! part a synthetic reflection part (format 1.3, λ = 20, five eyes;
+//! `nelf_format::synthetic::synthetic_reflection`); an asset file may bring either part
+//! itself. For each asset it prints, as markdown:
 //! GPU memory, relight-pass ms, frame ms at 512² and 1920×1080 with relighting every
 //! frame and without (the march alone over the precomputed RGBA atlas) and their ratio
 //! (at a held camera: the frame relit per pixel from its cache where it fits the cache,
@@ -27,7 +30,10 @@
 //! reference's own time for that frame. For a view-dependent asset also frame ms at 512²
 //! and 1080p with the camera static (the march alone) and moving every frame (view pass +
 //! march), beside the same asset without its view part, as ratios, and the view pass's
-//! own ms.
+//! own ms. For a reflection asset, at 512², frame ms beside the same asset without its
+//! reflection part: static, moving, relit every frame (camera held; camera moving too)
+//! and with the lighting turned every frame (the CPU's projection and, with the part,
+//! its lobe filter included), and the reflect pass's own ms.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -35,7 +41,7 @@ use std::time::Instant;
 use glam::{DMat3, DVec3};
 use nelf_format::conventions::{LatLong, PinholeCamera, direction, rotation_y};
 use nelf_format::synthetic::SyntheticField;
-use nelf_format::synthetic::synthetic_view;
+use nelf_format::synthetic::{synthetic_reflection, synthetic_view};
 use nelf_format::{Asset, CoefficientEncoding, WriteOptions, read_asset, write_asset};
 use nelf_render::{Image, MarchSettings, render_asset};
 use nelf_viewer::shaders::{DENSE_MARCH_WGSL, DenseParams, preprocess};
@@ -341,6 +347,94 @@ fn bench_view_dependence(gpu: &mut GpuRenderer, asset: &Asset, reps: usize) -> R
     Ok(())
 }
 
+/// A reflection asset against itself without its reflection part, at 512²: frame ms with
+/// the camera static (the march alone), moving every frame (a new eye: reflect pass +
+/// march with the part), relit every frame at a held camera (without the part the viewer
+/// replays the held frame's pixels, `gpu/replay.rs`; with it, relight + `reflect_mean` +
+/// reflect pass + march), relit every frame with the camera moving too (a full relight
+/// and march either way) and with the lighting turned every frame at a held camera (the
+/// CPU's projection, with the part also its lobe filter, plus the GPU's work), and the
+/// reflect pass alone. The eleven measurements are interleaved, each on its own renderer,
+/// so that no measurement disturbs another's state.
+fn bench_reflection(asset: &Asset, reps: usize) -> Result<(), BoxError> {
+    // Jobs 2k without the part, 2k + 1 with it; job 10 the reflect pass alone.
+    const ROWS: [&str; 5] = [
+        "static (march)",
+        "moving (new eye every frame)",
+        "relit every frame, camera held",
+        "relit every frame, camera moving",
+        "lighting turned every frame, camera held (CPU projection + GPU)",
+    ];
+    let Some(reflection) = &asset.reflection else {
+        return Ok(());
+    };
+    let mut flat = asset.clone();
+    flat.reflection = None;
+    let env = sky()?;
+    let (w, h) = (512u32, 512u32);
+    let camera = portrait_camera(asset, w, h);
+    let settings = ViewSettings {
+        march: MarchSettings::default(),
+        jitter: false,
+        frame_index: 0,
+        view: MarchView::Shaded,
+        pass: MarchPass::Fragment,
+    };
+    let mut renderers = Vec::with_capacity(2 * ROWS.len() + 1);
+    for job in 0..=2 * ROWS.len() {
+        let mut gpu = GpuRenderer::new_headless()?;
+        gpu.load_asset(if job % 2 == 0 && job < 2 * ROWS.len() {
+            &flat
+        } else {
+            asset
+        })?;
+        gpu.set_lighting(&env, DMat3::IDENTITY)?;
+        renderers.push(gpu);
+    }
+    let mut frame = 0u32;
+    let mut angle = 0.0f64;
+    let times = time_interleaved(reps, renderers.len(), |job| {
+        frame += 1;
+        let moving = orbit_camera(asset, w, h, 20.0 + 0.25 * f64::from(frame % 40));
+        let gpu = &mut renderers[job];
+        match job / 2 {
+            0 => gpu.frame_blocking(&camera, &settings)?,
+            1 => gpu.frame_blocking(&moving, &settings)?,
+            2 => {
+                gpu.invalidate_lighting();
+                gpu.frame_blocking(&camera, &settings)?;
+            }
+            3 => {
+                gpu.invalidate_lighting();
+                gpu.frame_blocking(&moving, &settings)?;
+            }
+            4 => {
+                angle += 0.1;
+                gpu.set_light_rotation(rotation_y(angle))?;
+                gpu.frame_blocking(&camera, &settings)?;
+            }
+            _ => gpu.view_pass_blocking(&moving)?,
+        }
+        Ok(())
+    })?;
+    println!(
+        "\nReflection part (λ = {}, {} eyes): frame ms (fragment march) at {w}×{h} of the asset against \
+         itself without its reflection part, the {} measurements interleaved, each on its own renderer; \
+         ratio = with / without (fastest runs)\n",
+        reflection.exponent,
+        reflection.eyes_m.len(),
+        times.len()
+    );
+    println!("| 512² frame | without the part (ms) | with the part (ms) | ratio |");
+    println!("| --- | --- | --- | --- |");
+    for (row, what) in ROWS.iter().enumerate() {
+        let (without, with) = (times[2 * row], times[2 * row + 1]);
+        println!("| {what} | {without} | {with} | {:.2} |", with.min / without.min);
+    }
+    println!("| reflect pass alone | — | {} | — |", times[2 * ROWS.len()]);
+    Ok(())
+}
+
 fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) -> Result<(), BoxError> {
     let mut notes = Vec::new();
     let start = Instant::now();
@@ -356,10 +450,11 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
         info.halo_slots,
         info.bricks * 512,
         info.rank,
-        info.view.map_or_else(
-            || "view-independent".to_string(),
-            |v| format!("view-dependent (J = {}, K_v = {})", v.lobes, v.rank)
-        ),
+        match (info.view, info.reflection) {
+            (Some(v), _) => format!("view-dependent (J = {}, K_v = {})", v.lobes, v.rank),
+            (None, Some(r)) => format!("reflection part (λ = {}, {} eyes)", r.exponent, r.eyes),
+            (None, None) => "view-independent".to_string(),
+        },
         info.atlas_texels[0],
         info.atlas_texels[1],
         info.atlas_texels[2]
@@ -559,19 +654,23 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
     println!(
         "held camera at 256², lighting turned 3 times ({kind:?}): PSNR vs CPU reference ≥ {worst:.1} dB"
     );
-    bench_view_dependence(gpu, asset, reps)
+    bench_view_dependence(gpu, asset, reps)?;
+    bench_reflection(asset, reps)
 }
 
 fn main() -> Result<(), BoxError> {
     let mut paths: Vec<PathBuf> = Vec::new();
     let mut reps = 9usize;
     let mut add_view = false;
+    let mut add_reflection = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         if a == "--reps" {
             reps = args.next().ok_or("--reps needs a number")?.parse()?;
         } else if a == "--view" {
             add_view = true;
+        } else if a == "--reflect" {
+            add_reflection = true;
         } else {
             paths.push(PathBuf::from(a));
         }
@@ -596,10 +695,15 @@ fn main() -> Result<(), BoxError> {
     for path in &paths {
         let mut asset = read_asset(path)?;
         let mut name = path.display().to_string();
-        if add_view && asset.view.is_none() {
+        if add_view && asset.view.is_none() && asset.reflection.is_none() {
             asset.view = Some(synthetic_view(&asset, 3, 8, CoefficientEncoding::U8Affine, 7)?);
             asset.validate()?;
             name.push_str(" + synthetic view part (J = 3, K_v = 8)");
+        }
+        if add_reflection && asset.view.is_none() && asset.reflection.is_none() {
+            asset.reflection = Some(synthetic_reflection(&asset, 20.0, 7)?);
+            asset.validate()?;
+            name.push_str(" + synthetic reflection part (λ = 20)");
         }
         bench_asset(&mut gpu, &name, &asset, reps)?;
     }

@@ -689,8 +689,10 @@ pub struct GpuMemory {
     /// Where the relight and view passes write each brick's voxels (8 blocks of 8 slots
     /// per brick).
     pub neighbour_bytes: u64,
-    /// A view-dependent asset's view part: its packed coefficients, the per-voxel lobe
-    /// buffer, brick-cell coordinates and uniforms (0 for a view-independent asset).
+    /// A view-dependent asset's view part (its packed coefficients, the per-voxel lobe
+    /// buffer and uniforms) or a reflection asset's reflection part (its codes, the lobe
+    /// buffer, the filtered environment's table and uniforms); 0 for a view-independent
+    /// asset.
     pub view_bytes: u64,
     /// Uniforms and the lighting buffer.
     pub other_bytes: u64,

@@ -9,8 +9,8 @@
 //! agree; a test compares sizes and offsets with the layout naga computes.
 
 pub use nelf_render::wgsl::{
-    COMMON_WGSL, DENSE_MARCH_WGSL, DISPLAY_WGSL, LIBRARY, MARCH_WGSL, PASSES, PreprocessError, RELIGHT_WGSL,
-    VIEW_WGSL, preprocess,
+    ATLAS_STORE_WGSL, COMMON_WGSL, DENSE_MARCH_WGSL, DISPLAY_WGSL, LIBRARY, MARCH_WGSL, PASSES,
+    PreprocessError, REFLECT_WGSL, RELIGHT_WGSL, VIEW_WGSL, preprocess,
 };
 
 /// The march pass for devices without storage bindings or compute (WebGL2): a fragment
@@ -29,6 +29,7 @@ pub const VIEWER_PASSES: &[(&str, &str)] = &[
     ("display.wgsl", DISPLAY_WGSL),
     ("dense_march.wgsl", DENSE_MARCH_WGSL),
     ("view.wgsl", VIEW_WGSL),
+    ("reflect.wgsl", REFLECT_WGSL),
     ("replay.wgsl", REPLAY_WGSL),
 ];
 
@@ -81,6 +82,31 @@ pub struct ViewParams {
     /// Lobe weights over the 9 harmonics of degrees 0–2: lobe `j`'s over harmonics 0–3
     /// in `lobes[3j]`, 4–7 in `lobes[3j + 1]`, 8 in `lobes[3j + 2][0]`.
     pub lobes: [[f32; 4]; 27],
+}
+
+/// Largest number of eyes a reflection part averages over (the length of `eyes_u` in
+/// `reflect.wgsl`'s `ReflectParams`; the size test checks the two agree).
+pub const MAX_REFLECT_EYES: usize = nelf_format::asset::MAX_REFLECTION_EYES;
+
+/// Uniform of the reflect pass (`ReflectParams` in `reflect.wgsl`).
+#[repr(C)]
+#[derive(Debug, Clone, Copy, PartialEq, bytemuck::Pod, bytemuck::Zeroable)]
+pub struct ReflectParams {
+    /// Slot packing `x_bits`, `y_bits`; stored voxels; eyes in `eyes_u`.
+    pub atlas: [u32; 4],
+    /// The eye in lattice coordinates `(p − bbox_min)/voxel − 0.5`, unused.
+    pub eye_u: [f32; 4],
+    /// Invocations per row of the dispatch, unused ×3.
+    pub dispatch: [u32; 4],
+    /// Dequantization offsets of the codes (normal `u`, normal `v`, scale), unused.
+    pub code_offset: [f32; 4],
+    /// Dequantization steps of the codes (normal `u`, normal `v`, scale), unused.
+    pub code_scale: [f32; 4],
+    /// The columns of `light_from_world` (xyz, `w` unused): the frame of the filtered
+    /// environment's table.
+    pub light_from_world: [[f32; 4]; 3],
+    /// The eyes the PCA part averages over, in lattice coordinates (xyz, `w` unused).
+    pub eyes_u: [[f32; 4]; MAX_REFLECT_EYES],
 }
 
 /// Uniform of the march pass (`MarchParams` in `march.wgsl`).
@@ -203,6 +229,20 @@ mod tests {
         );
         let view = module("view.wgsl", VIEW_WGSL);
         assert_mirror!(view, ViewParams, [atlas, eye_u, dispatch, lobes]);
+        let reflect = module("reflect.wgsl", REFLECT_WGSL);
+        assert_mirror!(
+            reflect,
+            ReflectParams,
+            [
+                atlas,
+                eye_u,
+                dispatch,
+                code_offset,
+                code_scale,
+                light_from_world,
+                eyes_u
+            ]
+        );
         let march = module("march.wgsl", MARCH_WGSL);
         assert_mirror!(
             march,
@@ -261,6 +301,8 @@ mod tests {
                 "fn voxel_texel",
                 "fn view_harmonics",
                 "fn half_to_f32",
+                "fn store_voxel_texels",
+                "fn lobe_buffer_radiance",
             ] {
                 assert!(!text.contains(helper), "{name} copies {helper}");
             }

@@ -7,6 +7,10 @@
 //!   opposite sides, for 8-bit and f16 view coefficients; its image differs from the
 //!   view-independent asset's and from the one with the view direction reversed by far
 //!   more than the GPU's error.
+//! * A reflection asset (format 1.3, also through a file) too, from three eyes (the
+//!   highlights move), with and without missing bricks and after a light rotation; its
+//!   image differs from the asset's without the reflection part by far more than the
+//!   GPU's error.
 //! * Relighting after an environment rotation equals a fresh relight with the rotated map;
 //!   at a held camera only the voxels it reads are relit, with the same image.
 //! * A damaged or invalid asset is an error value, and the renderer keeps working.
@@ -15,9 +19,10 @@
 
 use glam::{DMat3, DVec3};
 use nelf_format::conventions::{ENV_W, LatLong, PinholeCamera, VIEW_HARMONICS, rotation_y};
-use nelf_format::synthetic::SyntheticField;
+use nelf_format::synthetic::{SyntheticField, synthetic_reflection};
 use nelf_format::{
-    Asset, CoefficientEncoding, Coefficients, ViewDependence, WriteOptions, read_asset, write_asset,
+    Asset, CoefficientEncoding, Coefficients, Reflection, ViewDependence, WriteOptions, read_asset,
+    write_asset,
 };
 use nelf_render::{Image, MarchSettings, render_asset};
 use nelf_viewer::{
@@ -355,6 +360,122 @@ fn gpu_matches_cpu_for_view_dependent_assets() {
         let db = psnr(&reference(&asset, &cameras[1], turned), &got);
         assert!(db >= 45.0, "{encoding:?} after a light rotation: PSNR {db:.2} dB");
         assert!(psnr(&images[1], &got) < 40.0, "the rotation changed nothing");
+    }
+}
+
+/// How much brighter the reflection part of [`gpu_matches_cpu_for_reflection_assets`] is
+/// than `synthetic_reflection`'s, a sheen of a few percent of `T` whose whole effect on
+/// the test head's image is far inside the GPU = CPU tolerance (≈ 60 dB against the image
+/// without it): a gloss that a wrong normal, mirror direction, table lookup or eye shows.
+const SHEEN_TO_GLOSS: f32 = 100.0;
+
+/// `part` with every voxel's scale multiplied by `factor` (decoded, then quantized again).
+fn strengthened(part: &Reflection, voxels: usize, factor: f32) -> Reflection {
+    let (normals, scales): (Vec<[f32; 3]>, Vec<f32>) = (0..voxels)
+        .map(|v| {
+            let (n, s) = part.voxel(v);
+            (n, factor * s)
+        })
+        .unzip();
+    Reflection::new(part.exponent, part.eyes_m.clone(), &normals, &scales).unwrap()
+}
+
+#[test]
+fn gpu_matches_cpu_for_reflection_assets() {
+    let mut gpu = renderer();
+    let env = sky(64, 32);
+    let env_rotation = rotation_y(0.7);
+    let target = DVec3::new(0.0, 0.01, 0.0);
+    // Three eyes: two in front (near the part's eyes, +z, and off to the side) and one
+    // behind and below, where the mirror directions (and highlights) are elsewhere.
+    let cameras = [
+        DVec3::new(0.17, 0.09, 0.42),
+        DVec3::new(-0.3, 0.05, 0.3),
+        DVec3::new(-0.36, -0.12, -0.22),
+    ]
+    .map(|eye| PinholeCamera::look_at(eye, target, DVec3::Y, 96, 80, 0.65));
+    let reference = |asset: &Asset, cam: &PinholeCamera, rotation: DMat3| {
+        render_asset(asset, cam, &env, rotation, None, &MarchSettings::default()).unwrap()
+    };
+    for (holes, exponent) in [(false, 20.0), (true, 40.0)] {
+        let mut flat = asset_through_file(40_000, 6, CoefficientEncoding::U8Affine, 5);
+        if holes {
+            // Missing bricks: the reflect pass writes aprons and halo slots as the relight does.
+            flat = without_bricks(&flat, |b| (b[0] + b[1] + 2 * b[2]) % 3 == 0);
+        }
+        let mut asset = flat.clone();
+        let part = synthetic_reflection(&flat, exponent, 3).unwrap();
+        asset.reflection = Some(strengthened(&part, flat.voxel_count(), SHEEN_TO_GLOSS));
+        let asset = through_file(&asset);
+        // The asset without its reflection part first: the renderer then switches.
+        gpu.load_asset(&flat).unwrap();
+        assert_eq!(gpu.asset_info().unwrap().reflection, None);
+        gpu.set_lighting(&env, env_rotation).unwrap();
+        let flat_images = cameras.map(|cam| gpu.render(&cam, &no_jitter()).unwrap());
+        let info = gpu.load_asset(&asset).unwrap();
+        let part = info.reflection.unwrap();
+        assert_eq!((part.exponent, part.eyes), (exponent, 5));
+        assert_eq!(info.view, None);
+        assert!(info.memory.view_bytes > 0);
+        gpu.set_lighting(&env, env_rotation).unwrap();
+        let mut images = Vec::new();
+        for (i, cam) in cameras.iter().enumerate() {
+            let got = gpu.render(cam, &no_jitter()).unwrap();
+            let want = reference(&asset, cam, env_rotation);
+            let covered = want.alpha.iter().filter(|&&a| a > 0.5).count();
+            assert!(covered > 500, "the head covers only {covered} pixels");
+            let compute = ViewSettings {
+                pass: MarchPass::Compute,
+                ..no_jitter()
+            };
+            assert_eq!(gpu.render(cam, &compute).unwrap(), got);
+            let db = psnr(&want, &got);
+            // The reflection part matters far beyond the GPU's error.
+            let without = psnr(&want, &flat_images[i]);
+            eprintln!(
+                "λ {exponent} holes {holes} eye {i}: PSNR {db:.1} dB; without the reflection part {without:.1} dB"
+            );
+            assert!(db >= 45.0, "λ {exponent} holes {holes} eye {i}: PSNR {db:.2} dB");
+            assert!(
+                without < 35.0,
+                "λ {exponent} holes {holes} eye {i}: the reflection part barely shows ({without:.1} dB without it)"
+            );
+            images.push(got);
+        }
+        // The highlights move: the part's change to the image differs between the eyes
+        // (the flat images of two eyes differ only by the camera, so compare the change).
+        let change = |i: usize| -> Vec<f32> {
+            images[i]
+                .rgb
+                .iter()
+                .zip(&flat_images[i].rgb)
+                .map(|(a, b)| (a[0] - b[0]) + (a[1] - b[1]) + (a[2] - b[2]))
+                .collect()
+        };
+        let (front, side) = (change(0), change(1));
+        let brightened = |c: &[f32]| c.iter().filter(|&&d| d > 0.01).count();
+        eprintln!(
+            "λ {exponent} holes {holes}: pixels brightened by the part: eye 0 {}, eye 1 {}, eye 2 {}",
+            brightened(&front),
+            brightened(&side),
+            brightened(&change(2))
+        );
+        assert!(brightened(&front) > 20 && brightened(&side) > 20);
+        // Back to the first eye, lighting unchanged: the reflect pass runs again.
+        assert_eq!(gpu.render(&cameras[0], &no_jitter()).unwrap(), images[0]);
+        // A debug view of one PCA component and back.
+        gpu.set_relight_view(RelightView::Component(1));
+        assert_ne!(gpu.render(&cameras[0], &no_jitter()).unwrap(), images[0]);
+        gpu.set_relight_view(RelightView::Shaded);
+        assert_eq!(gpu.render(&cameras[0], &no_jitter()).unwrap(), images[0]);
+        // A lighting change at the same eye relights, refilters and reruns the reflect pass.
+        let turned = rotation_y(-1.1);
+        gpu.set_light_rotation(turned).unwrap();
+        let got = gpu.render(&cameras[1], &no_jitter()).unwrap();
+        let db = psnr(&reference(&asset, &cameras[1], turned), &got);
+        assert!(db >= 45.0, "λ {exponent} after a light rotation: PSNR {db:.2} dB");
+        assert!(psnr(&images[1], &got) < 40.0, "the rotation changed nothing");
+        assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
     }
 }
 
@@ -1014,5 +1135,11 @@ fn the_storage_free_path_of_webgl2_draws_the_same_atlas_and_image() {
     let err = plain.load_asset(&view_asset).unwrap_err();
     assert!(matches!(err, ViewerError::NoCompute(_)), "{err}");
     assert!(err.to_string().contains("WebGPU"), "{err}");
+    assert!(plain.render(&cam, &no_jitter()).is_ok());
+    // So does a reflection asset's reflect pass.
+    let mut reflection_asset = asset_through_file(20_000, 6, CoefficientEncoding::U8Affine, 4);
+    reflection_asset.reflection = Some(synthetic_reflection(&reflection_asset, 20.0, 4).unwrap());
+    let err = plain.load_asset(&reflection_asset).unwrap_err();
+    assert!(matches!(err, ViewerError::NoCompute(_)), "{err}");
     assert!(plain.render(&cam, &no_jitter()).is_ok());
 }

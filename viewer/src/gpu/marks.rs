@@ -17,8 +17,8 @@
 //! voxel of the grid box).
 //!
 //! Jittered frames qualify when the seed stays (the app draws one jitter pattern per
-//! camera); not debug views or view-dependent assets (their view pass rewrites the
-//! atlas): those always relight in full.
+//! camera); not debug views or view-dependent assets (their view or reflect pass rewrites
+//! the atlas): those always relight in full.
 
 use super::common::{compute_pipeline, shader_module, storage_entry};
 use super::view::voxel_dispatch;
@@ -182,6 +182,7 @@ impl GpuRenderer {
         let asset = self.asset.as_ref()?;
         let eligible = asset.marks.as_ref().is_some_and(|m| m.enabled)
             && asset.view.is_none()
+            && asset.reflection.is_none()
             && settings.view == MarchView::Shaded
             && self.relight_view == RelightView::Shaded;
         eligible.then_some(*params)

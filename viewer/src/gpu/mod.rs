@@ -17,14 +17,17 @@
 //! A view-dependent asset (format 1.2) adds one small per-voxel pass between the two,
 //! run only when the camera's eye or the lighting changed: the relight pass then writes
 //! each voxel's radiance and lobe colours to a buffer and the view pass adds the lobes
-//! toward the eye into the atlas (`gpu/view.rs`); the march is the same. A view-independent
-//! asset takes exactly the path above.
+//! toward the eye into the atlas (`gpu/view.rs`); the march is the same. A reflection
+//! asset (format 1.3) does the same with its reflect pass (`gpu/reflect.rs`: the radiance
+//! of a glossy lobe about the mirror direction, looked up in the lighting filtered by the
+//! lobe). A view-independent asset takes exactly the path above.
 //!
 //! One module per pass, as the shaders are (`shaders/*.wgsl`): `relight` (relight.wgsl),
 //! `marks` (the marked relight: relight.wgsl's `relight_marked`, march.wgsl's marking),
 //! `replay` (replay.wgsl: a held camera's frame relit per pixel),
-//! `view` (view.wgsl and relight.wgsl's `relight_lobes`), `march` (march.wgsl, compute,
-//! counting and fragment variants), `display` (display.wgsl: exposure, tone map, sRGB);
+//! `view` (view.wgsl and relight.wgsl's `relight_lobes`), `reflect` (reflect.wgsl and
+//! `relight_lobes` with no lobes), `march` (march.wgsl, compute, counting and fragment
+//! variants), `display` (display.wgsl: exposure, tone map, sRGB);
 //! `common` holds the layout and pipeline helpers they share and `readback` the headless
 //! read-back. This module owns the device, the asset upload, the public API and the frame
 //! encoding that calls the passes.
@@ -34,6 +37,7 @@ mod display;
 mod march;
 mod marks;
 mod readback;
+mod reflect;
 mod relight;
 mod replay;
 mod view;
@@ -41,7 +45,7 @@ mod view;
 use glam::DMat3;
 use nelf_format::conventions::{LT_DIM, LatLong, PinholeCamera};
 use nelf_format::{Asset, CoefficientEncoding, GridGeometry, PcaModel};
-use nelf_render::{ProjectedLight, project_light, project_view_light};
+use nelf_render::{FilteredEnvironment, ProjectedLight, project_light, project_view_light};
 use wgpu::util::DeviceExt as _;
 
 pub use self::display::{DisplayImage, DisplaySettings, ToneMap};
@@ -50,10 +54,11 @@ use self::march::{MARCH_FORMAT, MarchPipelines};
 pub use self::march::{MarchPass, MarchView, ViewSettings};
 pub use self::marks::RelightKind;
 use self::marks::{GpuMarks, MarkPipelines};
+use self::reflect::{GpuReflection, REFLECT_LOBE_WORDS, ReflectPipeline};
 use self::relight::RelightPipeline;
 pub use self::replay::DEFAULT_REPLAY_BUDGET_BYTES;
 use self::replay::{GpuReplay, ReplayInputs, ReplayPipelines};
-use self::view::{GpuView, ViewBindings, ViewPipelines, lobe_buffer_words};
+use self::view::{GpuView, LobesPipeline, ViewBindings, ViewPipeline, lobe_buffer_words};
 use crate::atlas::{
     AtlasLayout, Dequantization, GpuMemory, PackedCoefficients, RelightView, atlas_sources, indirection_grid,
     march_grid, neighbour_blocks, pack_brick_cells, pack_coefficients, pack_density,
@@ -78,6 +83,8 @@ pub struct AssetInfo {
     pub max_density_per_m: f32,
     /// The view-dependent part (format 1.2), if the asset has one.
     pub view: Option<ViewInfo>,
+    /// The reflection part (format 1.3), if the asset has one.
+    pub reflection: Option<ReflectionInfo>,
 }
 
 /// What a view-dependent asset's view part holds ([`nelf_format::ViewDependence`]).
@@ -91,6 +98,15 @@ pub struct ViewInfo {
     pub encoding: CoefficientEncoding,
 }
 
+/// What a reflection asset's reflection part holds ([`nelf_format::Reflection`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReflectionInfo {
+    /// The lobe's exponent λ.
+    pub exponent: f32,
+    /// The eyes the PCA part averages over.
+    pub eyes: usize,
+}
+
 /// Compute and render pipelines, created once per device: one set per pass. A device
 /// without storage bindings (WebGL2) gets no compute pipelines: its relight runs on the
 /// CPU (`atlas::relight_atlas_cpu`) and its march is `march_nostorage.wgsl`.
@@ -101,8 +117,12 @@ struct Pipelines {
     replay: Option<ReplayPipelines>,
     march: MarchPipelines,
     display: DisplayPipelines,
-    /// Created with the first view-dependent asset.
-    view: Option<ViewPipelines>,
+    /// `relight_lobes`, created with the first view-dependent asset of either kind.
+    lobes: Option<LobesPipeline>,
+    /// Created with the first view-dependent asset (format 1.2).
+    view: Option<ViewPipeline>,
+    /// Created with the first reflection asset (format 1.3).
+    reflect: Option<ReflectPipeline>,
 }
 
 impl Pipelines {
@@ -125,7 +145,9 @@ impl Pipelines {
             replay,
             march,
             display: DisplayPipelines::new(device)?,
+            lobes: None,
             view: None,
+            reflect: None,
         })
     }
 }
@@ -157,6 +179,8 @@ struct GpuAsset {
     cpu_relight: Option<CpuRelight>,
     /// The view part of a view-dependent asset.
     view: Option<GpuView>,
+    /// The reflection part of a reflection asset.
+    reflection: Option<GpuReflection>,
     voxel_count: usize,
     info: AssetInfo,
 }
@@ -198,6 +222,8 @@ struct Lighting {
     projected: ProjectedLight,
     /// A view-dependent asset's lighting projected onto its view basis (`P^v_i`, rgb).
     view_projected: Option<Vec<[f32; 3]>>,
+    /// A reflection asset's lighting filtered by its lobe (`E` at the table's nodes).
+    filtered: Option<FilteredEnvironment>,
 }
 
 /// The march's output image and the bind groups that use it.
@@ -243,8 +269,9 @@ pub struct GpuRenderer {
     replay: Option<GpuReplay>,
     /// Largest per-pixel cache to allocate; larger frames use the marked relight.
     replay_budget_bytes: u64,
-    /// The eye (lattice coordinates) the atlas of a view-dependent asset shows radiance
-    /// toward; `None` when the view pass must run before the next march.
+    /// The eye (lattice coordinates) the atlas of a view-dependent or reflection asset
+    /// shows radiance toward; `None` when the view (or reflect) pass must run before the
+    /// next march.
     view_eye: Option<[f32; 3]>,
     /// The eye of the last frame encoded.
     last_eye: Option<[f32; 3]>,
@@ -445,12 +472,16 @@ impl GpuRenderer {
     /// Uploads `asset` (validated first; an invalid one is an error and leaves the
     /// previous asset in place): coefficients, densities, brick list, indirection grid,
     /// and an atlas the relight pass fills; for a view-dependent asset also its view
-    /// coefficients and a per-voxel lobe buffer (`gpu/view.rs`). Lighting, if set, is
+    /// coefficients and a per-voxel lobe buffer (`gpu/view.rs`), for a reflection asset its
+    /// tabulated lobe, codes and lobe buffer (`gpu/reflect.rs`). Lighting, if set, is
     /// re-projected onto the new basis.
     pub fn load_asset(&mut self, asset: &Asset) -> Result<AssetInfo, ViewerError> {
         asset.validate()?;
         if !self.storage() && asset.view.is_some() {
             return Err(ViewerError::NoCompute("a view-dependent asset (format 1.2)"));
+        }
+        if !self.storage() && asset.reflection.is_some() {
+            return Err(ViewerError::NoCompute("a reflection asset (format 1.3)"));
         }
         let limits = self.device.limits();
         let grid_bricks = asset.grid.grid_bricks;
@@ -475,9 +506,12 @@ impl GpuRenderer {
         let view_coefficients = asset.view.as_ref().map(|v| pack_coefficients(&v.coefficients));
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let voxel_count = asset.voxel_count();
-        let lobe_bytes = asset.view.as_ref().map_or(0, |v| {
-            (voxel_count * lobe_buffer_words(v.lobe_count())) as u64 * 4
-        });
+        let lobe_words = match (&asset.view, &asset.reflection) {
+            (Some(v), _) => lobe_buffer_words(v.lobe_count()),
+            (None, Some(_)) => REFLECT_LOBE_WORDS,
+            (None, None) => 0,
+        };
+        let lobe_bytes = (voxel_count * lobe_words) as u64 * 4;
         for (what, bytes) in [
             ("coefficients", coefficients.words.len() as u64 * 4),
             ("densities", density.len() as u64 * 4),
@@ -487,6 +521,10 @@ impl GpuRenderer {
                 view_coefficients.as_ref().map_or(0, |p| p.words.len() as u64 * 4),
             ),
             ("per-voxel view lobes", lobe_bytes),
+            (
+                "reflection codes",
+                asset.reflection.as_ref().map_or(0, |_| voxel_count as u64 * 4),
+            ),
         ] {
             // Without storage bindings these stay on the CPU.
             if self.storage() && bytes > max_binding {
@@ -598,26 +636,41 @@ impl GpuRenderer {
             "brick cells",
             bytemuck::cast_slice(&pack_brick_cells(&asset.bricks)),
         );
+        let view_bindings = ViewBindings {
+            relight: [&relight_params, &light, &coefficient_buffer, &density_buffer],
+            neighbour_blocks: &neighbour_buffer,
+            atlas: &atlas_view,
+        };
+        if (asset.view.is_some() || asset.reflection.is_some()) && self.pipelines.lobes.is_none() {
+            self.pipelines.lobes = Some(LobesPipeline::new(&self.device)?);
+        }
         let view = match (&asset.view, &view_coefficients) {
             (Some(v), Some(packed)) => {
                 if self.pipelines.view.is_none() {
-                    self.pipelines.view = Some(ViewPipelines::new(&self.device)?);
+                    self.pipelines.view = Some(ViewPipeline::new(&self.device)?);
                 }
-                let pipelines = self.pipelines.view.as_ref().ok_or(ViewerError::NoAsset)?;
+                let lobes = self.pipelines.lobes.as_ref().ok_or(ViewerError::NoAsset)?;
+                let pipeline = self.pipelines.view.as_ref().ok_or(ViewerError::NoAsset)?;
                 let mut view =
                     GpuView::upload(&self.device, v, packed, brick_cells.clone(), voxel_count, storage);
-                view.bind(
-                    &self.device,
-                    pipelines,
-                    &ViewBindings {
-                        relight: [&relight_params, &light, &coefficient_buffer, &density_buffer],
-                        neighbour_blocks: &neighbour_buffer,
-                        atlas: &atlas_view,
-                    },
-                );
+                view.bind(&self.device, lobes, pipeline, &view_bindings);
                 Some(view)
             }
             _ => None,
+        };
+        let reflection = match &asset.reflection {
+            Some(r) => {
+                if self.pipelines.reflect.is_none() {
+                    self.pipelines.reflect = Some(ReflectPipeline::new(&self.device)?);
+                }
+                let lobes = self.pipelines.lobes.as_ref().ok_or(ViewerError::NoAsset)?;
+                let pipeline = self.pipelines.reflect.as_ref().ok_or(ViewerError::NoAsset)?;
+                let mut reflection =
+                    GpuReflection::upload(&self.device, asset, r, &layout, brick_cells.clone(), storage)?;
+                reflection.bind(&self.device, lobes, pipeline, &view_bindings);
+                Some(reflection)
+            }
+            None => None,
         };
         let marks =
             self.pipelines.marks.as_ref().map(|pipelines| {
@@ -629,7 +682,8 @@ impl GpuRenderer {
             density_bytes: density_buffer.size(),
             march_grid_bytes: march_grid.texels.len() as u64 * 4,
             neighbour_bytes: neighbour_buffer.size(),
-            view_bytes: view.as_ref().map_or(0, GpuView::bytes),
+            view_bytes: view.as_ref().map_or(0, GpuView::bytes)
+                + reflection.as_ref().map_or(0, GpuReflection::bytes),
             other_bytes: light.size()
                 + relight_params.size()
                 + brick_cells.size()
@@ -647,6 +701,10 @@ impl GpuRenderer {
                 lobes: v.lobe_count(),
                 rank: v.rank(),
                 encoding: v.coefficients.encoding(),
+            }),
+            reflection: asset.reflection.as_ref().map(|r| ReflectionInfo {
+                exponent: r.exponent,
+                eyes: r.eyes_m.len(),
             }),
         };
         let dequantization = Dequantization::of(&asset.coefficients);
@@ -680,6 +738,7 @@ impl GpuRenderer {
                 density: asset.density.clone(),
             }),
             view,
+            reflection,
             voxel_count,
             info,
         });
@@ -700,12 +759,23 @@ impl GpuRenderer {
 
     /// Sets the environment map (any resolution, lat-long, world frame) and its rotation
     /// `world_from_env`, projecting it onto the asset's basis
-    /// ([`nelf_render::project_light`]) and a view-dependent asset's view basis
-    /// ([`nelf_render::project_view_light`]). Needs an asset. The relight pass runs before
-    /// the next frame.
+    /// ([`nelf_render::project_light`]), a view-dependent asset's view basis
+    /// ([`nelf_render::project_view_light`]) and filtering it by a reflection asset's lobe
+    /// ([`nelf_render::ReflectionLobe::filter`]). Needs an asset. The relight pass runs
+    /// before the next frame.
     pub fn set_lighting(&mut self, env: &LatLong, world_from_env: DMat3) -> Result<(), ViewerError> {
         let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
-        let projected = project_light(&asset.pca, asset.world_from_light, env, world_from_env)?;
+        let (projected, filtered) = match &asset.reflection {
+            Some(reflection) => {
+                let (projected, filtered) =
+                    reflection.project_and_filter(&asset.pca, asset.world_from_light, env, world_from_env)?;
+                (projected, Some(filtered))
+            }
+            None => (
+                project_light(&asset.pca, asset.world_from_light, env, world_from_env)?,
+                None,
+            ),
+        };
         let view_projected = match &asset.view {
             Some(view) => Some(project_view_light(
                 &view.model,
@@ -720,6 +790,7 @@ impl GpuRenderer {
             world_from_env,
             projected,
             view_projected,
+            filtered,
         });
         self.relight_dirty = true;
         Ok(())
@@ -826,9 +897,10 @@ impl GpuRenderer {
         Ok(())
     }
 
-    /// Encodes the relight pass (if needed), for a view-dependent asset the view pass (if
-    /// the eye or the lighting changed) and the march of `camera` into `encoder`; the
-    /// result lands in the internal target that [`GpuRenderer::paint`] displays.
+    /// Encodes the relight pass (if needed), for a view-dependent or reflection asset the
+    /// view or reflect pass (if the eye or the lighting changed) and the march of `camera`
+    /// into `encoder`; the result lands in the internal target that [`GpuRenderer::paint`]
+    /// displays.
     pub fn encode_frame(
         &mut self,
         encoder: &mut wgpu::CommandEncoder,
@@ -890,6 +962,7 @@ impl GpuRenderer {
         // marks what the camera reads, so that the next ones relight only that.
         let mark = !count_samples && relit == Some(RelightKind::Full) && held && key != self.marks_key;
         self.encode_view_if_needed(encoder, eye)?;
+        self.encode_reflect_if_needed(encoder, eye)?;
         let target = self.target.as_ref().ok_or(ViewerError::NoAsset)?;
         if mark {
             let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
@@ -936,17 +1009,17 @@ impl GpuRenderer {
         self.submit_and_wait(encoder)
     }
 
-    /// Runs the view pass of a view-dependent asset toward `camera`'s eye now (relighting
-    /// first if needed) and waits (benchmarks); nothing for a view-independent asset.
+    /// Runs the view pass of a view-dependent asset (or the reflect pass of a reflection
+    /// asset) toward `camera`'s eye now (relighting first if needed) and waits
+    /// (benchmarks); nothing for a view-independent asset.
     pub fn view_pass_blocking(&mut self, camera: &PinholeCamera) -> Result<(), ViewerError> {
         let params = self.march_params(camera, &ViewSettings::default())?;
+        let eye = [params.origin_u[0], params.origin_u[1], params.origin_u[2]];
         let mut encoder = self.encoder("view");
         self.encode_relight_if_needed(&mut encoder, false)?;
         self.view_eye = None;
-        self.encode_view_if_needed(
-            &mut encoder,
-            [params.origin_u[0], params.origin_u[1], params.origin_u[2]],
-        )?;
+        self.encode_view_if_needed(&mut encoder, eye)?;
+        self.encode_reflect_if_needed(&mut encoder, eye)?;
         self.submit_and_wait(encoder)
     }
 

@@ -16,7 +16,9 @@
 //! equals shading every sample.
 //!
 //! A view-dependent asset runs the `relight_lobes` entry instead (see [`super::view`]):
-//! the same dot product plus the lobe colours, into the lobe buffer the view pass reads.
+//! the same dot product plus the lobe colours, into the lobe buffer the view pass reads;
+//! a reflection asset runs it with no lobes, then the reflect pass's `reflect_mean`
+//! (see [`super::reflect`]).
 
 use nelf_format::conventions::LT_DIM;
 
@@ -109,7 +111,9 @@ impl RelightPipeline {
 impl GpuRenderer {
     /// Encodes the relight pass if the lighting, rank or view changed since the last one:
     /// `relight` into the atlas, or for a view-dependent asset showing radiance
-    /// `relight_lobes` into its lobe buffer (the view pass then fills the atlas).
+    /// `relight_lobes` into its lobe buffer (the view pass then fills the atlas), for a
+    /// reflection asset the same with no lobes followed by `reflect_mean` (the reflect
+    /// pass then fills the atlas).
     ///
     /// With `marked` (the current camera's read voxels are marked, `marks.rs`), only those
     /// are relit and the rest of the atlas is left stale. Returns how it relit, if it did.
@@ -181,10 +185,13 @@ impl GpuRenderer {
         // `relight` shades four voxels per invocation.
         let quarter = asset.voxel_count.div_ceil(4);
         let (quarter_groups, quarter_per_row) = voxel_dispatch(quarter);
-        // The view part, when the atlas is to show radiance: its pipeline, bind group and
-        // (lobes, rank, words, encoding).
-        let lobes = match (&asset.view, &self.pipelines.view, &lighting.view_projected) {
-            (Some(view), Some(pipelines), Some(view_light)) if self.relight_view == RelightView::Shaded => {
+        // The view or reflection part, when the atlas is to show radiance: the
+        // `relight_lobes` pipeline, its bind group and (lobes, rank, words, encoding); a
+        // reflection part has no lobes (its filtered environment is uploaded here).
+        let shaded = self.relight_view == RelightView::Shaded;
+        let lobes = match (&self.pipelines.lobes, &asset.view, &asset.reflection) {
+            (Some(pipeline), Some(view), _) if shaded => {
+                let view_light = lighting.view_projected.as_ref().ok_or(ViewerError::NoLighting)?;
                 let lobes = view.model.lobe_count().min(MAX_LOBES);
                 let folded_view = fold_view_light(view_light, &view.dequantization, lobes);
                 debug_assert_eq!(folded_view.len(), VIEW_LIGHT_ENTRIES);
@@ -197,7 +204,13 @@ impl GpuRenderer {
                     view.coefficient_words_per_voxel,
                     view.coefficient_encoding as u32,
                 ];
-                Some((&pipelines.lobes, bind_group, shape))
+                Some((&pipeline.pipeline, bind_group, shape))
+            }
+            (Some(pipeline), None, Some(reflection)) if shaded => {
+                let filtered = lighting.filtered.as_ref().ok_or(ViewerError::NoLighting)?;
+                reflection.write_filtered(&self.queue, filtered);
+                let bind_group = reflection.lobes_bind_group.as_ref().ok_or(ViewerError::NoAsset)?;
+                Some((&pipeline.pipeline, bind_group, [0; 4]))
             }
             _ => None,
         };
@@ -242,6 +255,10 @@ impl GpuRenderer {
             pass.dispatch_workgroups(quarter_groups[0], quarter_groups[1], 1);
         }
         drop(pass);
+        if let (Some(reflection), Some(pipeline), true) = (&asset.reflection, &self.pipelines.reflect, shaded)
+        {
+            reflection.encode_mean(&self.queue, encoder, pipeline)?;
+        }
         self.relight_dirty = false;
         self.atlas_state = AtlasState::Lit;
         self.last_relight = Some(RelightKind::Full);

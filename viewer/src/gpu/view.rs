@@ -28,7 +28,9 @@
 //! `common.wgsl`), so no f16 shader capability is needed.
 //!
 //! A view-independent asset creates none of this: no lobe buffer, no view pipelines
-//! (they are created with the first view-dependent asset), no view pass.
+//! (they are created with the first view-dependent asset), no view pass. A reflection
+//! asset (format 1.3) runs `relight_lobes` with no lobes and its own pass instead of this
+//! one ([`super::reflect`]).
 
 use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS};
 use nelf_format::{Coefficients, ViewDependence};
@@ -47,19 +49,18 @@ pub(super) fn lobe_buffer_words(lobes: usize) -> usize {
     2 + (3 * lobes).div_ceil(2)
 }
 
-/// Pipelines of view-dependent assets, created once per device with the first such asset.
-pub(super) struct ViewPipelines {
-    lobes_layout: wgpu::BindGroupLayout,
-    pub(super) lobes: wgpu::ComputePipeline,
+/// The relight pass's `relight_lobes` entry (each voxel's radiance, σ and lobe colours
+/// into the lobe buffer), created once per device with the first view-dependent asset of
+/// either kind (format 1.2 or 1.3).
+pub(super) struct LobesPipeline {
     layout: wgpu::BindGroupLayout,
-    pub(super) view: wgpu::ComputePipeline,
+    pub(super) pipeline: wgpu::ComputePipeline,
 }
 
-impl ViewPipelines {
+impl LobesPipeline {
     pub(super) fn new(device: &wgpu::Device) -> Result<Self, ViewerError> {
         use wgpu::ShaderStages as S;
-        use wgpu::TextureViewDimension as D;
-        let lobes_layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
+        let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("relight lobes"),
             entries: &[
                 uniform_entry(0, S::COMPUTE),
@@ -72,36 +73,73 @@ impl ViewPipelines {
             ],
         });
         let relight = shader_module(device, "relight.wgsl", RELIGHT_WGSL)?;
-        let lobes = compute_pipeline(device, &[&lobes_layout], &relight, "relight_lobes", &[]);
+        let pipeline = compute_pipeline(device, &[&layout], &relight, "relight_lobes", &[]);
+        Ok(Self { layout, pipeline })
+    }
+
+    /// The bind group of `relight_lobes`: the relight pass's uniform, lighting, coefficients
+    /// and densities (bindings 0–3), the folded view lighting (6, at least
+    /// [`VIEW_LIGHT_ENTRIES`] entries), the view coefficients (7) and the lobe buffer (8).
+    pub(super) fn bind_group(
+        &self,
+        device: &wgpu::Device,
+        relight: [&wgpu::Buffer; 4],
+        view_light: &wgpu::Buffer,
+        view_coefficients: &wgpu::Buffer,
+        voxel_lobes: &wgpu::Buffer,
+    ) -> wgpu::BindGroup {
+        let [params, light, coefficients, density] = relight;
+        device.create_bind_group(&wgpu::BindGroupDescriptor {
+            label: Some("relight lobes"),
+            layout: &self.layout,
+            entries: &[
+                buffer(0, params),
+                buffer(1, light),
+                buffer(2, coefficients),
+                buffer(3, density),
+                buffer(6, view_light),
+                buffer(7, view_coefficients),
+                buffer(8, voxel_lobes),
+            ],
+        })
+    }
+}
+
+/// The view pass's pipeline, created once per device with the first view-dependent asset
+/// (format 1.2).
+pub(super) struct ViewPipeline {
+    layout: wgpu::BindGroupLayout,
+    pub(super) pipeline: wgpu::ComputePipeline,
+}
+
+impl ViewPipeline {
+    pub(super) fn new(device: &wgpu::Device) -> Result<Self, ViewerError> {
+        use wgpu::ShaderStages as S;
+        use wgpu::TextureViewDimension as D;
         let layout = device.create_bind_group_layout(&wgpu::BindGroupLayoutDescriptor {
             label: Some("view"),
             entries: &[
                 uniform_entry(0, S::COMPUTE),
                 storage_entry(1, true, S::COMPUTE),
                 storage_entry(2, true, S::COMPUTE),
-                storage_entry(3, true, S::COMPUTE),
-                storage_texture_entry(4, wgpu::TextureFormat::Rgba16Float, D::D3),
+                storage_entry(4, true, S::COMPUTE),
+                storage_texture_entry(5, wgpu::TextureFormat::Rgba16Float, D::D3),
             ],
         });
         let module = shader_module(device, "view.wgsl", VIEW_WGSL)?;
-        let view = compute_pipeline(device, &[&layout], &module, "view", &[]);
-        Ok(Self {
-            lobes_layout,
-            lobes,
-            layout,
-            view,
-        })
+        let pipeline = compute_pipeline(device, &[&layout], &module, "view", &[]);
+        Ok(Self { layout, pipeline })
     }
 }
 
-/// The buffers of a view-dependent asset's relight and view passes that
-/// [`GpuView::bind`] binds.
+/// The buffers of a view-dependent asset's relight and view (or reflect) passes that
+/// [`GpuView::bind`] (or `GpuReflection::bind`) binds.
 pub(super) struct ViewBindings<'a> {
     /// The relight pass's uniform, lighting, coefficients and densities (bindings 0–3).
     pub relight: [&'a wgpu::Buffer; 4],
     /// Where each voxel is written (`crate::atlas::neighbour_blocks`).
     pub neighbour_blocks: &'a wgpu::Buffer,
-    /// The atlas the view pass fills.
+    /// The atlas the view (or reflect) pass fills.
     pub atlas: &'a wgpu::TextureView,
 }
 
@@ -191,31 +229,30 @@ impl GpuView {
     }
 
     /// Creates the bind groups of `relight_lobes` and of the view pass.
-    pub(super) fn bind(&mut self, device: &wgpu::Device, pipelines: &ViewPipelines, b: &ViewBindings<'_>) {
-        let [params, light, coefficients, density] = b.relight;
-        self.lobes_bind_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: Some("relight lobes"),
-            layout: &pipelines.lobes_layout,
-            entries: &[
-                buffer(0, params),
-                buffer(1, light),
-                buffer(2, coefficients),
-                buffer(3, density),
-                buffer(6, &self.view_light),
-                buffer(7, &self.coefficients),
-                buffer(8, &self.voxel_lobes),
-            ],
-        }));
+    pub(super) fn bind(
+        &mut self,
+        device: &wgpu::Device,
+        lobes: &LobesPipeline,
+        view: &ViewPipeline,
+        b: &ViewBindings<'_>,
+    ) {
+        self.lobes_bind_group = Some(lobes.bind_group(
+            device,
+            b.relight,
+            &self.view_light,
+            &self.coefficients,
+            &self.voxel_lobes,
+        ));
         self.view_bind_group = Some(device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: Some("view"),
-            layout: &pipelines.layout,
+            layout: &view.layout,
             entries: &[
                 buffer(0, &self.view_params),
                 buffer(1, &self.voxel_lobes),
                 buffer(2, &self.brick_cells),
-                buffer(3, b.neighbour_blocks),
+                buffer(4, b.neighbour_blocks),
                 wgpu::BindGroupEntry {
-                    binding: 4,
+                    binding: 5,
                     resource: wgpu::BindingResource::TextureView(b.atlas),
                 },
             ],
@@ -240,7 +277,7 @@ impl GpuRenderer {
         if self.relight_view != crate::RelightView::Shaded || self.view_eye == Some(eye_u) {
             return Ok(());
         }
-        let pipelines = self.pipelines.view.as_ref().ok_or(ViewerError::NoAsset)?;
+        let pipeline = self.pipelines.view.as_ref().ok_or(ViewerError::NoAsset)?;
         let bind_group = view.view_bind_group.as_ref().ok_or(ViewerError::NoAsset)?;
         let (groups, per_row) = voxel_dispatch(asset.voxel_count);
         let params = ViewParams {
@@ -261,7 +298,7 @@ impl GpuRenderer {
             timestamp_writes: None,
         });
         pass.set_bind_group(0, bind_group, &[]);
-        pass.set_pipeline(&pipelines.view);
+        pass.set_pipeline(&pipeline.pipeline);
         pass.dispatch_workgroups(groups[0], groups[1], 1);
         drop(pass);
         self.view_eye = Some(eye_u);
@@ -270,7 +307,7 @@ impl GpuRenderer {
 }
 
 /// A bind group entry for a whole buffer.
-fn buffer(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
+pub(super) fn buffer(binding: u32, buffer: &wgpu::Buffer) -> wgpu::BindGroupEntry<'_> {
     wgpu::BindGroupEntry {
         binding,
         resource: buffer.as_entire_binding(),
