@@ -447,7 +447,7 @@ fn fit_reflection_voxel(
     // Rings at 6° and 12° around the density's normal, then at 1.5° and 3° around the
     // best of those (measured on a sphere whose normal is known: 0.9° median error
     // against 2.8° with the first search alone).
-    let mut try_normals = |candidates: Vec<Vec3>, best: &mut (Vec3, f64)| {
+    let try_normals = |candidates: Vec<Vec3>, best: &mut (Vec3, f64)| {
         for n in candidates {
             let (_, explained) = fit_summed_scale(middle, x, n, eyes, directions, weights, summed);
             if explained > best.1 {
@@ -471,6 +471,10 @@ fn fit_reflection_voxel(
         .collect();
     (n.to_array(), scales)
 }
+
+/// One band voxel's fit in the view stage's second pass: its harmonic normal equations
+/// `(G, h)` and, when asked for, its reflection normal and scales.
+type PerVoxel = ((Vec<f64>, Vec<f64>), Option<([f32; 3], Vec<f32>)>);
 
 /// Samples and fits the residual of `field` over the band voxels `lt_voxels` (whose
 /// view-independent vectors are `lt`, `384` each, and visibility weights `weights`).
@@ -648,7 +652,6 @@ pub fn fit_view(
     let entries: Vec<usize> = (0..n).collect();
     for (c, chunk) in entries.chunks(BATCH).enumerate() {
         let r = residuals(chunk)?;
-        type PerVoxel = ((Vec<f64>, Vec<f64>), Option<([f32; 3], Vec<f32>)>);
         let per: Vec<PerVoxel> = chunk
             .par_iter()
             .enumerate()
@@ -1105,7 +1108,7 @@ pub fn choose_view(
         } else {
             (0..REFLECT_EXPONENTS.len()).collect()
         };
-        let eyes_m: Vec<[f32; 3]> = target.eyes.iter().map(|e| e.to_array()).collect();
+        let eyes_m: Vec<[f32; 3]> = target.eyes.iter().map(Vec3::to_array).collect();
         for k in exponents {
             let mut normals = vec![[0.0f32, 0.0, 1.0]; voxels];
             let mut scales = vec![0.0f32; voxels];
