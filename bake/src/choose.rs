@@ -408,10 +408,11 @@ pub fn bake_capture_to_target(
                 // dropped again when it breaks the byte budget.
                 add_view_dependence(job, &config_c, progress, &sampled, &mut output)?;
                 if let Some(max) = args.max_bytes
-                    && output.asset.view.is_some()
+                    && (output.asset.view.is_some() || output.asset.reflection.is_some())
                     && encoded_bytes(&output.asset)? > max
                 {
                     output.asset.view = None;
+                    output.asset.reflection = None;
                     if let Some(v) = output.report.view.as_mut() {
                         v.chosen = crate::view::ViewChoice::Off;
                         v.chosen_index = None;

@@ -362,15 +362,24 @@ fn finish(output: &mut BakeOutput, config: &BakeConfig, args: &OutputArgs) -> an
                 .map_or_else(|| "not judged".into(), |g| format!("{g:+.2} dB"))
         };
         match kept {
-            Some(c) => println!(
-                "  view dependence {} ({}): {} lobes × view rank {}, {} at {}",
-                v.chosen,
-                v.requested,
-                c.lobes,
-                c.rank,
-                gain(c),
-                v.judged_at
-            ),
+            Some(c) => match c.exponent {
+                Some(exponent) => println!(
+                    "  view dependence {} ({}): a glossy lobe of exponent {exponent} about each voxel's mirror direction, {} at {}",
+                    v.chosen,
+                    v.requested,
+                    gain(c),
+                    v.judged_at
+                ),
+                None => println!(
+                    "  view dependence {} ({}): {} lobes × view rank {}, {} at {}",
+                    v.chosen,
+                    v.requested,
+                    c.lobes,
+                    c.rank,
+                    gain(c),
+                    v.judged_at
+                ),
+            },
             None => println!(
                 "  view dependence off ({}): {}",
                 v.requested,
