@@ -840,7 +840,7 @@ mod tests {
         let residual: Vec<f32> = dirs
             .iter()
             .flat_map(|d| {
-                let h = lobe.transport(nelf_render::mirror(*d, n), n);
+                let h = lobe.transport(*d, n);
                 let mean = &mean;
                 scales
                     .into_iter()
