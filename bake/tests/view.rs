@@ -422,7 +422,7 @@ fn auto_keeps_nothing_for_a_matte_head() {
     let out = bake_tiny(0.0);
     let report = out.report.view.as_ref().unwrap();
     eprintln!("{report:?}");
-    assert!(out.asset.view.is_none());
+    assert!(out.asset.view.is_none() && out.asset.reflection.is_none());
     assert_eq!(report.chosen, ViewChoice::Off);
     assert!(
         report.residual_ratio < nelf_bake::view::NO_VIEW_DEPENDENCE,
@@ -438,8 +438,13 @@ fn auto_keeps_the_sheen_of_a_glossy_head() {
     let report = out.report.view.as_ref().unwrap();
     eprintln!("{report:#?}");
     assert_eq!(report.judged_at, "the capture's held-aside targets");
-    assert!(out.asset.view.is_some(), "no view part kept: {report:?}");
-    assert_ne!(report.chosen, ViewChoice::Off);
+    assert_ne!(report.chosen, ViewChoice::Off, "no view part kept: {report:?}");
+    // The kept part lives where its kind belongs, and only there.
+    if report.chosen == ViewChoice::Reflect {
+        assert!(out.asset.reflection.is_some() && out.asset.view.is_none());
+    } else {
+        assert!(out.asset.view.is_some() && out.asset.reflection.is_none());
+    }
     let chosen = &report.candidates[report.chosen_index.unwrap()];
     assert!(chosen.gain_db.unwrap() > 0.25, "{chosen:?}");
 }
