@@ -4,7 +4,7 @@
 # default sheen, each captured with 5 source views and one held-aside novel view per
 # shared HDRI (8 novel lights), baked with --view-dependence off, sh1, sh2, 3 learned
 # lobes and auto, and scored by the reference renderer against path-traced ground truth
-# at the held-aside views (bake_eval: PSNR, SSIM, interior PSNR), with the file bytes.
+# at the held-aside views (bake_eval: PSNR, SSIM, ꟻLIP, interior PSNR), with the file bytes.
 # `auto` judges its candidates at those same held-aside views (the explicit rows do not).
 #
 #   cargo build --release -p nelf --bins -p nelf-bake --examples
@@ -41,8 +41,8 @@ for head in $heads; do
 done
 
 {
-  echo "| head | view dependence | kept | J | K_v | K | file (bytes) | bytes ratio | bake (s) | view stage (s) | PSNR targets (dB) | SSIM targets | interior PSNR targets (dB) | PSNR sources (dB) |"
-  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
+  echo "| head | view dependence | kept | J | K_v | K | file (bytes) | bytes ratio | bake (s) | view stage (s) | PSNR targets (dB) | SSIM targets | ꟻLIP targets | interior PSNR targets (dB) | PSNR sources (dB) |"
+  echo "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"
 } > "$OUT/table.md"
 for head in $heads; do
   base_bytes=""
@@ -65,7 +65,7 @@ idx = view.get("chosen_index")
 cand = view["candidates"][idx] if idx is not None else None
 kept = view.get("chosen", "off")
 print(f"| {head} | {choice} | {kept} | {cand['lobes'] if cand else 0} | {cand['rank'] if cand else 0} | {bake['rank']} | {bake['file_size']} | "
-      f"{bake['file_size'] / base:.2f} | {secs:.1f} | {bake['timings'].get('view_secs', 0):.1f} | {t['psnr_db']:.2f} | {t['ssim']:.4f} | "
+      f"{bake['file_size'] / base:.2f} | {secs:.1f} | {bake['timings'].get('view_secs', 0):.1f} | {t['psnr_db']:.2f} | {t['ssim']:.4f} | {t['flip']:.4f} | "
       f"{t['interior_psnr_db']:.2f} | {s['psnr_db']:.2f} |")
 PY
   done

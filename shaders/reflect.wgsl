@@ -16,9 +16,12 @@
 //   pass (relight.wgsl, `relight_lobes` with no lobes) writes base and σ to the lobe buffer
 //   (common.wgsl, `lobe_buffer_words`: two words per voxel), and `reflect_mean`, which
 //   does not depend on the eye, replaces base by base − s·Ē in place;
-// * per camera move `reflect_toward_eye` adds s · max(0, n·ω) E(r) toward the eye and
-//   writes the result with σ into every atlas texel that holds the voxel
-//   (atlas_store.wgsl);
+//   A voxel whose scale is 0 (marked so in its codes word: outside the bake's band, most
+//   of a baked asset's voxels) does not depend on the eye: `reflect_mean` writes its
+//   base and σ into the atlas there and then;
+// * per camera move `reflect_toward_eye`, over the list of voxels with a scale only, adds
+//   s · max(0, n·ω) E(r) toward the eye and writes the result with σ into every atlas
+//   texel that holds the voxel (atlas_store.wgsl);
 // * per frame the march is unchanged.
 // The normal (octahedral u, v) and the scale are 8-bit codes, dequantized as
 // nelf_format::Coefficients::voxel_f32 does (offset + scale · code, f32). Positions and
@@ -34,7 +37,8 @@ struct ReflectParams {
     atlas: vec4<u32>,
     // The eye in lattice coordinates (p − bbox_min)/voxel − 0.5 (xyz); w: unused.
     eye_u: vec4<f32>,
-    // x: invocations per row of the dispatch (workgroups along x · 64); yzw: unused.
+    // x: invocations per row of the dispatch over all voxels (workgroups along x · 64);
+    // y: the same for the dispatch over `scaled_voxels`; z: its length; w: unused.
     dispatch: vec4<u32>,
     // Dequantization of the codes (normal u, normal v, scale s): offset + scale · code
     // (xyz); w: unused.
@@ -52,11 +56,15 @@ struct ReflectParams {
 @group(0) @binding(1) var<storage, read_write> voxel_lobes: array<u32>;
 // Brick-cell coordinates of every present brick (common.wgsl, `brick_cell`).
 @group(0) @binding(2) var<storage, read> brick_cells: array<vec2<u32>>;
-// Per voxel one word of 8-bit codes: normal u (bits 0–7), normal v (8–15), scale (16–23).
+// Per voxel one word of 8-bit codes: normal u (bits 0–7), normal v (8–15), scale (16–23),
+// and bit 24 set where the voxel has a scale (> 0; the CPU decides, so that this pass and
+// the list below agree).
 @group(0) @binding(3) var<storage, read> reflection_codes: array<u32>;
 // Bindings 4 (neighbour blocks) and 5 (the atlas): atlas_store.wgsl.
 // E(r) at the nodes of the lobe table, row-major (row · 128 + column), rgb.
 @group(0) @binding(6) var<storage, read> filtered_environment: array<vec4<f32>>;
+// The voxels with a scale (bit 24 of their codes word), ascending.
+@group(0) @binding(7) var<storage, read> scaled_voxels: array<u32>;
 
 // The lobe table's rows (polar angle) and columns (azimuth), as
 // nelf_format::conventions::LOBE_TABLE_H / LOBE_TABLE_W.
@@ -137,12 +145,14 @@ fn lobe_radiance(toward_eye: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
     return c * filtered_environment_at(normalize_or_zero(2.0 * c * n - toward_eye));
 }
 
-// Stored voxel `v`'s unit normal (xyz) and scale s ≥ 0 (w), dequantized from its codes.
+// Stored voxel `v`'s unit normal (xyz) and scale s ≥ 0 (w), dequantized from its codes; a
+// voxel without the bit of a scale has scale 0.
 fn voxel_normal_scale(v: u32) -> vec4<f32> {
     let word = reflection_codes[v];
     let codes = vec3<f32>(vec3<u32>(word & 0xffu, (word >> 8u) & 0xffu, (word >> 16u) & 0xffu));
     let values = params.code_offset.xyz + params.code_scale.xyz * codes;
-    return vec4<f32>(octahedral_decode(values.xy), max(values.z, 0.0));
+    let scaled = (word & 0x1000000u) != 0u;
+    return vec4<f32>(octahedral_decode(values.xy), select(0.0, max(values.z, 0.0), scaled));
 }
 
 // Stored voxel `v`'s centre in lattice coordinates.
@@ -157,7 +167,8 @@ fn invocation_voxel(gid: vec3<u32>) -> u32 {
     return select(v, voxels, gid.x >= params.dispatch.x || v >= voxels);
 }
 
-// Per lighting change, after the relight pass: base → base − s·Ē in the lobe buffer.
+// Per lighting change, after the relight pass: base → base − s·Ē in the lobe buffer; a
+// voxel without a scale goes into the atlas as it is.
 @compute @workgroup_size(64, 1, 1)
 fn reflect_mean(@builtin(global_invocation_id) gid: vec3<u32>) {
     let voxels = params.atlas.z;
@@ -167,6 +178,8 @@ fn reflect_mean(@builtin(global_invocation_id) gid: vec3<u32>) {
     }
     let normal_scale = voxel_normal_scale(v);
     if !(normal_scale.w > 0.0) {
+        let base = lobe_buffer_radiance(voxel_lobes[v], voxel_lobes[voxels + v]);
+        store_voxel_texels(v, SlotPacking(params.atlas.x, params.atlas.y), base);
         return;
     }
     let n = normal_scale.xyz;
@@ -183,20 +196,22 @@ fn reflect_mean(@builtin(global_invocation_id) gid: vec3<u32>) {
     voxel_lobes[voxels + v] = f32_to_half(rgb.z) | (second & 0xffff0000u);
 }
 
-// Per camera move: the radiance toward the eye, written with σ into the atlas.
+// Per camera move, over the voxels with a scale: the radiance toward the eye, written
+// with σ into the atlas.
 @compute @workgroup_size(64, 1, 1)
 fn reflect_toward_eye(@builtin(global_invocation_id) gid: vec3<u32>) {
     let voxels = params.atlas.z;
-    let v = invocation_voxel(gid);
+    let i = gid.x + gid.y * params.dispatch.y;
+    if gid.x >= params.dispatch.y || i >= params.dispatch.z {
+        return;
+    }
+    let v = scaled_voxels[i];
     if v >= voxels {
         return;
     }
     let base = lobe_buffer_radiance(voxel_lobes[v], voxel_lobes[voxels + v]);
-    var rgb = base.rgb;
     let normal_scale = voxel_normal_scale(v);
-    if normal_scale.w > 0.0 {
-        let toward_eye = normalize_or_zero(params.eye_u.xyz - voxel_centre_u(v));
-        rgb += normal_scale.w * lobe_radiance(toward_eye, normal_scale.xyz);
-    }
+    let toward_eye = normalize_or_zero(params.eye_u.xyz - voxel_centre_u(v));
+    let rgb = base.rgb + normal_scale.w * lobe_radiance(toward_eye, normal_scale.xyz);
     store_voxel_texels(v, SlotPacking(params.atlas.x, params.atlas.y), vec4<f32>(rgb, base.a));
 }

@@ -11,7 +11,8 @@
 //! with `--json`, the rows are printed as one JSON object instead of a table.
 //! "8-bit PSNR" is the PSNR of those previews as 8-bit sRGB values (exposure putting
 //! the reference's largest value at 0.5, as written), what a person looking at the
-//! PNGs compares.
+//! PNGs compares; "ꟻLIP" the mean ꟻLIP error (NVIDIA's LDR ꟻLIP, default observer) of the
+//! same 8-bit images, 0 = identical.
 
 use std::path::{Path, PathBuf};
 
@@ -20,6 +21,7 @@ use nelf_bake::{CaptureLoadOptions, load_capture};
 use nelf_format::conventions::{LatLong, PinholeCamera};
 use nelf_format::read_asset;
 use nelf_scene::envmap::load_envmap;
+use nelf_scene::flip::{DEFAULT_PIXELS_PER_DEGREE, flip_map, pooled_mean};
 use nelf_scene::image_io::write_png_srgb;
 use nelf_scene::mesh_io::linear_to_srgb8;
 use nelf_scene::metrics::psnr;
@@ -34,7 +36,7 @@ fn measure(
     mask: &[f32],
     name: &str,
     out: Option<&Path>,
-) -> Result<(ViewScore, ErrorBreakdown, f64), Error> {
+) -> Result<Row, Error> {
     let (score, image) = score_view(asset, camera, env, reference, name)?;
     let breakdown = error_breakdown(&image, reference, mask, f64::from(data_range(reference)))?;
     let stops = (0.5 / data_range(reference)).log2();
@@ -45,6 +47,15 @@ fn measure(
             .collect()
     };
     let psnr_8bit = psnr(&to_8bit(&image.rgb), &to_8bit(reference), 255.0)?;
+    let exposed = |rgb: &[[f32; 3]]| -> Vec<[f32; 3]> { rgb.iter().map(|p| p.map(|v| v * gain)).collect() };
+    let flip_error = flip_map(
+        &exposed(reference),
+        &exposed(&image.rgb),
+        camera.width,
+        camera.height,
+        DEFAULT_PIXELS_PER_DEGREE,
+    )?;
+    let flip = pooled_mean(&flip_error, None)?.ok_or("an empty image has no ꟻLIP")?;
     if let Some(dir) = out {
         for (suffix, rgb) in [("render", &image.rgb[..]), ("truth", reference)] {
             write_png_srgb(
@@ -56,16 +67,17 @@ fn measure(
             )?;
         }
     }
-    Ok((score, breakdown, psnr_8bit))
+    Ok((score, breakdown, psnr_8bit, flip))
 }
 
-type Row = (ViewScore, ErrorBreakdown, f64);
+/// A view's score, error breakdown, 8-bit PSNR and mean ꟻLIP.
+type Row = (ViewScore, ErrorBreakdown, f64, f64);
 
-fn mean(rows: &[Row]) -> Option<[f64; 7]> {
+fn mean(rows: &[Row]) -> Option<[f64; 8]> {
     let n = rows.len() as f64;
     (!rows.is_empty()).then(|| {
-        let mut m = [0.0; 7];
-        for (s, b, p8) in rows {
+        let mut m = [0.0; 8];
+        for (s, b, p8, flip) in rows {
             let v = [
                 s.psnr_db,
                 s.ssim,
@@ -74,6 +86,7 @@ fn mean(rows: &[Row]) -> Option<[f64; 7]> {
                 b.interior_psnr_db,
                 b.coverage_error,
                 *p8,
+                *flip,
             ];
             for (a, x) in m.iter_mut().zip(v) {
                 *a += x / n;
@@ -133,12 +146,14 @@ fn main() -> Result<(), Error> {
             mean(s).map(|m| {
                 serde_json::json!({"psnr_db": m[0], "ssim": m[1], "render_secs": m[2],
                     "edge_share": m[3], "interior_psnr_db": m[4], "coverage_error": m[5],
-                    "psnr_8bit_db": m[6]})
+                    "psnr_8bit_db": m[6], "flip": m[7]})
             })
         };
         let rows = |s: &[Row]| {
             s.iter()
-                .map(|(v, b, p8)| serde_json::json!({"score": v, "breakdown": b, "psnr_8bit_db": p8}))
+                .map(|(v, b, p8, flip)| {
+                    serde_json::json!({"score": v, "breakdown": b, "psnr_8bit_db": p8, "flip": flip})
+                })
                 .collect::<Vec<_>>()
         };
         let value = serde_json::json!({
@@ -149,20 +164,20 @@ fn main() -> Result<(), Error> {
         return Ok(());
     }
     println!(
-        "| view | PSNR (dB) | SSIM | render (s) | edge share | interior PSNR (dB) | coverage error | 8-bit PSNR (dB) |"
+        "| view | PSNR (dB) | SSIM | render (s) | edge share | interior PSNR (dB) | coverage error | 8-bit PSNR (dB) | ꟻLIP |"
     );
-    println!("| --- | --- | --- | --- | --- | --- | --- | --- |");
-    for (r, b, p8) in sources.iter().chain(&targets) {
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    for (r, b, p8, flip) in sources.iter().chain(&targets) {
         println!(
-            "| {} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} | {p8:.2} |",
+            "| {} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} | {p8:.2} | {flip:.4} |",
             r.name, r.psnr_db, r.ssim, r.render_secs, b.edge_share, b.interior_psnr_db, b.coverage_error
         );
     }
     for (label, rows) in [("mean of sources", &sources), ("mean of targets", &targets)] {
         if let Some(m) = mean(rows) {
             println!(
-                "| {label} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} | {:.2} |",
-                m[0], m[1], m[2], m[3], m[4], m[5], m[6]
+                "| {label} | {:.2} | {:.4} | {:.3} | {:.2} | {:.2} | {:.4} | {:.2} | {:.4} |",
+                m[0], m[1], m[2], m[3], m[4], m[5], m[6], m[7]
             );
         }
     }

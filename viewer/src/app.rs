@@ -38,7 +38,8 @@ use nelf_render::MarchSettings;
 
 use crate::atlas::RelightView;
 use crate::gpu::{
-    DisplaySettings, GpuRenderer, MarchPass, MarchView, RelightKind, ToneMap, ViewInfo, ViewSettings,
+    DisplaySettings, GpuRenderer, MarchPass, MarchView, ReflectionInfo, RelightKind, ToneMap, ViewInfo,
+    ViewSettings,
 };
 
 /// A named environment map offered in the picker.
@@ -393,8 +394,8 @@ struct ViewerApp {
     frames_with_asset: u32,
     view_rect_px: [f32; 4],
     asset_rank: usize,
-    /// The loaded asset's view-dependent part, if any (shown in the stats line).
-    asset_view: Option<ViewInfo>,
+    /// The loaded asset's view-dependent parts as the renderer shows them (the stats line).
+    asset_parts: AssetParts,
     max_density_per_m: f32,
     orbit: Option<Orbit>,
     rotation_deg: f32,
@@ -446,17 +447,39 @@ struct Screenshots {
 
 /// The stats line of an asset: its PCA rank and whether it is view-dependent (format
 /// 1.2: `J` lobes over a view basis of rank `K_v`).
-fn asset_stats(rank: usize, view: Option<ViewInfo>) -> String {
-    match view {
-        Some(v) => format!(
+fn asset_stats(rank: usize, parts: &AssetParts) -> String {
+    let shown = match (parts.view, parts.reflection) {
+        (Some(v), _) => format!(
             "K = {rank}; view-dependent: J = {} lobe{}, K_v = {} ({:?})",
             v.lobes,
             if v.lobes == 1 { "" } else { "s" },
             v.rank,
             v.encoding
         ),
-        None => format!("K = {rank}; view-independent"),
+        (None, Some(r)) => format!(
+            "K = {rank}; reflection lobe: exponent {}, averaged over {} eye{}",
+            r.exponent,
+            r.eyes,
+            if r.eyes == 1 { "" } else { "s" }
+        ),
+        (None, None) => format!("K = {rank}; view-independent"),
+    };
+    match parts.ignored {
+        Some(part) => format!(
+            "{shown}\nnot shown: its {part}, which needs compute shaders \
+             (WebGPU or the native viewer); this is the view-averaged asset"
+        ),
+        None => shown,
     }
+}
+
+/// The view-dependent parts of the loaded asset, as the renderer reported them.
+#[derive(Debug, Clone, Copy, Default)]
+struct AssetParts {
+    view: Option<ViewInfo>,
+    reflection: Option<ReflectionInfo>,
+    /// The part the renderer left out (no compute shaders: WebGL2).
+    ignored: Option<&'static str>,
 }
 
 /// The stats line of the last lighting change on the GPU: which voxels it relit, or
@@ -512,7 +535,7 @@ impl ViewerApp {
             frames_with_asset: 0,
             view_rect_px: [0.0; 4],
             asset_rank: 0,
-            asset_view: None,
+            asset_parts: AssetParts::default(),
             max_density_per_m: 1.0,
             orbit: None,
             rotation_deg: config.start.rotation_deg,
@@ -640,7 +663,11 @@ impl ViewerApp {
             Some(Ok(info)) => {
                 self.asset_name = Some(name.to_owned());
                 self.asset_rank = info.rank;
-                self.asset_view = info.view;
+                self.asset_parts = AssetParts {
+                    view: info.view,
+                    reflection: info.reflection,
+                    ignored: info.view_part_ignored,
+                };
                 self.rank = info.rank;
                 self.component = self.component.min(info.rank.saturating_sub(1));
                 self.max_density_per_m = info.max_density_per_m.max(1e-6);
@@ -814,7 +841,7 @@ impl ViewerApp {
             None => ui.label("no asset: drop a .nelf file here"),
         };
         if self.asset_name.is_some() {
-            ui.label(asset_stats(self.asset_rank, self.asset_view));
+            ui.label(asset_stats(self.asset_rank, &self.asset_parts));
         }
         ui.label(&self.gpu_description);
         ui.label(format!(
@@ -1277,15 +1304,43 @@ mod tests {
 
     #[test]
     fn stats_line_says_whether_the_asset_is_view_dependent() {
-        assert_eq!(asset_stats(12, None), "K = 12; view-independent");
+        assert_eq!(
+            asset_stats(12, &AssetParts::default()),
+            "K = 12; view-independent"
+        );
         let view = ViewInfo {
             lobes: 3,
             rank: 8,
             encoding: nelf_format::CoefficientEncoding::U8Affine,
         };
+        let parts = AssetParts {
+            view: Some(view),
+            ..AssetParts::default()
+        };
         assert_eq!(
-            asset_stats(12, Some(view)),
+            asset_stats(12, &parts),
             "K = 12; view-dependent: J = 3 lobes, K_v = 8 (U8Affine)"
+        );
+        let parts = AssetParts {
+            reflection: Some(ReflectionInfo {
+                exponent: 20.0,
+                eyes: 5,
+            }),
+            ..AssetParts::default()
+        };
+        assert_eq!(
+            asset_stats(12, &parts),
+            "K = 12; reflection lobe: exponent 20, averaged over 5 eyes"
+        );
+        // WebGL2 shows the view-averaged asset and says so.
+        let parts = AssetParts {
+            ignored: Some("reflection part (format 1.3)"),
+            ..AssetParts::default()
+        };
+        let line = asset_stats(12, &parts);
+        assert!(
+            line.starts_with("K = 12; view-independent\nnot shown: its reflection part"),
+            "{line}"
         );
     }
 

@@ -1125,21 +1125,31 @@ fn the_storage_free_path_of_webgl2_draws_the_same_atlas_and_image() {
             );
         }
     }
-    // A view-dependent asset needs the view pass (compute): a clear error, and the
-    // renderer keeps its asset.
-    let view_asset = with_view(
-        &asset_through_file(20_000, 6, CoefficientEncoding::U8Affine, 4),
-        CoefficientEncoding::U8Affine,
-        4,
-    );
-    let err = plain.load_asset(&view_asset).unwrap_err();
-    assert!(matches!(err, ViewerError::NoCompute(_)), "{err}");
-    assert!(err.to_string().contains("WebGPU"), "{err}");
-    assert!(plain.render(&cam, &no_jitter()).is_ok());
-    // So does a reflection asset's reflect pass.
-    let mut reflection_asset = asset_through_file(20_000, 6, CoefficientEncoding::U8Affine, 4);
-    reflection_asset.reflection = Some(synthetic_reflection(&reflection_asset, 20.0, 4).unwrap());
-    let err = plain.load_asset(&reflection_asset).unwrap_err();
-    assert!(matches!(err, ViewerError::NoCompute(_)), "{err}");
-    assert!(plain.render(&cam, &no_jitter()).is_ok());
+    // Without compute the view-dependent parts are left out, said so, and what is shown is
+    // the view-averaged asset, pixel for pixel the same asset without those parts.
+    let base = asset_through_file(20_000, 6, CoefficientEncoding::U8Affine, 4);
+    plain.load_asset(&base).unwrap();
+    plain.set_lighting(&env, rotation_y(0.4)).unwrap();
+    let averaged = plain.render(&cam, &no_jitter()).unwrap();
+    let view_asset = with_view(&base, CoefficientEncoding::U8Affine, 4);
+    let mut reflection_asset = base.clone();
+    reflection_asset.reflection = Some(synthetic_reflection(&base, 20.0, 4).unwrap());
+    for (asset, part) in [
+        (&view_asset, "view-dependent part (format 1.2)"),
+        (&reflection_asset, "reflection part (format 1.3)"),
+    ] {
+        let info = plain.load_asset(asset).unwrap();
+        assert_eq!(info.view_part_ignored, Some(part));
+        assert!(info.view.is_none() && info.reflection.is_none());
+        plain.set_lighting(&env, rotation_y(0.4)).unwrap();
+        let shown = plain.render(&cam, &no_jitter()).unwrap();
+        assert!(
+            shown == averaged,
+            "{part}: WebGL2 shows other pixels than the view-averaged asset"
+        );
+        // With compute nothing is left out.
+        let info = gpu.load_asset(asset).unwrap();
+        assert_eq!(info.view_part_ignored, None);
+        assert!(info.view.is_some() || info.reflection.is_some());
+    }
 }

@@ -85,6 +85,11 @@ pub struct AssetInfo {
     pub view: Option<ViewInfo>,
     /// The reflection part (format 1.3), if the asset has one.
     pub reflection: Option<ReflectionInfo>,
+    /// The asset's view-dependent or reflection part, named, where this renderer left it
+    /// out because its device has no compute shaders (WebGL2): it then shows the
+    /// view-averaged light transport every reader can show. `None` where nothing was
+    /// left out.
+    pub view_part_ignored: Option<&'static str>,
 }
 
 /// What a view-dependent asset's view part holds ([`nelf_format::ViewDependence`]).
@@ -474,15 +479,23 @@ impl GpuRenderer {
     /// and an atlas the relight pass fills; for a view-dependent asset also its view
     /// coefficients and a per-voxel lobe buffer (`gpu/view.rs`), for a reflection asset its
     /// tabulated lobe, codes and lobe buffer (`gpu/reflect.rs`). Lighting, if set, is
-    /// re-projected onto the new basis.
+    /// re-projected onto the new basis. A device without compute shaders (WebGL2) leaves
+    /// the view-dependent part out and shows the view-averaged asset
+    /// ([`AssetInfo::view_part_ignored`] names what it left out).
     pub fn load_asset(&mut self, asset: &Asset) -> Result<AssetInfo, ViewerError> {
         asset.validate()?;
-        if !self.storage() && asset.view.is_some() {
-            return Err(ViewerError::NoCompute("a view-dependent asset (format 1.2)"));
-        }
-        if !self.storage() && asset.reflection.is_some() {
-            return Err(ViewerError::NoCompute("a reflection asset (format 1.3)"));
-        }
+        // Without compute (WebGL2) the view-dependent parts cannot be shaded; the PCA part
+        // alone is the view-averaged asset every reader can show (SPEC.md §6), so the
+        // renderer shows that and says what it left out.
+        let compute = self.storage();
+        let view_part = asset.view.as_ref().filter(|_| compute);
+        let reflection_part = asset.reflection.as_ref().filter(|_| compute);
+        let view_part_ignored = match (&asset.view, &asset.reflection) {
+            _ if compute => None,
+            (Some(_), _) => Some("view-dependent part (format 1.2)"),
+            (None, Some(_)) => Some("reflection part (format 1.3)"),
+            (None, None) => None,
+        };
         let limits = self.device.limits();
         let grid_bricks = asset.grid.grid_bricks;
         if grid_bricks.iter().any(|&n| n > limits.max_texture_dimension_3d) {
@@ -503,10 +516,10 @@ impl GpuRenderer {
         let coefficients = pack_coefficients(&asset.coefficients);
         let density = pack_density(&asset.density);
         let neighbours = neighbour_blocks(&indirection, grid_bricks, &asset.bricks);
-        let view_coefficients = asset.view.as_ref().map(|v| pack_coefficients(&v.coefficients));
+        let view_coefficients = view_part.map(|v| pack_coefficients(&v.coefficients));
         let max_binding = limits.max_storage_buffer_binding_size.min(limits.max_buffer_size);
         let voxel_count = asset.voxel_count();
-        let lobe_words = match (&asset.view, &asset.reflection) {
+        let lobe_words = match (view_part, reflection_part) {
             (Some(v), _) => lobe_buffer_words(v.lobe_count()),
             (None, Some(_)) => REFLECT_LOBE_WORDS,
             (None, None) => 0,
@@ -523,7 +536,7 @@ impl GpuRenderer {
             ("per-voxel view lobes", lobe_bytes),
             (
                 "reflection codes",
-                asset.reflection.as_ref().map_or(0, |_| voxel_count as u64 * 4),
+                reflection_part.map_or(0, |_| voxel_count as u64 * 4),
             ),
         ] {
             // Without storage bindings these stay on the CPU.
@@ -641,10 +654,10 @@ impl GpuRenderer {
             neighbour_blocks: &neighbour_buffer,
             atlas: &atlas_view,
         };
-        if (asset.view.is_some() || asset.reflection.is_some()) && self.pipelines.lobes.is_none() {
+        if (view_part.is_some() || reflection_part.is_some()) && self.pipelines.lobes.is_none() {
             self.pipelines.lobes = Some(LobesPipeline::new(&self.device)?);
         }
-        let view = match (&asset.view, &view_coefficients) {
+        let view = match (view_part, &view_coefficients) {
             (Some(v), Some(packed)) => {
                 if self.pipelines.view.is_none() {
                     self.pipelines.view = Some(ViewPipeline::new(&self.device)?);
@@ -658,7 +671,7 @@ impl GpuRenderer {
             }
             _ => None,
         };
-        let reflection = match &asset.reflection {
+        let reflection = match reflection_part {
             Some(r) => {
                 if self.pipelines.reflect.is_none() {
                     self.pipelines.reflect = Some(ReflectPipeline::new(&self.device)?);
@@ -697,15 +710,16 @@ impl GpuRenderer {
             atlas_texels: texels,
             memory,
             max_density_per_m,
-            view: asset.view.as_ref().map(|v| ViewInfo {
+            view: view_part.map(|v| ViewInfo {
                 lobes: v.lobe_count(),
                 rank: v.rank(),
                 encoding: v.coefficients.encoding(),
             }),
-            reflection: asset.reflection.as_ref().map(|r| ReflectionInfo {
+            reflection: reflection_part.map(|r| ReflectionInfo {
                 exponent: r.exponent,
                 eyes: r.eyes_m.len(),
             }),
+            view_part_ignored,
         };
         let dequantization = Dequantization::of(&asset.coefficients);
         let replay = self.pipelines.replay.is_some().then(|| ReplayInputs {

@@ -19,9 +19,13 @@
 //!   and uploads the table; the relight pass's `relight_lobes` writes every voxel's `base`
 //!   and σ to the lobe buffer (two words per voxel, no lobes); then `reflect_mean`, which
 //!   does not depend on the eye, turns `base` into `base − s·Ē` in place;
+//!   A voxel without a scale (`s = 0`: outside the bake's band, about four in five voxels
+//!   of a baked head) does not depend on the eye, so `reflect_mean` writes its `[base, σ]`
+//!   into the atlas there and then;
 //! * **per camera move** (the eye, in lattice coordinates, differs from the one the atlas
-//!   was last filled for, or the lighting changed): `reflect_toward_eye` adds
-//!   `s · max(0, n·ω) E(r)` and writes `[rgb, σ]` into the atlas texels holding the voxel;
+//!   was last filled for, or the lighting changed): `reflect_toward_eye`, over the list of
+//!   voxels with a scale only, adds `s · max(0, n·ω) E(r)` and writes `[rgb, σ]` into the
+//!   atlas texels holding the voxel;
 //! * **per frame**: the march, unchanged.
 //!
 //! Taking `Ē` per lighting change rather than per camera move makes a camera move one
@@ -72,6 +76,7 @@ impl ReflectPipeline {
                 storage_entry(4, true, S::COMPUTE),
                 storage_texture_entry(5, wgpu::TextureFormat::Rgba16Float, D::D3),
                 storage_entry(6, true, S::COMPUTE),
+                storage_entry(7, true, S::COMPUTE),
             ],
         });
         let module = shader_module(device, "reflect.wgsl", REFLECT_WGSL)?;
@@ -90,8 +95,10 @@ pub(super) struct GpuReflection {
     /// The reflect pass's uniform but the eye (the part's constants).
     params: ReflectParams,
     params_buffer: wgpu::Buffer,
-    /// The codes, one word per voxel (`u | v << 8 | s << 16`).
+    /// The codes, one word per voxel (`u | v << 8 | s << 16 | scaled << 24`).
     codes: wgpu::Buffer,
+    /// The voxels with a scale, ascending ([`scaled_codes`]).
+    scaled_voxels: wgpu::Buffer,
     /// `E` at the table's nodes (`vec4<f32>`, rgb), rewritten per lighting change.
     filtered: wgpu::Buffer,
     /// The lobe buffer (radiance and σ per voxel, as f16 halves).
@@ -111,6 +118,23 @@ fn lattice_point(asset: &Asset, p: DVec3) -> [f32; 4] {
     let grid = &asset.grid;
     let u: [f32; 3] = std::array::from_fn(|a| ((p[a] - grid.bbox_min_m[a]) / grid.voxel_size_m - 0.5) as f32);
     [u[0], u[1], u[2], 0.0]
+}
+
+/// The reflect pass's codes words (`u | v << 8 | s << 16`, [`pack_coefficients`]) with bit
+/// 24 set where the voxel has a scale, `offset + step · s > 0` (the shader's dequantization,
+/// here in `f32` as there), and the list of those voxels, ascending: the only ones a camera
+/// move recomputes.
+fn scaled_codes(coefficients: &nelf_format::Coefficients, offset: f32, step: f32) -> (Vec<u32>, Vec<u32>) {
+    let mut words = pack_coefficients(coefficients).words;
+    let mut scaled = Vec::new();
+    for (v, word) in words.iter_mut().enumerate() {
+        let code = (*word >> 16) & 0xff;
+        if offset + step * code as f32 > 0.0 {
+            *word |= 1 << 24;
+            scaled.push(v as u32);
+        }
+    }
+    (words, scaled)
 }
 
 impl GpuReflection {
@@ -158,6 +182,8 @@ impl GpuReflection {
             *slot = lattice_point(asset, DVec3::from_array(eye.map(f64::from)));
         }
         let (_, per_row) = voxel_dispatch(voxels);
+        let (codes, scaled_voxels) = scaled_codes(&reflection.coefficients, offset[2], scale[2]);
+        let (_, scaled_per_row) = voxel_dispatch(scaled_voxels.len());
         let column = |i: usize| {
             let c = light_from_world.col(i);
             [c.x, c.y, c.z, 0.0]
@@ -170,7 +196,7 @@ impl GpuReflection {
                 reflection.eyes_m.len() as u32,
             ],
             eye_u: [0.0; 4],
-            dispatch: [per_row, 0, 0, 0],
+            dispatch: [per_row, scaled_per_row, scaled_voxels.len() as u32, 0],
             code_offset: offset,
             code_scale: scale,
             light_from_world: [column(0), column(1), column(2)],
@@ -192,9 +218,16 @@ impl GpuReflection {
                 size_of::<ReflectParams>(),
                 U::UNIFORM | U::COPY_DST,
             ),
-            codes: storage(
-                "reflection codes",
-                bytemuck::cast_slice(&pack_coefficients(&reflection.coefficients).words),
+            codes: storage("reflection codes", bytemuck::cast_slice(&codes)),
+            // A binding may not be empty: one out-of-range entry where no voxel has a scale
+            // (the dispatch then reads none).
+            scaled_voxels: storage(
+                "voxels with a scale",
+                bytemuck::cast_slice(if scaled_voxels.is_empty() {
+                    &[u32::MAX]
+                } else {
+                    &scaled_voxels
+                }),
             ),
             filtered: buffer(
                 "filtered environment",
@@ -217,6 +250,7 @@ impl GpuReflection {
     pub(super) fn bytes(&self) -> u64 {
         self.params_buffer.size()
             + self.codes.size()
+            + self.scaled_voxels.size()
             + self.filtered.size()
             + self.voxel_lobes.size()
             + self.no_view_light.size()
@@ -253,6 +287,7 @@ impl GpuReflection {
                     resource: wgpu::BindingResource::TextureView(b.atlas),
                 },
                 buffer(6, &self.filtered),
+                buffer(7, &self.scaled_voxels),
             ],
         }));
     }
@@ -292,23 +327,33 @@ impl GpuReflection {
         encoder: &mut wgpu::CommandEncoder,
         pipeline: &ReflectPipeline,
     ) -> Result<(), ViewerError> {
-        self.encode(queue, encoder, &pipeline.mean, &self.params, "reflect mean")
+        let voxels = self.params.atlas[2] as usize;
+        self.encode(
+            queue,
+            encoder,
+            &pipeline.mean,
+            &self.params,
+            voxels,
+            "reflect mean",
+        )
     }
 
-    /// Writes the uniform (`params`) and dispatches `pipeline`, one invocation per voxel.
+    /// Writes the uniform (`params`) and dispatches `pipeline`, one invocation per item
+    /// (`items`: voxels, or entries of the list of voxels with a scale).
     fn encode(
         &self,
         queue: &wgpu::Queue,
         encoder: &mut wgpu::CommandEncoder,
         pipeline: &wgpu::ComputePipeline,
         params: &ReflectParams,
+        items: usize,
         label: &str,
     ) -> Result<(), ViewerError> {
         let bind_group = self.bind_group.as_ref().ok_or(ViewerError::NoAsset)?;
         // Both entries read the same uniform, and the last write before a submission is
         // the one every pass of it sees: `params` always holds the part's constants.
         queue.write_buffer(&self.params_buffer, 0, bytemuck::bytes_of(params));
-        let (groups, _) = voxel_dispatch(params.atlas[2] as usize);
+        let (groups, _) = voxel_dispatch(items);
         let mut pass = encoder.begin_compute_pass(&wgpu::ComputePassDescriptor {
             label: Some(label),
             timestamp_writes: None,
@@ -342,14 +387,46 @@ impl GpuRenderer {
             eye_u: [eye_u[0], eye_u[1], eye_u[2], 0.0],
             ..reflection.params
         };
-        reflection.encode(
-            &self.queue,
-            encoder,
-            &pipeline.toward_eye,
-            &params,
-            "reflect toward eye",
-        )?;
+        let scaled = params.dispatch[2] as usize;
+        if scaled > 0 {
+            reflection.encode(
+                &self.queue,
+                encoder,
+                &pipeline.toward_eye,
+                &params,
+                scaled,
+                "reflect toward eye",
+            )?;
+        }
         self.view_eye = Some(eye_u);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_voxels_with_a_scale_are_listed_and_marked() {
+        // Three voxels: scale codes 0, 1 and 255 with the scale's code 0 at 0 (the bake's
+        // band) and at −0.01 (a quantizer whose range dips below 0: code 1 is then ≤ 0).
+        let codes = vec![7, 9, 0, 1, 2, 1, 3, 4, 255];
+        for (offset, want) in [(0.0f32, vec![1u32, 2]), (-0.01, vec![2])] {
+            let coefficients = nelf_format::Coefficients::U8Affine {
+                rank: 3,
+                scale: vec![0.01, 0.01, 0.01],
+                offset: vec![-1.0, -1.0, offset],
+                codes: codes.clone(),
+            };
+            let (words, scaled) = scaled_codes(&coefficients, offset, 0.01);
+            assert_eq!(scaled, want);
+            for (v, word) in words.iter().enumerate() {
+                let c = &codes[v * 3..v * 3 + 3];
+                let marked = u32::from(scaled.contains(&(v as u32)));
+                let want_word = u32::from(c[0]) | u32::from(c[1]) << 8 | u32::from(c[2]) << 16 | marked << 24;
+                assert_eq!(*word, want_word, "voxel {v}");
+            }
+        }
     }
 }
