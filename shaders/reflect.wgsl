@@ -160,11 +160,11 @@ fn voxel_centre_u(v: u32) -> vec3<f32> {
     return vec3<f32>(brick_cell(brick_cells[v / 512u]) * BRICK + voxel_local(v));
 }
 
-// The voxel of invocation `gid`, or the voxel count (out of range).
-fn invocation_voxel(gid: vec3<u32>) -> u32 {
-    let voxels = params.atlas.z;
-    let v = gid.x + gid.y * params.dispatch.x;
-    return select(v, voxels, gid.x >= params.dispatch.x || v >= voxels);
+// The item of invocation `gid` in a dispatch of `per_row` invocations per row over
+// `count` items (voxels, or entries of `scaled_voxels`), or `count` (out of range).
+fn invocation_item(gid: vec3<u32>, per_row: u32, count: u32) -> u32 {
+    let i = gid.x + gid.y * per_row;
+    return select(i, count, gid.x >= per_row || i >= count);
 }
 
 // Per lighting change, after the relight pass: base → base − s·Ē in the lobe buffer; a
@@ -172,7 +172,7 @@ fn invocation_voxel(gid: vec3<u32>) -> u32 {
 @compute @workgroup_size(64, 1, 1)
 fn reflect_mean(@builtin(global_invocation_id) gid: vec3<u32>) {
     let voxels = params.atlas.z;
-    let v = invocation_voxel(gid);
+    let v = invocation_item(gid, params.dispatch.x, voxels);
     if v >= voxels {
         return;
     }
@@ -201,8 +201,8 @@ fn reflect_mean(@builtin(global_invocation_id) gid: vec3<u32>) {
 @compute @workgroup_size(64, 1, 1)
 fn reflect_toward_eye(@builtin(global_invocation_id) gid: vec3<u32>) {
     let voxels = params.atlas.z;
-    let i = gid.x + gid.y * params.dispatch.y;
-    if gid.x >= params.dispatch.y || i >= params.dispatch.z {
+    let i = invocation_item(gid, params.dispatch.y, params.dispatch.z);
+    if i >= params.dispatch.z {
         return;
     }
     let v = scaled_voxels[i];
