@@ -2,7 +2,8 @@
 //! `nelf_train` example binary (no viewer, no wgpu: what a GPU machine runs, built
 //! with `--features cuda`). `data` renders (or resumes) a dataset of training
 //! triplets; `run` trains (or resumes training) on one; `eval` scores a network on
-//! a dataset's held-out heads with 2–5 source views.
+//! a dataset's held-out heads with 2–5 source views; `reset-density` repairs a run
+//! whose density saturated.
 
 use std::path::PathBuf;
 
@@ -34,6 +35,27 @@ pub enum TrainCommand {
     /// their novel-light views, with 2, 3, 4 and 5 source views (the paper's Table 3),
     /// beside the flat-colour baseline.
     Eval(EvalArgs),
+    /// Re-initialise the density heads' output layers of a run's checkpoint (weights
+    /// scaled down, bias at a small σ, their Adam moments zeroed; the step and every
+    /// other tensor kept): for a run whose density saturated inside the visual hull,
+    /// where no loss has a gradient left to carve it.
+    ResetDensity(ResetDensityArgs),
+}
+
+/// Options of `nelf train reset-density`.
+#[derive(Debug, clap::Args)]
+pub struct ResetDensityArgs {
+    /// Run folder (`nelf train run -o`) whose checkpoint is rewritten in place.
+    #[arg(long)]
+    pub run: PathBuf,
+    /// Density the reset heads give everywhere at first, 1/mm (0.05/mm: a 12.5 mm
+    /// coarse step lets ~46 % through).
+    #[arg(long, default_value_t = 0.05)]
+    pub sigma_per_mm: f64,
+    /// Factor on the output layers' weights (keeps what the features say, scaled
+    /// down so that σ stays near `--sigma-per-mm` at first).
+    #[arg(long, default_value_t = 0.05)]
+    pub weight_scale: f64,
 }
 
 /// Options of `nelf train eval`.
@@ -63,6 +85,22 @@ pub struct EvalArgs {
     /// Print the table as JSON.
     #[arg(long)]
     pub json: bool,
+    /// Which heads to score: the held-out ones (the honest figure) or training heads
+    /// (the gap between the two says how much is generalisation, not fitting).
+    #[arg(long, value_enum, default_value_t = EvalSplit::HeldOut)]
+    pub split: EvalSplit,
+    /// Write the last view count's sheet here (PNG; per head: truth | network | flat colour).
+    #[arg(long)]
+    pub sheet: Option<PathBuf>,
+}
+
+/// The heads `nelf train eval` scores.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum EvalSplit {
+    /// Held-out identities under held-out lightings, never trained on.
+    HeldOut,
+    /// Training heads (a diagnosis, never a figure of merit).
+    Train,
 }
 
 /// Options of `nelf train data`.
@@ -81,6 +119,19 @@ pub fn run(args: &TrainArgs) -> Result<(), TrainError> {
         TrainCommand::Data(data) => run_data(data),
         TrainCommand::Run(config) => run_training(config),
         TrainCommand::Eval(eval) => run_eval(eval),
+        TrainCommand::ResetDensity(reset) => {
+            let done =
+                crate::trainer::reset_density_heads(&reset.run, reset.sigma_per_mm, reset.weight_scale)?;
+            println!(
+                "{}: step {}; reset {} (σ {} /mm, weights × {})",
+                reset.run.display(),
+                done.step,
+                done.layers.join(", "),
+                reset.sigma_per_mm,
+                reset.weight_scale
+            );
+            Ok(())
+        }
     }
 }
 
@@ -104,9 +155,13 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
         ..TrainConfig::default()
     };
     let dataset = crate::data::Dataset::open(&args.data)?;
-    let ids: Vec<u32> = dataset.val_ids().into_iter().take(args.heads).collect();
+    let (ids, split_name) = match args.split {
+        EvalSplit::HeldOut => (dataset.val_ids(), "held-out"),
+        EvalSplit::Train => (dataset.train_ids(), "training"),
+    };
+    let ids: Vec<u32> = ids.into_iter().take(args.heads).collect();
     let heads = crate::trainer::prepare_heads(&dataset, &ids, image_size)?;
-    let rows = crate::eval::view_count_table(&model, &heads, &config, &args.views)?;
+    let rows = crate::eval::view_count_table(&model, &heads, &config, &args.views, args.sheet.as_deref())?;
     if args.json {
         let text = serde_json::to_string_pretty(&serde_json::json!({
             "weights": name,
@@ -119,7 +174,7 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
         return Ok(());
     }
     println!(
-        "{name} on {} held-out heads of {} at {image_size}², novel-light views, 8-bit sRGB:",
+        "{name} on {} {split_name} heads of {} at {image_size}², novel-light views, 8-bit sRGB:",
         heads.len(),
         args.data.display()
     );

@@ -8,12 +8,14 @@
 //! baseline of the same views (the true foreground mean inside the true silhouette),
 //! so that a network that learned only silhouettes and average colour shows as such.
 
+use std::path::Path;
+
 use nelf_field::{EncodedViews, Model};
 use serde::Serialize;
 
 use crate::config::TrainConfig;
 use crate::error::TrainError;
-use crate::run::validate_head;
+use crate::run::{validate_head, write_validation_sheet};
 use crate::trainer::PreparedHead;
 
 /// One row of the view-count table: means over the heads.
@@ -57,12 +59,14 @@ pub fn first_views(head: &PreparedHead, views: usize) -> Result<PreparedHead, Tr
     Ok(out)
 }
 
-/// The view-count table of `model` over `heads`, one row per count in `counts`.
+/// The view-count table of `model` over `heads`, one row per count in `counts`; with
+/// `sheet`, the last count's views are written there (truth | network | flat colour).
 pub fn view_count_table(
     model: &Model,
     heads: &[PreparedHead],
     config: &TrainConfig,
     counts: &[usize],
+    sheet: Option<&Path>,
 ) -> Result<Vec<ViewCountRow>, TrainError> {
     if heads.is_empty() {
         return Err(TrainError::Settings("no held-out heads to score".into()));
@@ -70,9 +74,12 @@ pub fn view_count_table(
     let mut rows = Vec::with_capacity(counts.len());
     for &views in counts {
         let mut sum = [0.0f64; 6];
+        let mut sheet_views = Vec::with_capacity(heads.len());
         for head in heads {
             let head = first_views(head, views)?;
-            let v = validate_head(model, &head, config)?.scores;
+            let view = validate_head(model, &head, config)?;
+            let v = view.scores;
+            sheet_views.push(view);
             let values = [
                 v.psnr,
                 v.foreground_psnr,
@@ -93,6 +100,11 @@ pub fn view_count_table(
             flat_foreground_psnr,
             flat_ssim,
         ] = sum.map(|s| s / heads.len() as f64);
+        if let (Some(path), Some(&last)) = (sheet, counts.last())
+            && last == views
+        {
+            write_validation_sheet(path, &sheet_views)?;
+        }
         rows.push(ViewCountRow {
             views,
             heads: heads.len(),

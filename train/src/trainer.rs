@@ -11,7 +11,7 @@
 //! (colours L1 over rays; depth along the ray inside the true mask; alpha of the
 //! fine pass; the log-L1 lighting loss on the encoder's source-light estimate)
 //! plus, when `distill_weight > 0`, the 3D distillation loss at ground-truth points
-//! near the surface, `λ_s·(|α(σ) − α(σ*)| + |Σ T·L − Σ T*·L|)` with `α(σ) = 1 − e^{−σ·2 mm}` and the
+//! near the surface, `λ_s·(|log(1 + σ·1 mm) − log(1 + σ*·1 mm)| + |Σ T·L − Σ T*·L|)` and the
 //! light transport compared through the radiance it gives, toward the direction the
 //! true `T*` is for, under each of the head's lightings (its source lighting and its
 //! targets'): `T` lives in the network's light frame and `T*` in the world's, and
@@ -43,9 +43,6 @@ use crate::config::TrainConfig;
 use crate::data::{Dataset, TargetMode, TrainingSample};
 use crate::error::TrainError;
 use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, render_rays};
-
-/// Step over which distilled densities are compared as opacities, millimetres.
-const DISTILL_STEP_MM: f64 = 2.0;
 
 /// Depth normaliser of the depth loss (the paper's 200 mm).
 const DEPTH_SCALE_MM: f64 = 200.0;
@@ -493,11 +490,11 @@ pub fn step_loss(
                 .map(|&i| head.distill_sigma[chosen[i as usize]])
                 .collect();
             let want = Tensor::from_vec(want, (n_in, 1), device)?;
-            // σ compared as the opacity of a 2 mm step, `1 − e^{−2σ}` (σ in 1/mm):
-            // in [0, 1] like the colours, whatever the shell's peak density.
-            let opacity =
-                |t: &Tensor| -> Result<Tensor, TrainError> { Ok((1.0 - (t * -DISTILL_STEP_MM)?.exp()?)?) };
-            let sigma_loss = l1(&opacity(&pass.trace.density)?, &opacity(&want)?)?;
+            // σ (1/mm) compared as `log(1 + σ)`, whose gradient `1/(1 + σ)` never
+            // vanishes. An opacity `1 − e^{−σ·δ}` saturates: run `nelf-small-run` sat at
+            // σ ≈ 17/mm everywhere inside the hull for 3,000 steps with no gradient
+            // through its 12.5 mm ray steps (an early mis-scaled loss put it there).
+            let sigma_loss = log_l1(&pass.trace.density, &want)?;
             // T through the radiance under each of the head's lightings.
             let lights = head.distill_lights.len();
             let lt = forward::light_transport(&pass, device)?;
@@ -782,6 +779,101 @@ pub fn load_checkpoint(
         message: e.to_string(),
     })?;
     Ok(info)
+}
+
+/// What [`reset_density_heads`] changed.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DensityReset {
+    /// The checkpoint's step (unchanged).
+    pub step: u64,
+    /// The output layers reset, one per density head (coarse, fine).
+    pub layers: Vec<String>,
+}
+
+/// Re-initialises the output layer of each density head (`*density_mlp.layers.N`, the
+/// last `N`) in the checkpoint in `dir`: its weights scaled by `weight_scale`, its bias
+/// set so that `softplus(bias) = sigma_per_mm`, its Adam moments zeroed; every other
+/// tensor and the step stay as they were.
+///
+/// For a run whose density saturated: with `σ·δ ≫ 1` over every ray step inside the
+/// hull, alpha is 1 wherever the hull is and `∂α/∂σ = δ·e^{−σδ}` is 0, so neither the
+/// colour nor the alpha loss can carve the hull again (`nelf-small-run` sat at
+/// σ ≈ 17/mm with 12.5 mm steps from step ~300 to 3514).
+pub fn reset_density_heads(
+    dir: &Path,
+    sigma_per_mm: f64,
+    weight_scale: f64,
+) -> Result<DensityReset, TrainError> {
+    if !(sigma_per_mm > 0.0 && sigma_per_mm.is_finite() && weight_scale.is_finite()) {
+        return Err(TrainError::Settings(format!(
+            "density reset: σ must be positive and finite (got {sigma_per_mm}/mm), the weight scale finite (got {weight_scale})"
+        )));
+    }
+    let info = read_checkpoint_info(dir)?;
+    let path = dir.join(CHECKPOINT_TENSORS);
+    let mut tensors = candle_core::safetensors::load(&path, &Device::Cpu).map_err(|e| TrainError::File {
+        path: path.clone(),
+        message: format!("not a checkpoint: {e}"),
+    })?;
+    // The last layer of each density head: the highest `N` among its biases.
+    let mut last: HashMap<String, usize> = HashMap::new();
+    for key in tensors.keys() {
+        let Some(rest) = key.strip_prefix("param.") else {
+            continue;
+        };
+        let Some((head, tail)) = rest.split_once("density_mlp.layers.") else {
+            continue;
+        };
+        let Some(n) = tail.strip_suffix(".bias").and_then(|n| n.parse::<usize>().ok()) else {
+            continue;
+        };
+        let entry = last.entry(format!("{head}density_mlp.layers")).or_insert(n);
+        *entry = (*entry).max(n);
+    }
+    if last.is_empty() {
+        return Err(TrainError::File {
+            path,
+            message: "no density head (`*density_mlp.layers.N.bias`) in this checkpoint".into(),
+        });
+    }
+    // softplus⁻¹(σ) = ln(e^σ − 1).
+    let bias_value = sigma_per_mm.exp_m1().ln() as f32;
+    let mut layers: Vec<String> = last.iter().map(|(stem, n)| format!("{stem}.{n}")).collect();
+    layers.sort();
+    for layer in &layers {
+        for leaf in ["weight", "bias"] {
+            let key = format!("param.{layer}.{leaf}");
+            let old = tensors.get(&key).ok_or_else(|| TrainError::File {
+                path: path.clone(),
+                message: format!("{key} is missing"),
+            })?;
+            let new = if leaf == "weight" {
+                (old * weight_scale)?
+            } else {
+                Tensor::full(bias_value, old.dims(), &Device::Cpu)?
+            };
+            tensors.insert(key, new);
+            for moment in ["adam_m", "adam_v"] {
+                let key = format!("{moment}.{layer}.{leaf}");
+                let old = tensors.get(&key).ok_or_else(|| TrainError::File {
+                    path: path.clone(),
+                    message: format!("{key} is missing"),
+                })?;
+                let zeros = old.zeros_like()?;
+                tensors.insert(key, zeros);
+            }
+        }
+    }
+    let tmp = path.with_extension("tmp");
+    candle_core::safetensors::save(&tensors, &tmp)?;
+    std::fs::rename(&tmp, &path).map_err(|source| TrainError::Io {
+        path: path.clone(),
+        source,
+    })?;
+    Ok(DensityReset {
+        step: info.step,
+        layers,
+    })
 }
 
 /// One optimiser step on the head the step's generator draws.

@@ -285,6 +285,109 @@ fn a_resumed_run_equals_an_unbroken_one_bit_for_bit() {
     );
 }
 
+/// Tensors of a checkpoint file by name, as bits.
+fn checkpoint_bits(dir: &std::path::Path) -> std::collections::BTreeMap<String, Vec<u32>> {
+    let path = dir.join(nelf_train::trainer::CHECKPOINT_TENSORS);
+    candle_core::safetensors::load(&path, &Device::Cpu)
+        .unwrap()
+        .into_iter()
+        .map(|(n, t)| {
+            let bits = match t.dtype() {
+                candle_core::DType::F32 => t
+                    .flatten_all()
+                    .unwrap()
+                    .to_vec1::<f32>()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.to_bits())
+                    .collect(),
+                _ => t
+                    .flatten_all()
+                    .unwrap()
+                    .to_vec1::<f64>()
+                    .unwrap()
+                    .iter()
+                    .map(|v| v.to_bits() as u32)
+                    .collect(),
+            };
+            (n, bits)
+        })
+        .collect()
+}
+
+#[test]
+fn a_density_reset_changes_only_the_density_output_layers() {
+    let config = tiny_config();
+    let heads = vec![synthetic_head()];
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut adam = trainable.optimizer(&config).unwrap();
+    for _ in 0..2 {
+        train_step(&trainable, &mut adam, &heads, &config).unwrap();
+    }
+    let info = CheckpointInfo {
+        step: adam.steps(),
+        train_secs: 1.0,
+        config: config.clone(),
+        last_loss: LossParts::default(),
+    };
+    let dir = tempfile::tempdir().unwrap();
+    save_checkpoint(dir.path(), &trainable, &adam, &info).unwrap();
+    let before = checkpoint_bits(dir.path());
+    let sigma = 0.05;
+    let done = nelf_train::trainer::reset_density_heads(dir.path(), sigma, 0.0).unwrap();
+    assert_eq!(done.step, 2);
+    assert_eq!(done.layers.len(), 2, "{:?}", done.layers);
+    let after = checkpoint_bits(dir.path());
+    assert_eq!(
+        before.keys().collect::<Vec<_>>(),
+        after.keys().collect::<Vec<_>>()
+    );
+    let reset: Vec<&String> = before.keys().filter(|k| before[*k] != after[*k]).collect();
+    // Each head's output weight and bias with their two Adam moments: 2 × 2 × 3.
+    assert_eq!(reset.len(), 12, "{reset:?}");
+    assert!(
+        reset
+            .iter()
+            .all(|k| done.layers.iter().any(|l| k.contains(l.as_str()))),
+        "{reset:?}"
+    );
+
+    // Loaded, the reset heads give σ everywhere (weights × 0: the bias alone).
+    let resumed = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut adam2 = resumed.optimizer(&config).unwrap();
+    assert_eq!(load_checkpoint(dir.path(), &resumed, &mut adam2).unwrap().step, 2);
+    let head = &heads[0];
+    let model = resumed.snapshot().unwrap();
+    let encoded = nelf_train::forward::encode(&model, &head.capture.views).unwrap();
+    for stage in [nelf_field::Stage::Coarse, nelf_field::Stage::Fine] {
+        let pass = nelf_train::forward::run_points(
+            &model,
+            &encoded,
+            &head.geometry,
+            &head.distill_points,
+            &head.distill_dirs,
+            stage,
+        )
+        .unwrap()
+        .unwrap();
+        let density = pass
+            .trace
+            .density
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        assert!(!density.is_empty());
+        assert!(
+            density.iter().all(|d| (f64::from(*d) - sigma).abs() < 1e-6),
+            "{density:?}"
+        );
+    }
+    // And the run continues.
+    train_step(&resumed, &mut adam2, &heads, &config).unwrap();
+    assert!(nelf_train::trainer::reset_density_heads(dir.path(), 0.0, 1.0).is_err());
+}
+
 #[test]
 fn a_damaged_checkpoint_is_refused_with_its_name() {
     let config = tiny_config();
@@ -396,7 +499,7 @@ fn the_view_count_table_scores_subsets_of_the_source_views() {
     );
     assert!(first_views(&head, 1).is_err());
     assert!(first_views(&head, all + 1).is_err());
-    let rows = view_count_table(&model, &[head], &config, &[2, all]).unwrap();
+    let rows = view_count_table(&model, &[head], &config, &[2, all], None).unwrap();
     assert_eq!(rows.iter().map(|r| r.views).collect::<Vec<_>>(), [2, all]);
     for r in &rows {
         assert!(

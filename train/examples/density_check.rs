@@ -1,0 +1,111 @@
+//! Does a network carve the visual hull? For each given head of a dataset: the mean
+//! alpha the network renders at its target views inside and outside the true mask,
+//! and its density σ at the head's distillation points (near the true surface)
+//! beside the true σ.
+//!
+//! A saturated network shows alpha ≈ 1 wherever the hull is (outside the true mask
+//! too) and σ far above what a ray step can resolve, equal where the truth is empty
+//! and where it is dense: `nelf train reset-density` repairs such a run.
+//!
+//! `cargo run --release -p nelf-train --example density_check -- WEIGHTS DATA ID...`
+
+use std::path::PathBuf;
+
+use nelf_field::Stage;
+use nelf_train::TrainConfig;
+use nelf_train::forward::{encode, irradiance, run_points};
+use nelf_train::trainer::{Jitter, prepare_heads, render_passes, target_rays};
+
+type Failure = Box<dyn std::error::Error>;
+
+fn main() -> Result<(), Failure> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let [weights, data, ids @ ..] = args.as_slice() else {
+        return Err("usage: density_check WEIGHTS DATA ID...".into());
+    };
+    let ids = ids
+        .iter()
+        .map(|s| s.parse::<u32>().map_err(|e| format!("head id {s:?}: {e}")))
+        .collect::<Result<Vec<_>, _>>()?;
+    let device = nelf_field::default_device();
+    let samples = nelf_field::NelfConfig {
+        coarse_samples: 32,
+        fine_samples: 32,
+        ..nelf_field::NelfConfig::for_device(&device)
+    };
+    let (model, name) =
+        nelf_field::shipped::load_or_shipped(Some(&PathBuf::from(weights)), samples, &device)?;
+    let size = model.working_image_size().unwrap_or(64);
+    let config = TrainConfig {
+        image_size: size,
+        coarse_samples: 32,
+        fine_samples: 32,
+        ..TrainConfig::default()
+    };
+    let dataset = nelf_train::data::Dataset::open(&PathBuf::from(data))?;
+    let heads = prepare_heads(&dataset, &ids, size)?;
+    println!("{name} at {size}²");
+    for (id, head) in ids.iter().zip(&heads) {
+        let encoded = encode(&model, &head.capture.views)?;
+        for target in &head.targets {
+            let irr = irradiance(&target.light_net, model.device())?;
+            let pixels: Vec<usize> = (0..target.camera.width * target.camera.height).collect();
+            // [inside the true mask, outside] × [alpha sum, pixels].
+            let mut sums = [[0.0f64; 2]; 2];
+            for chunk in pixels.chunks(512) {
+                let rays = target_rays(
+                    target,
+                    chunk,
+                    head.capture.head_centre_net(),
+                    model.config().head_radius_mm,
+                );
+                let (coarse, fine) =
+                    render_passes(&model, &encoded, head, &rays, &irr, &config, &mut Jitter::Centred)?;
+                let alpha = fine.unwrap_or(coarse).alpha.to_vec1::<f32>()?;
+                for (a, &p) in alpha.iter().zip(chunk) {
+                    let side = usize::from(target.alpha[p] <= 0.5);
+                    sums[side][0] += f64::from(*a);
+                    sums[side][1] += 1.0;
+                }
+            }
+            let mean = |s: [f64; 2]| s[0] / s[1].max(1.0);
+            println!(
+                "head {id}, {:?} target: mean alpha {:.3} inside the true mask, {:.3} outside",
+                target.mode,
+                mean(sums[0]),
+                mean(sums[1])
+            );
+        }
+        let Some(pass) = run_points(
+            &model,
+            &encoded,
+            &head.geometry,
+            &head.distill_points,
+            &head.distill_dirs,
+            Stage::Fine,
+        )?
+        else {
+            println!("head {id}: no distillation point inside the hull");
+            continue;
+        };
+        let density = pass.trace.density.flatten_all()?.to_vec1::<f32>()?;
+        let (mut empty, mut dense) = (Vec::new(), Vec::new());
+        for (&i, &s) in pass.inside.iter().zip(&density) {
+            if head.distill_sigma[i as usize] < 1e-3 {
+                &mut empty
+            } else {
+                &mut dense
+            }
+            .push(f64::from(s));
+        }
+        let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        println!(
+            "head {id}: network σ {:.4}/mm where the truth is empty ({} points), {:.4}/mm where it is dense ({} points)",
+            mean(&empty),
+            empty.len(),
+            mean(&dense),
+            dense.len()
+        );
+    }
+    Ok(())
+}
