@@ -99,6 +99,37 @@ fn main() -> Result<(), Failure> {
             .push(f64::from(s));
         }
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        // Can the density head's input tell empty from dense at all? Per feature, the
+        // gap between the two means over their pooled spread (Fisher's ratio).
+        let input = pass.trace.density_in.to_vec2::<f32>()?;
+        let mut best = (0.0f64, 0usize);
+        let mut magnitude = 0.0f64;
+        for f in 0..input.first().map_or(0, Vec::len) {
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            for (&i, row) in pass.inside.iter().zip(&input) {
+                magnitude += f64::from(row[f].abs());
+                if head.distill_sigma[i as usize] < 1e-3 {
+                    &mut a
+                } else {
+                    &mut b
+                }
+                .push(f64::from(row[f]));
+            }
+            let var =
+                |v: &[f64], m: f64| v.iter().map(|x| (x - m).powi(2)).sum::<f64>() / v.len().max(1) as f64;
+            let (ma, mb) = (mean(&a), mean(&b));
+            let ratio = (ma - mb).abs() / (0.5 * (var(&a, ma) + var(&b, mb))).sqrt().max(1e-12);
+            if ratio > best.0 {
+                best = (ratio, f);
+            }
+        }
+        let cells = (input.len() * input.first().map_or(0, Vec::len)).max(1) as f64;
+        println!(
+            "head {id}: density input mean |x| {:.3}; best single feature {} separates empty from dense by {:.2} pooled std",
+            magnitude / cells,
+            best.1,
+            best.0
+        );
         println!(
             "head {id}: network σ {:.4}/mm where the truth is empty ({} points), {:.4}/mm where it is dense ({} points)",
             mean(&empty),
