@@ -18,6 +18,9 @@ pub fn run(args: &TrainArgs) -> anyhow::Result<()> {
             "scoring a network on the held-out heads of {}",
             eval.data.display()
         ),
+        TrainCommand::ResetDensity(reset) => {
+            format!("resetting the density heads of {}", reset.run.display())
+        }
     };
     nelf_train::cli::run(args).context(what)?;
     if let TrainCommand::Run(config) = &args.command {

@@ -263,6 +263,21 @@ pub fn l1(a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
     Ok((a - b)?.abs()?.mean_all()?)
 }
 
+/// Linear colours clamped to [0, 1] and encoded as sRGB (the exact piecewise curve;
+/// the power branch never sees values below its threshold, so no gradient is NaN).
+pub fn srgb_encode(t: &Tensor) -> Result<Tensor, TrainError> {
+    const KNEE: f64 = 0.003_130_8;
+    let x = t.clamp(0.0f32, 1.0f32)?;
+    let linear = (&x * 12.92)?;
+    let power = ((x.maximum(KNEE as f32)?.powf(1.0 / 2.4)? * 1.055)? - 0.055)?;
+    Ok(x.le(KNEE)?.where_cond(&linear, &power)?)
+}
+
+/// `mean (srgb(a) − srgb(b))²` over colours clamped to [0, 1] ([`srgb_encode`]).
+pub fn srgb_l2(a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
+    Ok((srgb_encode(a)? - srgb_encode(b)?)?.sqr()?.mean_all()?)
+}
+
 /// `mean |log(1 + a) − log(1 + b)|` (the paper's log-L1 lighting loss).
 pub fn log_l1(a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
     let la = (a.relu()? + 1.0)?.log()?;

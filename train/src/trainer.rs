@@ -8,7 +8,8 @@
 //!
 //! `L = |c_c − c| + |c_f − c| + λ_d·|d − d*|/200 mm + λ_a·|a − a*| + λ_l·|log(1+L̂) − log(1+L)|`
 //!
-//! (colours L1 over rays; depth along the ray inside the true mask; alpha of the
+//! (colours L1 over rays, or with `--colour-loss srgb-l2` the squared error of their
+//! clamped sRGB encodings; depth along the ray inside the true mask; alpha of the
 //! fine pass; the log-L1 lighting loss on the encoder's source-light estimate)
 //! plus, when `distill_weight > 0`, the 3D distillation loss at ground-truth points
 //! near the surface, `λ_s·(|log(1 + σ·1 mm) − log(1 + σ*·1 mm)| + |Σ T·L − Σ T*·L|)` and the
@@ -39,10 +40,11 @@ use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};
 
 use crate::adam::Adam;
+use crate::config::ColourLoss;
 use crate::config::TrainConfig;
 use crate::data::{Dataset, TargetMode, TrainingSample};
 use crate::error::TrainError;
-use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, render_rays};
+use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, render_rays, srgb_l2};
 
 /// Depth normaliser of the depth loss (the paper's 200 mm).
 const DEPTH_SCALE_MM: f64 = 200.0;
@@ -452,9 +454,15 @@ pub fn step_loss(
         depth_mask.push(if ok { 1.0f32 } else { 0.0 });
         want_depth.push(if ok { (z / cos) as f32 } else { 0.0 });
     }
-    let rgb_coarse = l1(&coarse.rgb, &want_rgb)?;
+    let colour = |rgb: &Tensor| -> Result<Tensor, TrainError> {
+        match config.colour_loss {
+            ColourLoss::L1 => l1(rgb, &want_rgb),
+            ColourLoss::SrgbL2 => srgb_l2(rgb, &want_rgb),
+        }
+    };
+    let rgb_coarse = colour(&coarse.rgb)?;
     let rgb_fine = match &fine {
-        Some(f) => l1(&f.rgb, &want_rgb)?,
+        Some(f) => colour(&f.rgb)?,
         None => rgb_coarse.clone(),
     };
     let alpha = l1(&last.alpha, &Tensor::from_vec(want_alpha, r, device)?)?;

@@ -511,3 +511,30 @@ fn the_view_count_table_scores_subsets_of_the_source_views() {
     assert_eq!(rows[0].flat_psnr, rows[1].flat_psnr);
     assert_eq!(rows[0].flat_ssim, rows[1].flat_ssim);
 }
+
+#[test]
+fn the_srgb_colour_loss_scores_as_8_bit_srgb_does_and_has_finite_gradients() {
+    use candle_core::Var;
+    use nelf_train::forward::{srgb_encode, srgb_l2};
+    // The encoding: the linear toe, the power curve, clamping at both ends.
+    let x = Tensor::new(&[0.0f32, 0.001, 0.0031308, 0.18, 1.0, 4.0, -1.0], &Device::Cpu).unwrap();
+    let got = srgb_encode(&x).unwrap().to_vec1::<f32>().unwrap();
+    let want = [0.0, 0.01292, 0.040_45, 0.461_356, 1.0, 1.0, 0.0];
+    for (g, w) in got.iter().zip(want) {
+        assert!((g - w).abs() < 1e-4, "{got:?}");
+    }
+    // Gradients stay finite at black (where x^(1/2.4) has an infinite slope) and are
+    // zero where both sides are clamped.
+    let a = Var::new(&[0.0f32, 0.0, 0.5, 2.0], &Device::Cpu).unwrap();
+    let b = Tensor::new(&[0.0f32, 0.2, 0.25, 3.0], &Device::Cpu).unwrap();
+    let loss = srgb_l2(a.as_tensor(), &b).unwrap();
+    let grad = loss
+        .backward()
+        .unwrap()
+        .get(&a)
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap();
+    assert!(grad.iter().all(|g| g.is_finite()), "{grad:?}");
+    assert!(grad[1] < 0.0 && grad[2] > 0.0 && grad[3] == 0.0, "{grad:?}");
+}
