@@ -517,7 +517,7 @@ fn the_srgb_colour_loss_scores_as_8_bit_srgb_does_and_has_finite_gradients() {
     use candle_core::Var;
     use nelf_train::forward::{srgb_encode, srgb_l2};
     // The encoding: the linear toe, the power curve, clamping at both ends.
-    let x = Tensor::new(&[0.0f32, 0.001, 0.0031308, 0.18, 1.0, 4.0, -1.0], &Device::Cpu).unwrap();
+    let x = Tensor::new(&[0.0f32, 0.001, 0.003_130_8, 0.18, 1.0, 4.0, -1.0], &Device::Cpu).unwrap();
     let got = srgb_encode(&x).unwrap().to_vec1::<f32>().unwrap();
     let want = [0.0, 0.01292, 0.040_45, 0.461_356, 1.0, 1.0, 0.0];
     for (g, w) in got.iter().zip(want) {
