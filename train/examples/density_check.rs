@@ -99,6 +99,45 @@ fn main() -> Result<(), Failure> {
             .push(f64::from(s));
         }
         let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len().max(1) as f64;
+        // Radiance at the surface points under the novel-light target's lighting, the
+        // network's against the truth, split by whether the direction the truth is for
+        // faces the point's side of the head (normal ≈ away from the head's centre).
+        if let Some(t) = head
+            .targets
+            .iter()
+            .position(|t| t.mode == nelf_train::data::TargetMode::NovelLight)
+        {
+            let lt = nelf_train::forward::light_transport(&pass, model.device())?.to_vec2::<f32>()?;
+            let light = &head.targets[t].light_net;
+            let lights = head.distill_lights.len();
+            let centre = head.capture.head_centre_net();
+            // [facing, back-facing] × [network, truth].
+            let mut sums = [[0.0f64; 2]; 2];
+            for (row, &i) in lt.iter().zip(&pass.inside) {
+                let i = i as usize;
+                if head.distill_sigma[i] < 1e-3 {
+                    continue;
+                }
+                let p = head.distill_points[i];
+                let d = head.distill_dirs[i];
+                let outward = (0..3)
+                    .map(|k| (f64::from(p[k]) - f64::from(centre[k])) * f64::from(d[k]))
+                    .sum::<f64>();
+                let side = usize::from(outward < 0.0);
+                for c in 0..3 {
+                    let net: f64 = (0..128)
+                        .map(|k| f64::from(row[c * 128 + k] * light[c * 128 + k]))
+                        .sum();
+                    sums[side][0] += net;
+                    sums[side][1] += f64::from(head.distill_radiance[(i * lights + 1 + t) * 3 + c]);
+                }
+            }
+            println!(
+                "head {id}: surface radiance under the novel light, network / truth: {:.2} facing outward, {:.2} facing inward",
+                sums[0][0] / sums[0][1].max(1e-12),
+                sums[1][0] / sums[1][1].max(1e-12)
+            );
+        }
         // Can the density head's input tell empty from dense at all? Per feature, the
         // gap between the two means over their pooled spread (Fisher's ratio).
         let input = pass.trace.density_in.to_vec2::<f32>()?;
