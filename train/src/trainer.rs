@@ -700,6 +700,16 @@ fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     })
 }
 
+/// Writes `tensors` to `path` (safetensors) through a temporary file and a rename.
+fn save_tensors_atomic(tensors: &HashMap<String, Tensor>, path: &Path) -> Result<(), TrainError> {
+    let tmp = path.with_extension("tmp");
+    candle_core::safetensors::save(tensors, &tmp)?;
+    std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
 /// Saves weights, Adam moments and the step to `dir` (tensors first, then the
 /// metadata that names the step: a crash between the two leaves the older
 /// metadata, which a resume then rejects as not matching, never a silent mix).
@@ -721,12 +731,7 @@ pub fn save_checkpoint(
     tensors.extend(adam.state_tensors());
     tensors.insert("step".into(), Tensor::new(&[info.step as f64], &Device::Cpu)?);
     let path = dir.join(CHECKPOINT_TENSORS);
-    let tmp = path.with_extension("tmp");
-    candle_core::safetensors::save(&tensors, &tmp)?;
-    std::fs::rename(&tmp, &path).map_err(|source| TrainError::Io {
-        path: path.clone(),
-        source,
-    })?;
+    save_tensors_atomic(&tensors, &path)?;
     let json = serde_json::to_vec_pretty(info).map_err(|e| TrainError::Settings(e.to_string()))?;
     write_atomic(&dir.join(CHECKPOINT_INFO), &json)
 }
@@ -848,36 +853,26 @@ pub fn reset_density_heads(
     let bias_value = sigma_per_mm.exp_m1().ln() as f32;
     let mut layers: Vec<String> = last.iter().map(|(stem, n)| format!("{stem}.{n}")).collect();
     layers.sort();
+    let missing = |key: &str| TrainError::File {
+        path: path.clone(),
+        message: format!("{key} is missing"),
+    };
     for layer in &layers {
         for leaf in ["weight", "bias"] {
-            let key = format!("param.{layer}.{leaf}");
-            let old = tensors.get(&key).ok_or_else(|| TrainError::File {
-                path: path.clone(),
-                message: format!("{key} is missing"),
-            })?;
-            let new = if leaf == "weight" {
-                (old * weight_scale)?
-            } else {
-                Tensor::full(bias_value, old.dims(), &Device::Cpu)?
-            };
-            tensors.insert(key, new);
-            for moment in ["adam_m", "adam_v"] {
-                let key = format!("{moment}.{layer}.{leaf}");
-                let old = tensors.get(&key).ok_or_else(|| TrainError::File {
-                    path: path.clone(),
-                    message: format!("{key} is missing"),
-                })?;
-                let zeros = old.zeros_like()?;
-                tensors.insert(key, zeros);
+            // The parameter, then its two Adam moments (zeroed).
+            for kind in ["param", "adam_m", "adam_v"] {
+                let key = format!("{kind}.{layer}.{leaf}");
+                let old = tensors.get(&key).ok_or_else(|| missing(&key))?;
+                let new = match (kind, leaf) {
+                    ("param", "weight") => (old * weight_scale)?,
+                    ("param", _) => Tensor::full(bias_value, old.dims(), &Device::Cpu)?,
+                    _ => old.zeros_like()?,
+                };
+                tensors.insert(key, new);
             }
         }
     }
-    let tmp = path.with_extension("tmp");
-    candle_core::safetensors::save(&tensors, &tmp)?;
-    std::fs::rename(&tmp, &path).map_err(|source| TrainError::Io {
-        path: path.clone(),
-        source,
-    })?;
+    save_tensors_atomic(&tensors, &path)?;
     Ok(DensityReset {
         step: info.step,
         layers,

@@ -220,22 +220,30 @@ fn gradients_match_finite_differences() {
     );
 }
 
-fn weights_bits(trainable: &Trainable) -> Vec<(String, Vec<u32>)> {
+/// A tensor's values as bits (`f64` as they are, `f32` widened), for exact comparisons.
+fn tensor_bits(t: &Tensor) -> Vec<u64> {
+    let flat = t.flatten_all().unwrap();
+    if t.dtype() == candle_core::DType::F64 {
+        flat.to_vec1::<f64>()
+            .unwrap()
+            .iter()
+            .map(|v| v.to_bits())
+            .collect()
+    } else {
+        flat.to_vec1::<f32>()
+            .unwrap()
+            .iter()
+            .map(|v| u64::from(v.to_bits()))
+            .collect()
+    }
+}
+
+fn weights_bits(trainable: &Trainable) -> Vec<(String, Vec<u64>)> {
     trainable
         .weights()
         .unwrap()
         .into_iter()
-        .map(|(n, t)| {
-            let bits = t
-                .flatten_all()
-                .unwrap()
-                .to_vec1::<f32>()
-                .unwrap()
-                .iter()
-                .map(|v| v.to_bits())
-                .collect();
-            (n, bits)
-        })
+        .map(|(n, t)| (n, tensor_bits(&t)))
         .collect()
 }
 
@@ -286,32 +294,12 @@ fn a_resumed_run_equals_an_unbroken_one_bit_for_bit() {
 }
 
 /// Tensors of a checkpoint file by name, as bits.
-fn checkpoint_bits(dir: &std::path::Path) -> std::collections::BTreeMap<String, Vec<u32>> {
+fn checkpoint_bits(dir: &std::path::Path) -> std::collections::BTreeMap<String, Vec<u64>> {
     let path = dir.join(nelf_train::trainer::CHECKPOINT_TENSORS);
     candle_core::safetensors::load(&path, &Device::Cpu)
         .unwrap()
         .into_iter()
-        .map(|(n, t)| {
-            let bits = match t.dtype() {
-                candle_core::DType::F32 => t
-                    .flatten_all()
-                    .unwrap()
-                    .to_vec1::<f32>()
-                    .unwrap()
-                    .iter()
-                    .map(|v| v.to_bits())
-                    .collect(),
-                _ => t
-                    .flatten_all()
-                    .unwrap()
-                    .to_vec1::<f64>()
-                    .unwrap()
-                    .iter()
-                    .map(|v| v.to_bits() as u32)
-                    .collect(),
-            };
-            (n, bits)
-        })
+        .map(|(n, t)| (n, tensor_bits(&t)))
         .collect()
 }
 
