@@ -69,7 +69,7 @@ pub fn view_count_table(
     sheet: Option<&Path>,
 ) -> Result<Vec<ViewCountRow>, TrainError> {
     if heads.is_empty() {
-        return Err(TrainError::Settings("no held-out heads to score".into()));
+        return Err(TrainError::Settings("no heads to score".into()));
     }
     let mut rows = Vec::with_capacity(counts.len());
     for &views in counts {

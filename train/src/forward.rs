@@ -263,8 +263,9 @@ pub fn l1(a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
     Ok((a - b)?.abs()?.mean_all()?)
 }
 
-/// Linear colours clamped to [0, 1] and encoded as sRGB (the exact piecewise curve;
-/// the power branch never sees values below its threshold, so no gradient is NaN).
+/// Linear colours clamped to [0, 1] and encoded as sRGB: the differentiable twin of
+/// `nelf_scene::mesh_io::linear_to_srgb` (tested equal; the power branch never sees
+/// values below its threshold, so no gradient is NaN).
 pub fn srgb_encode(t: &Tensor) -> Result<Tensor, TrainError> {
     const KNEE: f64 = 0.003_130_8;
     let x = t.clamp(0.0f32, 1.0f32)?;

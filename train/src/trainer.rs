@@ -40,8 +40,7 @@ use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};
 
 use crate::adam::Adam;
-use crate::config::ColourLoss;
-use crate::config::TrainConfig;
+use crate::config::{ColourLoss, TrainConfig};
 use crate::data::{Dataset, TargetMode, TrainingSample};
 use crate::error::TrainError;
 use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, render_rays, srgb_l2};

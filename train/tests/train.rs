@@ -511,6 +511,16 @@ fn the_srgb_colour_loss_scores_as_8_bit_srgb_does_and_has_finite_gradients() {
     for (g, w) in got.iter().zip(want) {
         assert!((g - w).abs() < 1e-4, "{got:?}");
     }
+    // The same curve as the project's scalar encoder, over a sweep across the knee.
+    let sweep: Vec<f32> = (0..=400).map(|i| -0.1 + 1.2 * i as f32 / 400.0).collect();
+    let encoded = srgb_encode(&Tensor::new(sweep.as_slice(), &Device::Cpu).unwrap())
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap();
+    for (x, e) in sweep.iter().zip(&encoded) {
+        let scalar = nelf_scene::mesh_io::linear_to_srgb(*x);
+        assert!((e - scalar).abs() < 1e-6, "{x}: {e} vs {scalar}");
+    }
     // Gradients stay finite at black (where x^(1/2.4) has an infinite slope) and are
     // zero where both sides are clamped.
     let a = Var::new(&[0.0f32, 0.0, 0.5, 2.0], &Device::Cpu).unwrap();
