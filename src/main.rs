@@ -39,6 +39,9 @@ enum Command {
 
 fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
+    // Training and the network's CPU passes allocate hundreds of large tensors per
+    // step; off glibc the allocator keeps its defaults, which only costs speed.
+    nelf_field::cpu::keep_freed_memory();
     match cli.command {
         Command::Demo(args) => cmd::demo::run(&args),
         Command::Inspect(args) => cmd::inspect::run(&args),

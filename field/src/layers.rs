@@ -107,6 +107,9 @@ impl Module for PRelu {
         if cpu::fused_for(x) && x.rank() == 2 && !self.weight.track_op() {
             return cpu::bias_prelu_rows(x, None, Some(&self.slopes), None);
         }
+        if x.rank() == 2 && (cpu::fused_trainable(x) || cpu::fused_trainable(&self.weight)) {
+            return cpu::prelu_rows_trainable(x, &self.weight);
+        }
         let mut shape = vec![1usize; x.rank()];
         if x.rank() >= 2 {
             shape[1] = self.weight.elem_count();

@@ -197,6 +197,7 @@ pub struct Model {
     config: NelfConfig,
     device: Device,
     working_image_size: Option<usize>,
+    source_relative_light: bool,
 }
 
 /// The key of the optional one-element tensor in a weights file that holds the image
@@ -204,6 +205,14 @@ pub struct Model {
 /// reduced to about that size before encoding, as the encoder's receptive field is
 /// measured in pixels.
 pub const WORKING_IMAGE_SIZE_KEY: &str = "nelf.working_image_size";
+
+/// The key of the optional one-element tensor (value 1) in a weights file that says
+/// the network was trained with every lighting in units of the capture's source
+/// lighting (each map divided by the source map's mean radiance, `nelf train run
+/// --source-relative-light`): its light transport is then `T·p_S`, the physical
+/// transport times the source lighting's mean radiance `p_S`, which the images alone
+/// cannot tell. Absent: lightings in absolute units.
+pub const SOURCE_RELATIVE_LIGHT_KEY: &str = "nelf.source_relative_light";
 
 /// Per-point outputs of a batch: density and colour or light transport, zero
 /// outside the hull.
@@ -238,6 +247,7 @@ impl Model {
             config,
             device: vb.device().clone(),
             working_image_size: None,
+            source_relative_light: false,
         })
     }
 
@@ -252,6 +262,21 @@ impl Model {
     pub fn with_working_image_size(self, size: Option<usize>) -> Self {
         Self {
             working_image_size: size,
+            ..self
+        }
+    }
+
+    /// Whether the network takes lightings in units of the source lighting's mean
+    /// radiance ([`SOURCE_RELATIVE_LIGHT_KEY`]).
+    pub fn source_relative_light(&self) -> bool {
+        self.source_relative_light
+    }
+
+    /// The model with [`Model::source_relative_light`] set.
+    #[must_use]
+    pub fn with_source_relative_light(self, relative: bool) -> Self {
+        Self {
+            source_relative_light: relative,
             ..self
         }
     }
@@ -294,6 +319,27 @@ impl Model {
                 Some(size as usize)
             }
         };
+        let source_relative_light = match tensors.remove(SOURCE_RELATIVE_LIGHT_KEY) {
+            None => false,
+            Some(t) => {
+                let value = t
+                    .flatten_all()
+                    .and_then(|t| t.to_dtype(DType::F32))
+                    .and_then(|t| t.to_vec1::<f32>())
+                    .ok()
+                    .and_then(|v| v.first().copied());
+                match value {
+                    Some(1.0) => true,
+                    Some(0.0) => false,
+                    _ => {
+                        return Err(NetError::file(
+                            origin,
+                            format!("`{SOURCE_RELATIVE_LIGHT_KEY}` is neither 0 nor 1"),
+                        ));
+                    }
+                }
+            }
+        };
         let architecture = Architecture::from_tensors(&tensors)
             .map_err(|e| NetError::file(origin, format!("not NeLF weights: {e}")))?;
         let vb = VarBuilder::from_tensors(tensors, DType::F32, device);
@@ -304,7 +350,10 @@ impl Model {
                 ..config
             },
         )
-        .map(|m| m.with_working_image_size(working_image_size))
+        .map(|m| {
+            m.with_working_image_size(working_image_size)
+                .with_source_relative_light(source_relative_light)
+        })
         .map_err(|e| NetError::file(origin, format!("not NeLF weights: {e}")))
     }
 

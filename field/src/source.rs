@@ -46,6 +46,7 @@ pub struct NelfField {
     bounds: (Vec3, Vec3),
     stage: Stage,
     chunk_points: usize,
+    light_transport_scale: f32,
 }
 
 impl NelfField {
@@ -74,6 +75,7 @@ impl NelfField {
             bounds: (Vec3::ZERO, Vec3::ZERO),
             stage: Stage::Fine,
             chunk_points: 16_384,
+            light_transport_scale: 1.0,
         };
         field.bounds = field.hull_bounds();
         Ok(field)
@@ -91,6 +93,34 @@ impl NelfField {
     pub fn with_chunk_points(mut self, points: usize) -> Self {
         self.chunk_points = points.max(1);
         self
+    }
+
+    /// Tells a field whose network takes source-relative lightings
+    /// ([`Model::source_relative_light`]) the mean radiance `p_S` of the capture's
+    /// source lighting (`Σ Ω L / 4π`, known for a synthetic or calibrated capture):
+    /// its light transport is then divided by `p_S`, into physical units. A network
+    /// in absolute units ignores it. Without it a source-relative field's `T` is
+    /// `T·p_S`: relit under a map of mean radiance 1 it is as bright as the capture.
+    ///
+    /// # Errors
+    /// `p_S` must be finite and positive.
+    pub fn with_source_light_power(mut self, mean_radiance: f64) -> Result<Self, NetError> {
+        if !(mean_radiance.is_finite() && mean_radiance > 0.0) {
+            return Err(NetError::input(format!(
+                "the source lighting's mean radiance {mean_radiance} is not a positive number"
+            )));
+        }
+        if self.model.source_relative_light() {
+            self.light_transport_scale = (1.0 / mean_radiance) as f32;
+        }
+        Ok(self)
+    }
+
+    /// The factor this field applies to the network's light transport (1, or `1/p_S`
+    /// after [`NelfField::with_source_light_power`]): a renderer that drives the
+    /// network directly multiplies its lighting by it.
+    pub fn light_transport_scale(&self) -> f32 {
+        self.light_transport_scale
     }
 
     /// Points evaluated at a time.
@@ -120,8 +150,18 @@ impl NelfField {
 
     /// The network's estimate of the capture's lighting: an 8 × 16 map of radiance
     /// in this field's light frame ([`FieldSource::world_from_light`]).
+    /// A source-relative network's estimate has mean radiance near 1 unless the field
+    /// knows the source power ([`NelfField::with_source_light_power`]).
     pub fn source_light(&self) -> Result<LatLong, NetError> {
-        net_light_to_latlong(&self.encoded.light().source_light)
+        let unit = 1.0 / self.light_transport_scale;
+        let light: Vec<f32> = self
+            .encoded
+            .light()
+            .source_light
+            .iter()
+            .map(|v| v * unit)
+            .collect();
+        net_light_to_latlong(&light)
     }
 
     /// The policy chosen by measuring baked-vs-direct PSNR (`field/README.md`,
@@ -235,6 +275,7 @@ impl NelfField {
             let net: Vec<[f32; 3]> = p.iter().map(|x| self.to_net(*x)).collect();
             let directions = self.target_directions(p, view);
             let scale = 1.0 / directions.len().max(1) as f32;
+            let lt_scale = scale * self.light_transport_scale;
             d.fill(0.0);
             t.fill(0.0);
             for dirs in &directions {
@@ -249,7 +290,7 @@ impl NelfField {
                     *sigma += scale * values.sigma[i] * MM_PER_M as f32;
                     net_to_ours(&values.values[i * LT_DIM..(i + 1) * LT_DIM], &mut ours);
                     for (o, v) in out.iter_mut().zip(&ours) {
-                        *o += scale * v;
+                        *o += lt_scale * v;
                     }
                 }
             }

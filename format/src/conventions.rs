@@ -213,6 +213,13 @@ impl LatLong {
         }
         sum
     }
+
+    /// Mean radiance over the sphere, `Σ Ω_i L_i / 4π`, averaged over the three channels
+    /// (unchanged by any rotation of the map).
+    pub fn mean_radiance(&self) -> f64 {
+        let [r, g, b] = self.integral();
+        (r + g + b) / (3.0 * 4.0 * std::f64::consts::PI)
+    }
 }
 
 /// Resamples an environment map `env` (any resolution, lat-long in its own frame)

@@ -254,6 +254,8 @@ pub fn bake_network(
         "encoded_image_size": encoded_size,
         "device": nelf_field::device_name(&device),
         "view_policy": "toward the mean camera",
+        "light_transport_scale": field.light_transport_scale(),
+        "source_relative_light": field.model().source_relative_light(),
     });
     bake_network_field(
         capture,
@@ -277,8 +279,40 @@ pub fn network_field(capture: &LoadedCapture, model: Model) -> anyhow::Result<(N
         capture.head_centre_m,
         default_net_from_world(),
     )?;
-    let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
+    let relative = model.source_relative_light();
+    let mut field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
+    if relative {
+        match capture_source_power(capture.description(), &capture.dir)? {
+            Some(power) => field = field.with_source_light_power(power)?,
+            None => eprintln!(
+                "note: {} records no lighting of its views, so the network's light transport stays \
+                 relative to it (relit under a map of mean radiance 1 it is as bright as the capture)",
+                capture.dir.display()
+            ),
+        }
+    }
     Ok((prepared, field))
+}
+
+/// The mean radiance (`Σ Ω L / 4π`) of the lighting a capture's views were taken
+/// under, when its `cameras.json` (`description`, in folder `dir`) names one
+/// (synthetic captures do).
+pub fn capture_source_power(
+    description: Option<&nelf_format::capture::Capture>,
+    dir: &std::path::Path,
+) -> anyhow::Result<Option<f64>> {
+    let Some(path) = description.and_then(|d| d.envmap_path(dir)) else {
+        return Ok(None);
+    };
+    let map = nelf_scene::envmap::load_envmap(&path)
+        .with_context(|| format!("reading the capture's lighting {}", path.display()))?;
+    let power = map.mean_radiance();
+    anyhow::ensure!(
+        power.is_finite() && power > 0.0,
+        "{}: the capture's lighting has mean radiance {power}",
+        path.display()
+    );
+    Ok(Some(power))
 }
 
 /// Sub-points per voxel edge where a network's field is baked

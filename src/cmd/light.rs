@@ -57,6 +57,12 @@ pub fn run(args: &LightArgs) -> anyhow::Result<()> {
         .with_context(|| format!("loading the capture {}", args.capture.display()))?;
     let encoded = model.encode(&capture.views).context("running the encoder")?;
     let light = net_light_to_latlong(&encoded.light().source_light)?;
+    if model.source_relative_light() {
+        eprintln!(
+            "note: {weights_name} estimates lightings relative to their own power (mean radiance about 1): \
+             images cannot tell a bright head under a dim light from a dim head under a bright one"
+        );
+    }
     let world_from_light = capture.world_from_light();
     let map: LatLong = if args.light_frame {
         light.clone()

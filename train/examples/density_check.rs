@@ -43,7 +43,7 @@ fn main() -> Result<(), Failure> {
         ..TrainConfig::default()
     };
     let dataset = nelf_train::data::Dataset::open(&PathBuf::from(data))?;
-    let heads = prepare_heads(&dataset, &ids, size)?;
+    let heads = prepare_heads(&dataset, &ids, size, model.source_relative_light())?;
     println!("{name} at {size}²");
     for (id, head) in ids.iter().zip(&heads) {
         let encoded = encode(&model, &head.capture.views)?;

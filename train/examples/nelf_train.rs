@@ -19,6 +19,9 @@ struct Cli {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let cli = Cli::parse();
+    if !nelf_field::cpu::keep_freed_memory() {
+        eprintln!("note: the allocator kept its defaults (not glibc): CPU training runs slower");
+    }
     nelf_train::cli::run(&cli.args)?;
     Ok(())
 }

@@ -160,7 +160,7 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
         EvalSplit::Train => (dataset.train_ids(), "training"),
     };
     let ids: Vec<u32> = ids.into_iter().take(args.heads).collect();
-    let heads = crate::trainer::prepare_heads(&dataset, &ids, image_size)?;
+    let heads = crate::trainer::prepare_heads(&dataset, &ids, image_size, model.source_relative_light())?;
     let rows = crate::eval::view_count_table(&model, &heads, &config, &args.views, args.sheet.as_deref())?;
     if args.json {
         let text = serde_json::to_string_pretty(&serde_json::json!({

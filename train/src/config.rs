@@ -70,6 +70,17 @@ pub struct TrainConfig {
     #[arg(long, value_enum, default_value_t = ColourLoss::L1)]
     #[serde(default)]
     pub colour_loss: ColourLoss,
+    /// Give the network every lighting in units of the head's source lighting: each
+    /// map divided by the source map's mean radiance (`Σ Ω L / 4π`). The images cannot
+    /// tell a bright head under a dim light from a dim head under a bright one, so the
+    /// absolute power of the source lighting is unknowable from them; without this the
+    /// network must guess it (on `nelf train data`'s heads its spread is ×1.85, one
+    /// geometric standard deviation). Weights trained so record it
+    /// (`nelf.source_relative_light`) and bakes divide their light transport by the
+    /// capture's source power where the capture knows its lighting.
+    #[arg(long)]
+    #[serde(default)]
+    pub source_relative_light: bool,
     /// Share of steps in novel-light mode (the rest: self-rotation).
     #[arg(long, default_value_t = 0.7)]
     pub novel_light_share: f64,
@@ -117,6 +128,7 @@ impl Default for TrainConfig {
             lr_mlp: 1e-4,
             lr_encoder: 2e-4,
             colour_loss: ColourLoss::L1,
+            source_relative_light: false,
             novel_light_share: 0.7,
             depth_weight: 0.1,
             alpha_weight: 0.1,

@@ -285,12 +285,18 @@ fn validate_and_log(
 
 /// Writes the network alone (official key names) for `Model::load`, with the image
 /// side it was trained at (`nelf_field::model::WORKING_IMAGE_SIZE_KEY`).
-pub fn export_weights(trainable: &Trainable, image_size: usize, path: &Path) -> Result<(), TrainError> {
+pub fn export_weights(trainable: &Trainable, config: &TrainConfig, path: &Path) -> Result<(), TrainError> {
     let mut tensors: std::collections::HashMap<String, Tensor> = trainable.weights()?.into_iter().collect();
     tensors.insert(
         nelf_field::model::WORKING_IMAGE_SIZE_KEY.into(),
-        Tensor::new(&[image_size as f32], &Device::Cpu)?,
+        Tensor::new(&[config.image_size as f32], &Device::Cpu)?,
     );
+    if config.source_relative_light {
+        tensors.insert(
+            nelf_field::model::SOURCE_RELATIVE_LIGHT_KEY.into(),
+            Tensor::new(&[1.0f32], &Device::Cpu)?,
+        );
+    }
     let tmp = path.with_extension("tmp");
     candle_core::safetensors::save(&tensors, &tmp)?;
     std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
@@ -307,7 +313,7 @@ fn checkpoint(
     info: &CheckpointInfo,
 ) -> Result<(), TrainError> {
     save_checkpoint(&paths.dir, trainable, adam, info)?;
-    export_weights(trainable, info.config.image_size, &paths.weights())
+    export_weights(trainable, &info.config, &paths.weights())
 }
 
 /// Trains per `config` (module docs).
@@ -346,9 +352,19 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
         )));
     }
     progress.set_message(format!("loading {} training heads", train_ids.len()));
-    let heads = prepare_heads(&dataset, &train_ids, config.image_size)?;
+    let heads = prepare_heads(
+        &dataset,
+        &train_ids,
+        config.image_size,
+        config.source_relative_light,
+    )?;
     let val_ids: Vec<u32> = dataset.val_ids().into_iter().take(config.val_heads).collect();
-    let val_heads = prepare_heads(&dataset, &val_ids, config.image_size)?;
+    let val_heads = prepare_heads(
+        &dataset,
+        &val_ids,
+        config.image_size,
+        config.source_relative_light,
+    )?;
 
     let trainable = Trainable::init(config, device)?;
     let mut adam = trainable.optimizer(config)?;

@@ -116,7 +116,18 @@ fn net_light(map: &LatLong, capture: &NetCapture) -> Result<Vec<f32>, TrainError
 }
 
 /// Prepares `sample` at `size × size` pixels (its size divided by a whole factor).
-pub fn prepare(sample: &TrainingSample, size: usize) -> Result<PreparedHead, TrainError> {
+///
+/// With `source_relative_light` every lighting the network is given (the source
+/// light its estimate is compared with, the targets' lightings, the distillation's)
+/// is divided by the source lighting's mean radiance `p_A`
+/// ([`LatLong::mean_radiance`]): the images stay as rendered, so the network learns
+/// `T·p_A` and a relit image is `T·p_A · L/p_A`, the same truth
+/// (`TrainConfig::source_relative_light`).
+pub fn prepare(
+    sample: &TrainingSample,
+    size: usize,
+    source_relative_light: bool,
+) -> Result<PreparedHead, TrainError> {
     let full = sample.source_cameras.first().map_or(0, |c| c.width as usize);
     if size == 0 || full % size != 0 || full / size == 0 {
         return Err(TrainError::Settings(format!(
@@ -139,7 +150,25 @@ pub fn prepare(sample: &TrainingSample, size: usize) -> Result<PreparedHead, Tra
         default_net_from_world(),
     )?;
     let geometry = EncodedViews::geometry_only(&capture.views)?;
-    let source_light_net = net_light(&sample.source_light, &capture)?;
+    let light_unit = if source_relative_light {
+        let power = sample.source_light.mean_radiance();
+        if !(power.is_finite() && power > 0.0) {
+            return Err(TrainError::Settings(format!(
+                "head {}: its source lighting has mean radiance {power}: no unit to relate lightings to",
+                sample.id
+            )));
+        }
+        power as f32
+    } else {
+        1.0
+    };
+    let net_light = |map: &LatLong| -> Result<Vec<f32>, TrainError> {
+        Ok(net_light(map, &capture)?
+            .into_iter()
+            .map(|v| v / light_unit)
+            .collect())
+    };
+    let source_light_net = net_light(&sample.source_light)?;
     let mut targets = Vec::with_capacity(sample.targets.len());
     for t in &sample.targets {
         let tw = t.camera.width as usize;
@@ -158,7 +187,7 @@ pub fn prepare(sample: &TrainingSample, size: usize) -> Result<PreparedHead, Tra
                 .iter()
                 .map(|d| d * 1000.0)
                 .collect(),
-            light_net: net_light(&t.light, &capture)?,
+            light_net: net_light(&t.light)?,
         });
     }
     let distill_points = sample
@@ -902,8 +931,16 @@ pub fn train_step(
 }
 
 /// Loads and prepares heads `ids` of `dataset` at `size`.
-pub fn prepare_heads(dataset: &Dataset, ids: &[u32], size: usize) -> Result<Vec<PreparedHead>, TrainError> {
-    ids.iter().map(|&id| prepare(&dataset.load(id)?, size)).collect()
+/// (`source_relative_light`: see [`prepare`]).
+pub fn prepare_heads(
+    dataset: &Dataset,
+    ids: &[u32],
+    size: usize,
+    source_relative_light: bool,
+) -> Result<Vec<PreparedHead>, TrainError> {
+    ids.iter()
+        .map(|&id| prepare(&dataset.load(id)?, size, source_relative_light))
+        .collect()
 }
 
 /// Where a run keeps its files.

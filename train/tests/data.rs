@@ -190,6 +190,38 @@ fn dataset_is_written_read_back_and_resumed() {
         }
         assert!(distill.lt.iter().any(|&t| t > 0.0));
 
+        // Source-relative preparation divides every lighting the network is given by
+        // the source map's mean radiance and changes nothing else (the images, the
+        // truth and the distilled radiance stay as rendered).
+        let p_a = sample.source_light.mean_radiance();
+        let expected = sample.source_light.integral().iter().sum::<f64>() / (12.0 * std::f64::consts::PI);
+        assert!((p_a - expected).abs() <= 1e-12 * expected);
+        assert!(
+            (p_a - 1.0).abs() > 1e-3,
+            "head {id}: a source power other than 1 ({p_a})"
+        );
+        let absolute = nelf_train::trainer::prepare(&sample, 32, false).unwrap();
+        let relative = nelf_train::trainer::prepare(&sample, 32, true).unwrap();
+        let divided = |a: &[f32], r: &[f32]| {
+            assert_eq!(a.len(), r.len());
+            for (a, r) in a.iter().zip(r) {
+                assert!(
+                    (f64::from(*a) / p_a - f64::from(*r)).abs()
+                        <= 1e-6 * (f64::from(*a) / p_a).abs().max(1e-6)
+                );
+            }
+        };
+        divided(&absolute.source_light_net, &relative.source_light_net);
+        for (a, r) in absolute.targets.iter().zip(&relative.targets) {
+            divided(&a.light_net, &r.light_net);
+            assert_eq!(a.image, r.image);
+        }
+        for (a, r) in absolute.distill_lights.iter().zip(&relative.distill_lights) {
+            divided(a, r);
+        }
+        assert_eq!(absolute.distill_radiance, relative.distill_radiance);
+        assert_eq!(absolute.capture.views.images, relative.capture.views.images);
+
         // The network's capture loader reads a head folder.
         let (net, _) = nelf_field::capture::load_capture_dir(
             dataset.head_dir(id),

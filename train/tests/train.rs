@@ -412,7 +412,7 @@ fn the_training_renderer_matches_the_inference_renderer() {
     let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("weights.safetensors");
-    nelf_train::run::export_weights(&trainable, config.image_size, &path).unwrap();
+    nelf_train::run::export_weights(&trainable, &config, &path).unwrap();
     let nelf_config = NelfConfig {
         coarse_samples: config.coarse_samples,
         fine_samples: config.fine_samples,
@@ -465,6 +465,74 @@ fn the_training_renderer_matches_the_inference_renderer() {
         opaque += composite.alpha.iter().filter(|a| **a > 0.5).count();
     }
     assert!(opaque > 0, "no ray hit anything: the comparison says nothing");
+}
+
+/// Weights trained with source-relative lighting say so, and a field over them
+/// divides its light transport by the capture's source power when told it; weights in
+/// absolute units ignore the power; a power that is no positive number is refused.
+#[test]
+fn source_relative_weights_say_so_and_their_bake_takes_the_source_power() {
+    use nelf_field::{Model, NelfConfig, NelfField};
+    use nelf_scene::field::{FieldSource, ViewPolicy};
+
+    let head = synthetic_head();
+    let dir = tempfile::tempdir().unwrap();
+    let mut fields = Vec::new();
+    for relative in [false, true] {
+        let config = TrainConfig {
+            source_relative_light: relative,
+            ..tiny_config()
+        };
+        let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+        let path = dir.path().join(format!("weights-{relative}.safetensors"));
+        nelf_train::run::export_weights(&trainable, &config, &path).unwrap();
+        let model = Model::load(&path, NelfConfig::default(), &Device::Cpu).unwrap();
+        assert_eq!(model.source_relative_light(), relative);
+        let field = NelfField::new(model, &head.capture).unwrap();
+        fields.push(field);
+    }
+    let centre = head.capture.head_centre_m.as_vec3();
+    let points: Vec<glam::Vec3> = (0..16)
+        .map(|i| {
+            centre
+                + glam::Vec3::new(
+                    0.004 * (i % 4) as f32 - 0.006,
+                    0.004 * (i / 4) as f32 - 0.006,
+                    0.03,
+                )
+        })
+        .collect();
+    let view = ViewPolicy::TowardPoint(head.capture.cameras[0].centre().as_vec3());
+    let evaluate = |field: &NelfField| {
+        let mut density = vec![0.0f32; points.len()];
+        let mut lt = vec![0.0f32; points.len() * 384];
+        field.evaluate(&points, &view, &mut density, &mut lt).unwrap();
+        (density, lt)
+    };
+    for (relative, field) in [false, true].into_iter().zip(fields) {
+        let (density, lt) = evaluate(&field);
+        assert!(lt.iter().any(|v| *v > 0.0), "the points are inside the hull");
+        assert_eq!(field.light_transport_scale(), 1.0);
+        let powered = field.with_source_light_power(2.5).unwrap();
+        let (density_p, lt_p) = evaluate(&powered);
+        assert_eq!(density, density_p, "the power changes no density");
+        let scale = if relative { 1.0 / 2.5 } else { 1.0 };
+        assert_eq!(powered.light_transport_scale(), scale as f32);
+        for (a, b) in lt.iter().zip(&lt_p) {
+            assert!(
+                (a * scale as f32 - b).abs() <= 1e-6 * a.abs().max(1e-6),
+                "{a} × {scale} vs {b}"
+            );
+        }
+        for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
+            let model = powered.model().clone();
+            let field = NelfField::new(model, &head.capture).unwrap();
+            assert!(
+                field.with_source_light_power(bad).is_err(),
+                "power {bad} is refused"
+            );
+        }
+    }
 }
 
 /// The view-count table scores a network with fewer source views: rows in the
