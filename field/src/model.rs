@@ -300,44 +300,37 @@ impl Model {
     ) -> Result<Self, NetError> {
         let mut tensors = candle_core::safetensors::load_buffer(bytes, device)
             .map_err(|e| NetError::file(origin, format!("not a safetensors file: {e}")))?;
-        let working_image_size = match tensors.remove(WORKING_IMAGE_SIZE_KEY) {
-            None => None,
-            Some(t) => {
-                let size = t
-                    .flatten_all()
+        // A metadata entry: `None` when absent, `Some(None)` when it is not one number.
+        let mut metadata = |key: &str| -> Option<Option<f32>> {
+            tensors.remove(key).map(|t| {
+                t.flatten_all()
                     .and_then(|t| t.to_dtype(DType::F32))
                     .and_then(|t| t.to_vec1::<f32>())
                     .ok()
+                    .filter(|v| v.len() == 1)
                     .and_then(|v| v.first().copied())
-                    .filter(|v| v.is_finite() && *v >= 16.0 && *v <= 16_384.0 && v.fract() == 0.0)
-                    .ok_or_else(|| {
-                        NetError::file(
-                            origin,
-                            format!("`{WORKING_IMAGE_SIZE_KEY}` is not an image side of 16 to 16384 pixels"),
-                        )
-                    })?;
-                Some(size as usize)
+            })
+        };
+        let working_image_size = match metadata(WORKING_IMAGE_SIZE_KEY) {
+            None => None,
+            Some(Some(v)) if v.is_finite() && (16.0..=16_384.0).contains(&v) && v.fract() == 0.0 => {
+                Some(v as usize)
+            }
+            Some(_) => {
+                return Err(NetError::file(
+                    origin,
+                    format!("`{WORKING_IMAGE_SIZE_KEY}` is not an image side of 16 to 16384 pixels"),
+                ));
             }
         };
-        let source_relative_light = match tensors.remove(SOURCE_RELATIVE_LIGHT_KEY) {
-            None => false,
-            Some(t) => {
-                let value = t
-                    .flatten_all()
-                    .and_then(|t| t.to_dtype(DType::F32))
-                    .and_then(|t| t.to_vec1::<f32>())
-                    .ok()
-                    .and_then(|v| v.first().copied());
-                match value {
-                    Some(1.0) => true,
-                    Some(0.0) => false,
-                    _ => {
-                        return Err(NetError::file(
-                            origin,
-                            format!("`{SOURCE_RELATIVE_LIGHT_KEY}` is neither 0 nor 1"),
-                        ));
-                    }
-                }
+        let source_relative_light = match metadata(SOURCE_RELATIVE_LIGHT_KEY) {
+            None | Some(Some(0.0)) => false,
+            Some(Some(1.0)) => true,
+            Some(_) => {
+                return Err(NetError::file(
+                    origin,
+                    format!("`{SOURCE_RELATIVE_LIGHT_KEY}` is neither 0 nor 1"),
+                ));
             }
         };
         let architecture = Architecture::from_tensors(&tensors)

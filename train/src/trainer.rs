@@ -11,8 +11,9 @@
 //! (colours L1 over rays, or with `--colour-loss srgb-l2` the squared error of their
 //! clamped sRGB encodings; depth along the ray inside the true mask; alpha of the
 //! fine pass; the log-L1 lighting loss on the encoder's source-light estimate)
-//! plus, when `distill_weight > 0`, the 3D distillation loss at ground-truth points
-//! near the surface, `λ_s·(|log(1 + σ·1 mm) − log(1 + σ*·1 mm)| + |Σ T·L − Σ T*·L|)` and the
+//! plus, when either of its weights is positive, the 3D distillation loss at ground-truth points
+//! near the surface, `λ_σ·|log(1 + σ·1 mm) − log(1 + σ*·1 mm)| + λ_s·|Σ T·L − Σ T*·L|`
+//! (`λ_σ` = `distill_sigma_weight`, by default `λ_s`) and the
 //! light transport compared through the radiance it gives, toward the direction the
 //! true `T*` is for, under each of the head's lightings (its source lighting and its
 //! targets'): `T` lives in the network's light frame and `T*` in the world's, and
@@ -510,7 +511,8 @@ pub fn step_loss(
         (((&rgb_fine + &rgb_coarse)? + (&depth * config.depth_weight)?)? + (&alpha * config.alpha_weight)?)?;
     total = (total + (&light * config.light_weight)?)?;
     let mut distill_value = 0.0;
-    if config.distill_weight > 0.0 && !head.distill_points.is_empty() {
+    if (config.distill_weight > 0.0 || config.distill_sigma_weight() > 0.0) && !head.distill_points.is_empty()
+    {
         let n = config.distill_points.min(head.distill_points.len());
         let chosen: Vec<usize> = (0..n)
             .map(|_| rng.random_range(0..head.distill_points.len()))
@@ -550,9 +552,10 @@ pub fn step_loss(
                 .collect();
             let want_radiance = Tensor::from_vec(want_radiance, (n_in, lights, 3), device)?;
             let radiance_loss = l1(&predicted, &want_radiance)?;
-            let loss = (sigma_loss + radiance_loss)?;
-            distill_value = f64::from(loss.to_scalar::<f32>()?);
-            total = (total + (loss * config.distill_weight)?)?;
+            distill_value = f64::from((&sigma_loss + &radiance_loss)?.to_scalar::<f32>()?);
+            let weighted =
+                ((sigma_loss * config.distill_sigma_weight())? + (radiance_loss * config.distill_weight)?)?;
+            total = (total + weighted)?;
         }
     }
     let scalar = |t: &Tensor| -> Result<f64, TrainError> {

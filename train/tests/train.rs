@@ -220,6 +220,38 @@ fn gradients_match_finite_differences() {
     );
 }
 
+/// The distillation's σ term has its own weight: unset it is the distillation's,
+/// and the loss is linear in it (the synthetic head's distillation points have σ
+/// and its network a density, so the term is not zero).
+#[test]
+fn the_sigma_distillation_weight_scales_its_term_alone() {
+    let trainable = Trainable::init(&tiny_config(), &Device::Cpu).unwrap();
+    let head = synthetic_head();
+    let total = |distill_weight: f64, sigma: Option<f64>| {
+        let config = TrainConfig {
+            distill_weight,
+            distill_sigma_weight: sigma,
+            ..tiny_config()
+        };
+        f64::from(
+            loss_at(&trainable, &head, &config, 5)
+                .0
+                .to_scalar::<f32>()
+                .unwrap(),
+        )
+    };
+    assert_eq!(total(0.1, None).to_bits(), total(0.1, Some(0.1)).to_bits());
+    let images = total(0.0, None);
+    let (half, one) = (total(0.0, Some(0.5)) - images, total(0.0, Some(1.0)) - images);
+    assert!(half > 1e-4, "the σ term adds to the loss ({half})");
+    assert!(
+        (one - 2.0 * half).abs() <= 1e-4 * one,
+        "linear in its weight: {half} then {one}"
+    );
+    // The radiance term stays with --distill-weight.
+    assert!(total(1.0, Some(0.0)) > images + 1e-4);
+}
+
 /// A tensor's values as bits (`f64` as they are, `f32` widened), for exact comparisons.
 fn tensor_bits(t: &Tensor) -> Vec<u64> {
     let flat = t.flatten_all().unwrap();
@@ -490,6 +522,22 @@ fn source_relative_weights_say_so_and_their_bake_takes_the_source_power() {
         assert_eq!(model.source_relative_light(), relative);
         let field = NelfField::new(model, &head.capture).unwrap();
         fields.push(field);
+    }
+    // Damaged metadata is refused, naming the file and the key.
+    let good = dir.path().join("weights-true.safetensors");
+    let mut tensors = candle_core::safetensors::load(&good, &Device::Cpu).unwrap();
+    for (key, value) in [
+        (nelf_field::model::SOURCE_RELATIVE_LIGHT_KEY, 0.5f32),
+        (nelf_field::model::WORKING_IMAGE_SIZE_KEY, 7.0),
+    ] {
+        let original = tensors.insert(key.to_string(), Tensor::new(&[value], &Device::Cpu).unwrap());
+        let bad = dir.path().join("damaged.safetensors");
+        candle_core::safetensors::save(&tensors, &bad).unwrap();
+        let err = Model::load(&bad, NelfConfig::default(), &Device::Cpu)
+            .unwrap_err()
+            .to_string();
+        assert!(err.contains(key) && err.contains("damaged.safetensors"), "{err}");
+        tensors.insert(key.to_string(), original.unwrap());
     }
     let centre = head.capture.head_centre_m.as_vec3();
     let points: Vec<glam::Vec3> = (0..16)
