@@ -9,6 +9,7 @@
 //!
 //! `cargo run --release -p nelf-train --example density_check -- WEIGHTS DATA ID...`
 
+use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use nelf_field::Stage;
@@ -89,6 +90,35 @@ fn main() -> Result<(), Failure> {
             continue;
         };
         let density = pass.trace.density.flatten_all()?.to_vec1::<f32>()?;
+        // σ by signed distance to the true surface: a blurred surface is dense a few
+        // millimetres out; a network whose surface is the visual hull's is dense far out.
+        let signed_mm: Vec<f32> = dataset
+            .load(*id)?
+            .distill
+            .signed_distance_m
+            .iter()
+            .map(|d| d * 1000.0)
+            .collect();
+        let bands: [(f32, f32); 5] = [
+            (-f32::INFINITY, -1.0),
+            (-1.0, 1.0),
+            (1.0, 5.0),
+            (5.0, 15.0),
+            (15.0, f32::INFINITY),
+        ];
+        let mut line = format!("head {id}: network σ (1/mm) by signed distance to the true surface:");
+        for (lo, hi) in bands {
+            let sigmas: Vec<f64> = pass
+                .inside
+                .iter()
+                .zip(&density)
+                .filter(|(i, _)| (lo..hi).contains(&signed_mm[**i as usize]))
+                .map(|(_, s)| f64::from(*s))
+                .collect();
+            let mean = sigmas.iter().sum::<f64>() / sigmas.len().max(1) as f64;
+            let _ = write!(line, " [{lo}, {hi}) mm {mean:.2} ({} points);", sigmas.len());
+        }
+        println!("{line}");
         let (mut empty, mut dense) = (Vec::new(), Vec::new());
         for (&i, &s) in pass.inside.iter().zip(&density) {
             if head.distill_sigma[i as usize] < 1e-3 {

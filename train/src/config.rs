@@ -104,6 +104,15 @@ pub struct TrainConfig {
     #[arg(long)]
     #[serde(default)]
     pub distill_sigma_weight: Option<f64>,
+    /// Weight of the free-space loss: `log(1 + σ·1 mm)` at the ray samples the truth
+    /// knows are empty (every sample of a background ray, and those more than
+    /// `FREE_SPACE_MARGIN_MM` in front of the true depth of a foreground one), both
+    /// passes (0: off). Beyond the paper, like the distillation: it carves the visual
+    /// hull where the rendering losses cannot, their gradients `δ·e^{−σδ}` gone once
+    /// σ·δ ≫ 1.
+    #[arg(long, default_value_t = 0.0)]
+    #[serde(default)]
+    pub free_space_weight: f64,
     /// Distillation points per step.
     #[arg(long, default_value_t = 256)]
     pub distill_points: usize,
@@ -143,6 +152,7 @@ impl Default for TrainConfig {
             light_weight: 0.1,
             distill_weight: 0.0,
             distill_sigma_weight: None,
+            free_space_weight: 0.0,
             distill_points: 256,
             seed: 0,
             checkpoint_secs: 300.0,
@@ -228,6 +238,7 @@ impl TrainConfig {
             self.light_weight,
             self.distill_weight,
             self.distill_sigma_weight(),
+            self.free_space_weight,
         ];
         if !weights.iter().all(|w| w.is_finite() && *w >= 0.0) {
             return bad(format!("loss weights {weights:?} must be non-negative"));

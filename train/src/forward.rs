@@ -166,6 +166,10 @@ pub struct RayPass {
     pub depth: Tensor,
     /// `(R, S)` compositing weights on the host (for importance sampling).
     pub weights: Vec<f32>,
+    /// `(R, S)` σ at the samples, 1/mm (0 outside the hull).
+    pub sigma: Tensor,
+    /// `(R, S)` the samples' depths along their rays, mm, on the host.
+    pub depths: Vec<f32>,
 }
 
 /// Renders `rays` with `samples` sorted depths each (`depths`, `(R, S)`, mm) through
@@ -225,7 +229,7 @@ pub fn render_rays(
         .collect();
     let delta = Tensor::from_vec(delta, (r, s), device)?;
     let depth_t = Tensor::from_slice(depths, (r, s), device)?;
-    let optical = (sigma * delta)?;
+    let optical = (&sigma * delta)?;
     let cumulative = optical.cumsum(1)?;
     let transmittance = (&cumulative - &optical)?.neg()?.exp()?;
     let opacity = (1.0 - optical.neg()?.exp()?)?;
@@ -239,6 +243,8 @@ pub fn render_rays(
         alpha,
         depth,
         weights: weights_host,
+        sigma,
+        depths: depths.to_vec(),
     })
 }
 

@@ -49,6 +49,11 @@ use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, ren
 /// Depth normaliser of the depth loss (the paper's 200 mm).
 const DEPTH_SCALE_MM: f64 = 200.0;
 
+/// How far in front of the true depth a foreground ray's samples count as free
+/// space, mm: beyond a pixel's footprint at the training sizes (~5 mm at 64²) and the
+/// spread of the sub-pixel depths it averages.
+pub const FREE_SPACE_MARGIN_MM: f32 = 15.0;
+
 /// A target view at the training resolution, in the network's units.
 #[derive(Debug, Clone)]
 pub struct PreparedTarget {
@@ -497,12 +502,39 @@ pub fn step_loss(
     let alpha = l1(&last.alpha, &Tensor::from_vec(want_alpha, r, device)?)?;
     let masked = depth_mask.iter().sum::<f32>();
     let depth = if masked > 0.0 {
-        let mask = Tensor::from_vec(depth_mask, r, device)?;
-        let diff = ((&last.depth - Tensor::from_vec(want_depth, r, device)?)?.abs()? * mask)?;
+        let mask = Tensor::from_slice(&depth_mask, r, device)?;
+        let diff = ((&last.depth - Tensor::from_slice(&want_depth, r, device)?)?.abs()? * mask)?;
         ((diff.sum_all()? / f64::from(masked))? / DEPTH_SCALE_MM)?
     } else {
         Tensor::zeros((), DType::F32, device)?
     };
+    // Free space: samples the truth knows are empty (background rays whole, foreground
+    // ones up to the margin in front of the true depth).
+    let mut free_space = Tensor::zeros((), DType::F32, device)?;
+    if config.free_space_weight > 0.0 {
+        for pass in std::iter::once(&coarse).chain(fine.as_ref()) {
+            let s = pass.depths.len() / r.max(1);
+            let mask: Vec<f32> = (0..r * s)
+                .map(|k| {
+                    let (ray, p) = (k / s, pixels[k / s]);
+                    let free = if target.alpha[p] <= 0.0 {
+                        true
+                    } else {
+                        depth_mask[ray] > 0.0
+                            && target.alpha[p] >= 1.0
+                            && pass.depths[k] < want_depth[ray] - FREE_SPACE_MARGIN_MM
+                    };
+                    if free { 1.0 } else { 0.0 }
+                })
+                .collect();
+            let count = mask.iter().sum::<f32>();
+            if count > 0.0 {
+                let mask = Tensor::from_vec(mask, (r, s), device)?;
+                let penalty = ((pass.sigma.relu()? + 1.0)?.log()? * mask)?.sum_all()?;
+                free_space = (free_space + (penalty / f64::from(count))?)?;
+            }
+        }
+    }
     let light = log_l1(
         &encoded.source_light,
         &Tensor::from_slice(&head.source_light_net, head.source_light_net.len(), device)?,
@@ -510,6 +542,9 @@ pub fn step_loss(
     let mut total =
         (((&rgb_fine + &rgb_coarse)? + (&depth * config.depth_weight)?)? + (&alpha * config.alpha_weight)?)?;
     total = (total + (&light * config.light_weight)?)?;
+    if config.free_space_weight > 0.0 {
+        total = (total + (&free_space * config.free_space_weight)?)?;
+    }
     let mut distill_value = 0.0;
     if (config.distill_weight > 0.0 || config.distill_sigma_weight() > 0.0) && !head.distill_points.is_empty()
     {

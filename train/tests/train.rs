@@ -206,6 +206,20 @@ fn gradients_match_finite_differences() {
             "fine_appearance_encoder.blend_mlp.layers.0.bias",
         ],
     );
+    // The free-space loss (σ at samples the truth knows are empty) reaches both
+    // density heads.
+    let free_space = TrainConfig {
+        distill_weight: 0.0,
+        free_space_weight: 1.0,
+        ..tiny_config()
+    };
+    check_gradients(
+        &free_space,
+        &[
+            "coarse_appearance_encoder.density_mlp.layers.2.bias",
+            "fine_appearance_encoder.density_mlp.layers.2.bias",
+        ],
+    );
     // The distillation loss (σ and radiance through T) adds to the fine network.
     let distill_heavy = TrainConfig {
         distill_weight: 1.0,
@@ -250,6 +264,33 @@ fn the_sigma_distillation_weight_scales_its_term_alone() {
     );
     // The radiance term stays with --distill-weight.
     assert!(total(1.0, Some(0.0)) > images + 1e-4);
+}
+
+/// The free-space loss adds a positive term, linear in its weight (the tiny
+/// network's density is not zero in front of the synthetic head's true depth).
+#[test]
+fn the_free_space_loss_adds_a_term_linear_in_its_weight() {
+    let trainable = Trainable::init(&tiny_config(), &Device::Cpu).unwrap();
+    let head = synthetic_head();
+    let total = |free_space_weight: f64| {
+        let config = TrainConfig {
+            free_space_weight,
+            ..tiny_config()
+        };
+        f64::from(
+            loss_at(&trainable, &head, &config, 3)
+                .0
+                .to_scalar::<f32>()
+                .unwrap(),
+        )
+    };
+    let base = total(0.0);
+    let (one, two) = (total(1.0) - base, total(2.0) - base);
+    assert!(one > 1e-5, "free space adds to the loss ({one})");
+    assert!(
+        (two - 2.0 * one).abs() <= 1e-3 * two,
+        "linear in its weight: {one} then {two}"
+    );
 }
 
 /// A tensor's values as bits (`f64` as they are, `f32` widened), for exact comparisons.
