@@ -208,6 +208,11 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
     );
     // The shipped network was trained at 64 pixels: the views are encoded so.
     assert_eq!(source["encoded_image_size"][0], source["working_image_size"]);
+    // It takes lightings relative to the source lighting's power, which this
+    // capture's cameras.json names: its transport is divided by that power.
+    assert_eq!(source["source_relative_light"], true, "{source}");
+    let scale = source["light_transport_scale"].as_f64().unwrap();
+    assert!(scale.is_finite() && scale > 0.0 && scale != 1.0, "{source}");
     assert!(asset.voxel_count() > 0);
 
     // --source truth without a mesh: refused, naming the folder and what is missing.
