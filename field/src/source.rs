@@ -27,7 +27,7 @@ use nelf_scene::tracer::MAX_AVERAGED_DIRECTIONS;
 
 use crate::capture::{MM_PER_M, NetCapture};
 use crate::error::NetError;
-use crate::light::{net_light_to_latlong, net_to_ours};
+use crate::light::{latlong_to_net_light, net_light_to_latlong, net_to_ours};
 use crate::model::Model;
 use crate::views::{EncodedViews, Stage};
 
@@ -117,10 +117,19 @@ impl NelfField {
     }
 
     /// The factor this field applies to the network's light transport (1, or `1/p_S`
-    /// after [`NelfField::with_source_light_power`]): a renderer that drives the
-    /// network directly multiplies its lighting by it.
+    /// after [`NelfField::with_source_light_power`]).
     pub fn light_transport_scale(&self) -> f32 {
         self.light_transport_scale
+    }
+
+    /// `light` (8 × 16, this field's light frame) in the network's layout and units,
+    /// for renderers that drive the network directly: the light transport scale folded
+    /// in, so that they render what this field bakes.
+    pub fn net_light(&self, light: &LatLong) -> Result<Vec<f32>, NetError> {
+        Ok(latlong_to_net_light(light)?
+            .into_iter()
+            .map(|v| v * self.light_transport_scale)
+            .collect())
     }
 
     /// Points evaluated at a time.

@@ -279,19 +279,31 @@ pub fn network_field(capture: &LoadedCapture, model: Model) -> anyhow::Result<(N
         capture.head_centre_m,
         default_net_from_world(),
     )?;
-    let relative = model.source_relative_light();
-    let mut field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
-    if relative {
-        match capture_source_power(capture.description(), &capture.dir)? {
-            Some(power) => field = field.with_source_light_power(power)?,
-            None => eprintln!(
-                "note: {} records no lighting of its views, so the network's light transport stays \
-                 relative to it (relit under a map of mean radiance 1 it is as bright as the capture)",
-                capture.dir.display()
-            ),
-        }
-    }
+    let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
+    let field = in_capture_light_units(field, capture.description(), &capture.dir)?;
     Ok((prepared, field))
+}
+
+/// `field` in physical units when its network takes source-relative lightings and the
+/// capture (`description`, in folder `dir`) names its lighting; otherwise as it is,
+/// saying so when its light transport stays relative.
+pub fn in_capture_light_units(
+    field: NelfField,
+    description: Option<&nelf_format::capture::Capture>,
+    dir: &std::path::Path,
+) -> anyhow::Result<NelfField> {
+    if !field.model().source_relative_light() {
+        return Ok(field);
+    }
+    if let Some(power) = capture_source_power(description, dir)? {
+        return Ok(field.with_source_light_power(power)?);
+    }
+    eprintln!(
+        "note: {} records no lighting of its views, so the network's light transport stays \
+         relative to it (relit under a map of mean radiance 1 it is as bright as the capture)",
+        dir.display()
+    );
+    Ok(field)
 }
 
 /// The mean radiance (`Σ Ω L / 4π`) of the lighting a capture's views were taken

@@ -129,10 +129,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                 field.model(),
                 field.encoded(),
                 &prepared.net_camera(camera),
-                &nelf_field::light::latlong_to_net_light(&light)?
-                    .into_iter()
-                    .map(|v| v * field.light_transport_scale())
-                    .collect::<Vec<f32>>(),
+                &field.net_light(&light)?,
                 &ImageSettings {
                     head_centre: prepared.head_centre_net(),
                     sampling: Sampling::Stratified,

@@ -230,18 +230,8 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
     .context("loading the network's weights")?;
     let (capture, description) = load_capture_dir_for_model(capture_dir, default_net_from_world(), &model)
         .with_context(|| format!("loading the capture {}", capture_dir.display()))?;
-    let relative = model.source_relative_light();
-    let mut field = nelf_field::NelfField::new(model, &capture).context("encoding the capture")?;
-    if relative {
-        match super::bake::capture_source_power(Some(&description), capture_dir)? {
-            Some(power) => field = field.with_source_light_power(power)?,
-            None => eprintln!(
-                "note: {} records no lighting of its views: the image is as bright as the capture \
-                 would be under a lighting of the given map's shape and mean radiance 1",
-                capture_dir.display()
-            ),
-        }
-    }
+    let field = nelf_field::NelfField::new(model, &capture).context("encoding the capture")?;
+    let field = super::bake::in_capture_light_units(field, Some(&description), capture_dir)?;
     let (lo, hi) = field.bounds();
     let (camera, capture_envmap) = resolve_camera(&args.view, (lo.as_dvec3(), hi.as_dvec3()))?;
     let world_from_light = field.world_from_light();
@@ -260,10 +250,7 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
             name,
         )
     };
-    let net_light: Vec<f32> = nelf_field::light::latlong_to_net_light(&light)?
-        .into_iter()
-        .map(|v| v * field.light_transport_scale())
-        .collect();
+    let net_light = field.net_light(&light)?;
     let load_seconds = start.elapsed().as_secs_f64();
 
     let start = Instant::now();

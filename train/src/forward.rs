@@ -285,9 +285,12 @@ pub fn srgb_l2(a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
     Ok((srgb_encode(a)? - srgb_encode(b)?)?.sqr()?.mean_all()?)
 }
 
+/// `log(1 + max(t, 0))`, elementwise.
+pub fn log1p_relu(t: &Tensor) -> Result<Tensor, TrainError> {
+    Ok((t.relu()? + 1.0)?.log()?)
+}
+
 /// `mean |log(1 + a) − log(1 + b)|` (the paper's log-L1 lighting loss).
 pub fn log_l1(a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
-    let la = (a.relu()? + 1.0)?.log()?;
-    let lb = (b.relu()? + 1.0)?.log()?;
-    l1(&la, &lb)
+    l1(&log1p_relu(a)?, &log1p_relu(b)?)
 }

@@ -517,20 +517,17 @@ pub fn step_loss(
             let mask: Vec<f32> = (0..r * s)
                 .map(|k| {
                     let (ray, p) = (k / s, pixels[k / s]);
-                    let free = if target.alpha[p] <= 0.0 {
-                        true
-                    } else {
-                        depth_mask[ray] > 0.0
+                    let free = target.alpha[p] <= 0.0
+                        || (depth_mask[ray] > 0.0
                             && target.alpha[p] >= 1.0
-                            && pass.depths[k] < want_depth[ray] - FREE_SPACE_MARGIN_MM
-                    };
+                            && pass.depths[k] < want_depth[ray] - FREE_SPACE_MARGIN_MM);
                     if free { 1.0 } else { 0.0 }
                 })
                 .collect();
             let count = mask.iter().sum::<f32>();
             if count > 0.0 {
                 let mask = Tensor::from_vec(mask, (r, s), device)?;
-                let penalty = ((pass.sigma.relu()? + 1.0)?.log()? * mask)?.sum_all()?;
+                let penalty = (forward::log1p_relu(&pass.sigma)? * mask)?.sum_all()?;
                 free_space = (free_space + (penalty / f64::from(count))?)?;
             }
         }
