@@ -32,6 +32,14 @@ fn default_max_hull_radius_m() -> f64 {
     DEFAULT_MAX_HULL_RADIUS_M
 }
 
+/// Default `--network-skin-mm`: measured with `nelf eval network` on held-out heads
+/// (`field/README.md`, "Density of a network bake").
+pub const DEFAULT_NETWORK_SKIN_MM: f32 = 1.0;
+
+fn default_network_skin_mm() -> f32 {
+    DEFAULT_NETWORK_SKIN_MM
+}
+
 /// Default `--lt-share-voxels`.
 pub const DEFAULT_LT_SHARE_VOXELS: f32 = 2.0;
 
@@ -165,8 +173,9 @@ pub struct BakeConfig {
     /// Ground-truth field, `inside`/`centred` shells: ramp width, voxels.
     #[arg(long, default_value_t = 2.0)]
     pub shell_voxels: f32,
-    /// Ground-truth field, `signed` shell: how far outside the surface the density
-    /// crosses zero, voxels (the slope puts transmittance ½ at the surface).
+    /// Signed density (the ground-truth field's `signed` shell, a network field's
+    /// `--network-skin-mm`): how far outside the surface the density crosses zero,
+    /// voxels (the slope puts transmittance ½ at the surface).
     #[arg(long, default_value_t = 0.25)]
     pub lead_voxels: f32,
     /// Ground-truth field: thickness, voxels, given to open sheets and parts thinner
@@ -190,6 +199,15 @@ pub struct BakeConfig {
     #[arg(long, default_value_t = DEFAULT_LT_SHARE_VOXELS)]
     #[serde(default = "default_lt_share_voxels")]
     pub lt_share_voxels: f32,
+    /// Network field: its density is stored as a signed function of `ln σ`
+    /// (`nelf_scene::field::SignedLogDensity`) for a skin across which σ grows by `e`
+    /// every this many millimetres, the surface where a ray through it reaches optical
+    /// depth ln 2 (σ = ln 2 / skin); trilinear interpolation then puts the surface
+    /// between voxels where the network has it, not a voxel outside. 0 stores σ itself
+    /// (a baked head renders swollen by about a voxel).
+    #[arg(long, default_value_t = DEFAULT_NETWORK_SKIN_MM)]
+    #[serde(default = "default_network_skin_mm")]
+    pub network_skin_mm: f32,
     /// Outgoing direction the light transport is baked for.
     #[arg(long, value_enum, default_value_t)]
     pub view_policy: ViewPolicyChoice,
@@ -284,6 +302,7 @@ impl Default for BakeConfig {
             sheet_voxels: 2.0,
             hollow_voxels: 0.0,
             lt_share_voxels: DEFAULT_LT_SHARE_VOXELS,
+            network_skin_mm: DEFAULT_NETWORK_SKIN_MM,
             view_policy: ViewPolicyChoice::AverageCameras,
             render_size: 128,
             step_voxels: 0.5,
@@ -366,6 +385,12 @@ impl BakeConfig {
                 self.lt_share_voxels
             ));
         }
+        if !(self.network_skin_mm.is_finite() && self.network_skin_mm >= 0.0) {
+            return bad(format!(
+                "--network-skin-mm {} must be ≥ 0 (0: store σ itself)",
+                self.network_skin_mm
+            ));
+        }
         if !(self.lead_voxels.is_finite() && self.lead_voxels > 0.0 && self.lead_voxels <= 2.0) {
             return bad(format!("--lead-voxels {} must be in (0, 2]", self.lead_voxels));
         }
@@ -399,5 +424,35 @@ impl BakeConfig {
             step_voxels: self.step_voxels,
             ..MarchSettings::default()
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn network_skin_is_validated_and_defaults_for_older_configs() {
+        assert!(BakeConfig::default().validate().is_ok());
+        for bad in [-1.0f32, f32::NAN, f32::INFINITY] {
+            let config = BakeConfig {
+                network_skin_mm: bad,
+                ..BakeConfig::default()
+            };
+            let message = config.validate().err().map(|e| e.to_string()).unwrap_or_default();
+            assert!(message.contains("--network-skin-mm"), "{bad}: {message}");
+        }
+        let off = BakeConfig {
+            network_skin_mm: 0.0,
+            ..BakeConfig::default()
+        };
+        assert!(off.validate().is_ok());
+        // A config saved before the option existed reads back with the default.
+        let mut json = serde_json::to_value(BakeConfig::default()).unwrap_or_default();
+        if let Some(map) = json.as_object_mut() {
+            map.remove("network_skin_mm");
+        }
+        let read: BakeConfig = serde_json::from_value(json).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(read.network_skin_mm, DEFAULT_NETWORK_SKIN_MM);
     }
 }

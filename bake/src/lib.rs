@@ -41,7 +41,9 @@ pub mod view;
 
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
 pub use choose::{ChoiceArgs, ChoiceReport, bake_capture_to_target};
-pub use config::{BakeConfig, EncodingChoice, ShellPlacement, TraceOverrides, ViewPolicyChoice};
+pub use config::{
+    BakeConfig, DEFAULT_NETWORK_SKIN_MM, EncodingChoice, ShellPlacement, TraceOverrides, ViewPolicyChoice,
+};
 pub use error::BakeError;
 pub use jobs::{
     CapturePlan, bake_capture, bake_capture_field, bake_mesh, capture_field_job, mesh_cameras, plan_capture,

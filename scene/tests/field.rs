@@ -583,3 +583,140 @@ fn voxel_filter_keeps_a_thin_shells_optical_depth() {
     assert!(VoxelFiltered::new(&ThinSlab, 0.0, 2).is_err());
     assert!(VoxelFiltered::new(&ThinSlab, voxel, 0).is_err());
 }
+
+/// A trained network's skin across the plane `x = surface`: σ grows by `e` every
+/// `1/k` metres into `+x` and equals `k·ln 2` on the plane, where a ray coming from
+/// `−x` reaches optical depth ln 2 (`τ(x) = σ(x)/k`).
+struct ExponentialSkin {
+    surface_m: f32,
+    k_per_m: f32,
+}
+
+impl ExponentialSkin {
+    fn sigma(&self, x: f32) -> f32 {
+        (self.k_per_m * std::f32::consts::LN_2 * (self.k_per_m * (x - self.surface_m)).exp()).min(1e9)
+    }
+}
+
+impl FieldSource for ExponentialSkin {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        _view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        for ((p, d), t) in points
+            .iter()
+            .zip(density.iter_mut())
+            .zip(lt.chunks_exact_mut(LT_DIM))
+        {
+            *d = self.sigma(p.x);
+            t.fill(p.x);
+        }
+        Ok(())
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        (Vec3::splat(-1.0), Vec3::splat(1.0))
+    }
+}
+
+/// Where a ray along `+x` through the lattice values `grid` (at `x = (i − 8)·Δ`),
+/// interpolated linearly and clipped at 0 as the renderer does, reaches optical
+/// depth ln 2.
+fn half_transmittance_x(grid: &[f32], voxel: f32) -> f32 {
+    let steps = 200;
+    let mut tau = 0.0f64;
+    for i in 0..grid.len() - 1 {
+        for s in 0..steps {
+            let f = (s as f32 + 0.5) / steps as f32;
+            let sigma = ((1.0 - f) * grid[i] + f * grid[i + 1]).max(0.0);
+            tau += f64::from(sigma * voxel / steps as f32);
+            if tau >= std::f64::consts::LN_2 {
+                return (i as f32 + f - 8.0) * voxel;
+            }
+        }
+    }
+    f32::INFINITY
+}
+
+/// A signed log density puts a steep skin's surface where the field has it, to a
+/// small fraction of a voxel, wherever the surface lies between voxel centres; the
+/// density itself, sampled on the same lattice (point samples or the bake's box
+/// filter), renders swollen by a third to half a voxel.
+#[test]
+fn a_signed_log_density_keeps_a_steep_skin_in_place() {
+    use nelf_scene::field::SignedLogDensity;
+    let voxel = 0.004f32;
+    let k = 1000.0f32; // σ × e every millimetre
+    let (mut raw_errors, mut signed_errors) = (Vec::new(), Vec::new());
+    let (mut filtered_errors, mut filtered_signed_errors) = (Vec::new(), Vec::new());
+    for o in 0..10 {
+        let skin = ExponentialSkin {
+            surface_m: voxel * (0.05 + 0.1 * o as f32),
+            k_per_m: k,
+        };
+        let signed =
+            SignedLogDensity::new(&skin, k * std::f32::consts::LN_2, k, 0.25 * voxel, voxel).unwrap();
+        let points: Vec<Vec3> = (0..17)
+            .map(|i| Vec3::new((i as f32 - 8.0) * voxel, 0.0, 0.0))
+            .collect();
+        let mut raw = vec![0.0f32; points.len()];
+        let mut encoded = vec![0.0f32; points.len()];
+        let mut lt = vec![0.0f32; points.len() * LT_DIM];
+        skin.evaluate(&points, &ViewPolicy::Direction(Vec3::X), &mut raw, &mut lt)
+            .unwrap();
+        signed
+            .evaluate(&points, &ViewPolicy::Direction(Vec3::X), &mut encoded, &mut lt)
+            .unwrap();
+        // Light transport passes through unchanged.
+        assert_eq!(lt[LT_DIM], points[1].x);
+        let mut density_only = vec![0.0f32; points.len()];
+        signed.evaluate_density(&points, &mut density_only).unwrap();
+        assert_eq!(density_only, encoded);
+        raw_errors.push((half_transmittance_x(&raw, voxel) - skin.surface_m) / voxel);
+        signed_errors.push((half_transmittance_x(&encoded, voxel) - skin.surface_m) / voxel);
+        // The bake's box filter (2³ sub-points) first, as for a network.
+        let filtered = nelf_scene::field::VoxelFiltered::new(&skin, voxel, 2).unwrap();
+        filtered.evaluate_density(&points, &mut raw).unwrap();
+        filtered_errors.push((half_transmittance_x(&raw, voxel) - skin.surface_m) / voxel);
+        let signed =
+            SignedLogDensity::new(&filtered, k * std::f32::consts::LN_2, k, 0.25 * voxel, voxel).unwrap();
+        signed.evaluate_density(&points, &mut encoded).unwrap();
+        filtered_signed_errors.push((half_transmittance_x(&encoded, voxel) - skin.surface_m) / voxel);
+    }
+    for (o, e) in signed_errors.iter().enumerate() {
+        assert!(e.abs() < 0.02, "offset {o}: signed surface off by {e} voxels");
+    }
+    let raw_mean = raw_errors.iter().sum::<f32>() / raw_errors.len() as f32;
+    let filtered_mean = filtered_errors.iter().sum::<f32>() / filtered_errors.len() as f32;
+    // Over the box filter the mean of σ across a voxel's sub-points (at ±Δ/4) is
+    // σ·cosh(kΔ/4) of its centre's: the surface moves out by ln(cosh(kΔ/4))/k,
+    // 0.11 voxels here, a third of what σ itself loses, the same at every offset.
+    let filter_shift = (k * voxel / 4.0).cosh().ln() / (k * voxel);
+    for (o, e) in filtered_signed_errors.iter().enumerate() {
+        assert!(
+            (e + filter_shift).abs() < 0.02,
+            "offset {o}: filtered signed surface off by {e} voxels"
+        );
+    }
+    assert!(raw_mean < -0.25, "raw σ swells the surface by {raw_mean} voxels");
+    assert!(
+        filtered_mean < -0.25,
+        "box-filtered σ swells the surface by {filtered_mean} voxels"
+    );
+
+    // Empty space is the negative cap; the encoding grows with σ; bad settings fail.
+    let skin = ExponentialSkin {
+        surface_m: 0.0,
+        k_per_m: k,
+    };
+    let signed = SignedLogDensity::new(&skin, 693.0, k, 0.001, voxel).unwrap();
+    assert!(signed.encode(0.0) < 0.0 && signed.encode(0.0) == signed.encode(f32::NAN));
+    assert!(signed.encode(0.0) <= signed.encode(1.0));
+    assert!(signed.encode(1.0) < signed.encode(693.0) && signed.encode(693.0) < signed.encode(1e5));
+    assert!(signed.encode(693.0) > 0.0 && signed.encode(1e12) == -signed.encode(0.0));
+    assert!(SignedLogDensity::new(&skin, 0.0, k, 0.001, voxel).is_err());
+    assert!(SignedLogDensity::new(&skin, 693.0, f32::NAN, 0.001, voxel).is_err());
+}

@@ -17,7 +17,7 @@ use nelf_bake::{
 use nelf_field::capture::default_net_from_world;
 use nelf_field::shipped::load_or_shipped;
 use nelf_field::{Model, NelfConfig, NelfField, NetCapture};
-use nelf_scene::field::VoxelFiltered;
+use nelf_scene::field::{SignedLogDensity, VoxelFiltered};
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 
 /// Options of `nelf bake`.
@@ -348,10 +348,25 @@ pub fn bake_network_field(
     let planned = plan_capture(capture, config, field, &progress)?;
     let view_policy = view_policy.unwrap_or_else(|| field.recommended_view_policy());
     let filtered = VoxelFiltered::new(field, planned.voxel_size_m as f32, voxel_filter)?;
+    let voxel_m = planned.voxel_size_m as f32;
+    let signed;
+    let source: &dyn nelf_scene::field::FieldSource = if config.network_skin_mm > 0.0 {
+        let skin_m = config.network_skin_mm / 1000.0;
+        signed = SignedLogDensity::new(
+            &filtered,
+            std::f32::consts::LN_2 / skin_m,
+            1.0 / skin_m,
+            config.lead_voxels * voxel_m,
+            voxel_m,
+        )?;
+        &signed
+    } else {
+        &filtered
+    };
     Ok(bake_capture_field(
         capture,
         planned,
-        &filtered,
+        source,
         view_policy,
         provenance,
         config,

@@ -41,6 +41,10 @@ pub struct NetworkEvalArgs {
     /// Sub-points per voxel edge in the network's bake (box filter; 1 = point samples).
     #[arg(long, default_value_t = super::bake::NETWORK_VOXEL_FILTER)]
     pub voxel_filter: usize,
+    /// The network's bake: its density as a signed function of `ln σ` for a skin this
+    /// thick, mm (`nelf bake --network-skin-mm`; 0: σ itself).
+    #[arg(long, default_value_t = nelf_bake::DEFAULT_NETWORK_SKIN_MM)]
+    pub network_skin_mm: f32,
     /// Also bake the network once per target with its light transport toward that
     /// target's camera (`oracle_view_bake` in the scores): what a bake without a
     /// view-dependent part could reach at best, to tell view dependence from other
@@ -73,6 +77,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         resolution: args.resolution,
         rank: args.rank,
         view_dependence: ViewChoice::Off,
+        network_skin_mm: args.network_skin_mm,
         ..BakeConfig::default()
     };
     let progress = Progress::hidden();
@@ -185,6 +190,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         "weights": weights_name,
         "resolution": args.resolution,
         "voxel_filter": args.voxel_filter,
+        "network_skin_mm": args.network_skin_mm,
         "rank": args.rank,
         "targets": rows.len(),
         "mean_foreground_psnr": {
