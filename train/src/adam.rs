@@ -4,6 +4,10 @@
 //!
 //! `m ← β₁m + (1−β₁)g`, `v ← β₂v + (1−β₂)g²`,
 //! `θ ← θ − α·(m / (1−β₁ᵗ)) / (√(v / (1−β₂ᵗ)) + ε)`.
+//!
+//! Optionally it keeps an exponential moving average of the weights after each
+//! update (`θ̄ ← β·θ̄ + (1−β)·θ`, Polyak & Juditsky 1992), saved and restored with
+//! the moments.
 
 use std::collections::BTreeMap;
 
@@ -18,6 +22,8 @@ const BETA1: f64 = 0.9;
 const BETA2: f64 = 0.999;
 /// ε.
 const EPS: f64 = 1e-8;
+/// Key prefix of the weight average's tensors in a checkpoint.
+pub const EMA_PREFIX: &str = "ema.";
 
 /// The tensor `key` of a checkpoint, which must have the shape `dims` of the
 /// network it is loaded into.
@@ -45,6 +51,8 @@ struct Slot {
     lr: f64,
     m: Tensor,
     v: Tensor,
+    /// The moving average of the weights, when one is kept.
+    ema: Option<Tensor>,
 }
 
 /// Adam over named variables (sorted by name, so the update order is fixed).
@@ -52,18 +60,35 @@ struct Slot {
 pub struct Adam {
     slots: BTreeMap<String, Slot>,
     steps: u64,
+    ema_decay: Option<f64>,
 }
 
 impl Adam {
-    /// Adam over `vars`, each with its step size.
-    pub fn new(vars: Vec<(String, Var, f64)>) -> Result<Self, TrainError> {
+    /// Adam over `vars`, each with its step size; with `ema_decay` it also keeps a
+    /// moving average of the weights, started from their values now.
+    pub fn new(vars: Vec<(String, Var, f64)>, ema_decay: Option<f64>) -> Result<Self, TrainError> {
+        if let Some(beta) = ema_decay
+            && !(0.0..1.0).contains(&beta)
+        {
+            return Err(TrainError::Settings(format!(
+                "a weight average's decay must be in [0, 1), got {beta}"
+            )));
+        }
         let mut slots = BTreeMap::new();
         for (name, var, lr) in vars {
             let m = var.as_tensor().zeros_like()?;
             let v = var.as_tensor().zeros_like()?;
-            slots.insert(name, Slot { var, lr, m, v });
+            let ema = match ema_decay {
+                Some(_) => Some(var.as_tensor().detach().copy()?),
+                None => None,
+            };
+            slots.insert(name, Slot { var, lr, m, v, ema });
         }
-        Ok(Self { slots, steps: 0 })
+        Ok(Self {
+            slots,
+            steps: 0,
+            ema_decay,
+        })
     }
 
     /// Updates taken so far.
@@ -93,9 +118,21 @@ impl Adam {
             let v_hat = (&slot.v / c2)?;
             let delta = (m_hat / (v_hat.sqrt()? + EPS)?)?;
             let next = (slot.var.as_tensor() - (delta * slot.lr)?)?;
+            if let (Some(beta), Some(ema)) = (self.ema_decay, &mut slot.ema) {
+                *ema = ((&*ema * beta)? + (&next * (1.0 - beta))?)?;
+            }
             slot.var.set(&next)?;
         }
         Ok(())
+    }
+
+    /// The moving average of the weights (sorted by name), when one is kept.
+    pub fn averaged_weights(&self) -> Option<Vec<(String, Tensor)>> {
+        self.ema_decay?;
+        self.slots
+            .iter()
+            .map(|(name, s)| s.ema.clone().map(|t| (name.clone(), t)))
+            .collect()
     }
 
     /// Waits for the device to finish the update (reads one value back).
@@ -110,20 +147,24 @@ impl Adam {
         Ok(())
     }
 
-    /// The moments as named tensors (`adam_m.NAME`, `adam_v.NAME`) for a checkpoint.
+    /// The moments as named tensors (`adam_m.NAME`, `adam_v.NAME`, and the weight
+    /// average's `ema.NAME` when one is kept) for a checkpoint.
     pub fn state_tensors(&self) -> Vec<(String, Tensor)> {
         self.slots
             .iter()
             .flat_map(|(name, s)| {
                 [
-                    (format!("adam_m.{name}"), s.m.clone()),
-                    (format!("adam_v.{name}"), s.v.clone()),
+                    Some((format!("adam_m.{name}"), s.m.clone())),
+                    Some((format!("adam_v.{name}"), s.v.clone())),
+                    s.ema.clone().map(|t| (format!("{EMA_PREFIX}{name}"), t)),
                 ]
             })
+            .flatten()
             .collect()
     }
 
-    /// Restores the moments and step count saved by [`Adam::state_tensors`].
+    /// Restores the moments, the weight average and the step count saved by
+    /// [`Adam::state_tensors`] (call after the weights are restored).
     pub fn restore(
         &mut self,
         tensors: &std::collections::HashMap<String, Tensor>,
@@ -136,6 +177,15 @@ impl Adam {
             ] {
                 let t = checkpoint_tensor(tensors, &key, target.dims())?;
                 *target = t.to_device(target.device())?;
+            }
+            // An average saved with the checkpoint continues; a checkpoint without
+            // one (saved with the average off) starts it from the restored weights.
+            if let Some(ema) = &mut slot.ema {
+                let key = format!("{EMA_PREFIX}{name}");
+                *ema = match tensors.get(&key) {
+                    Some(_) => checkpoint_tensor(tensors, &key, ema.dims())?.to_device(ema.device())?,
+                    None => slot.var.as_tensor().detach().copy()?,
+                };
             }
         }
         self.steps = steps;

@@ -5,7 +5,8 @@
 //! network and flat colour side by side), and checkpoints every few minutes
 //! and at the end: `checkpoint.safetensors` + `checkpoint.json` (resume state) and
 //! `weights.safetensors` (the network alone, official key names, loadable by
-//! `nelf_field::Model::load`), each written through a temporary file.
+//! `nelf_field::Model::load`; the weight average when `--ema-decay` keeps one,
+//! which is also what validation scores), each written through a temporary file.
 
 use std::io::Write as _;
 use std::path::Path;
@@ -152,7 +153,7 @@ pub fn write_validation_sheet(path: &Path, views: &[ValidationView]) -> Result<(
 /// Mean validation over `heads`; when `sheet` is given, the views are written there
 /// as a PNG ([`write_validation_sheet`]).
 pub fn validate(
-    trainable: &Trainable,
+    model: &Model,
     heads: &[PreparedHead],
     config: &TrainConfig,
     sheet: Option<&Path>,
@@ -160,11 +161,10 @@ pub fn validate(
     if heads.is_empty() {
         return Ok(None);
     }
-    let model = trainable.snapshot()?;
     let mut sum = [0.0f64; 4];
     let mut views = Vec::with_capacity(heads.len());
     for head in heads {
-        let view = validate_head(&model, head, config)?;
+        let view = validate_head(model, head, config)?;
         let v = view.validation;
         views.push(view);
         for (s, x) in sum
@@ -259,6 +259,7 @@ fn log_loss(path: &Path, step: u64, train_secs: f64, loss: &LossParts) -> Result
 #[allow(clippy::too_many_arguments, reason = "the loop's state, passed through once")]
 fn validate_and_log(
     trainable: &Trainable,
+    adam: &Adam,
     heads: &[PreparedHead],
     config: &TrainConfig,
     paths: &RunPaths,
@@ -267,7 +268,11 @@ fn validate_and_log(
     loss: &LossParts,
     progress: &ProgressBar,
 ) -> Result<Option<Validation>, TrainError> {
-    let Some(v) = validate(trainable, heads, config, Some(&paths.dir.join("validation.png")))? else {
+    if heads.is_empty() {
+        return Ok(None);
+    }
+    let model = trainable.snapshot_of(run_weights(trainable, adam)?)?;
+    let Some(v) = validate(&model, heads, config, Some(&paths.dir.join("validation.png")))? else {
         return Ok(None);
     };
     log_validation(&paths.log(), step, train_secs, loss, &v)?;
@@ -286,7 +291,25 @@ fn validate_and_log(
 /// Writes the network alone (official key names) for `Model::load`, with the image
 /// side it was trained at (`nelf_field::model::WORKING_IMAGE_SIZE_KEY`).
 pub fn export_weights(trainable: &Trainable, config: &TrainConfig, path: &Path) -> Result<(), TrainError> {
-    let mut tensors: std::collections::HashMap<String, Tensor> = trainable.weights()?.into_iter().collect();
+    export_named_weights(trainable.weights()?, config, path)
+}
+
+/// The weights a run validates and exports: the moving average when it keeps one
+/// (`--ema-decay`), else the last step's.
+pub fn run_weights(trainable: &Trainable, adam: &Adam) -> Result<Vec<(String, Tensor)>, TrainError> {
+    match adam.averaged_weights() {
+        Some(average) => Ok(average),
+        None => trainable.weights(),
+    }
+}
+
+/// [`export_weights`] of named tensors (the official key names).
+pub fn export_named_weights(
+    weights: Vec<(String, Tensor)>,
+    config: &TrainConfig,
+    path: &Path,
+) -> Result<(), TrainError> {
+    let mut tensors: std::collections::HashMap<String, Tensor> = weights.into_iter().collect();
     tensors.insert(
         nelf_field::model::WORKING_IMAGE_SIZE_KEY.into(),
         Tensor::new(&[config.image_size as f32], &Device::Cpu)?,
@@ -313,7 +336,7 @@ fn checkpoint(
     info: &CheckpointInfo,
 ) -> Result<(), TrainError> {
     save_checkpoint(&paths.dir, trainable, adam, info)?;
-    export_weights(trainable, &info.config, &paths.weights())
+    export_named_weights(run_weights(trainable, adam)?, &info.config, &paths.weights())
 }
 
 /// Trains per `config` (module docs).
@@ -422,7 +445,7 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
         }
         if config.val_every > 0 && step % config.val_every == 0 {
             validation = validate_and_log(
-                &trainable, &val_heads, config, &paths, step, train_secs, &last_loss, progress,
+                &trainable, &adam, &val_heads, config, &paths, step, train_secs, &last_loss, progress,
             )?;
             validated_at = Some(step);
         }
@@ -442,6 +465,7 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
     if config.val_every > 0 && validated_at != Some(adam.steps()) {
         validation = validate_and_log(
             &trainable,
+            &adam,
             &val_heads,
             config,
             &paths,

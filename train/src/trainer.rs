@@ -686,7 +686,7 @@ impl Trainable {
                 (name, var, lr)
             })
             .collect();
-        Adam::new(vars)
+        Adam::new(vars, (config.ema_decay > 0.0).then_some(config.ema_decay))
     }
 
     /// The weights as named tensors (the official key names).
@@ -701,8 +701,13 @@ impl Trainable {
     /// gradient graph and takes the fused inference kernels (validation: a graph
     /// over a full image held ~24 GB here).
     pub fn snapshot(&self) -> Result<Model, TrainError> {
-        let tensors = self
-            .weights()?
+        self.snapshot_of(self.weights()?)
+    }
+
+    /// The network with a copy of `weights` (named as [`Trainable::weights`], for
+    /// example [`Adam::averaged_weights`]) as plain tensors.
+    pub fn snapshot_of(&self, weights: Vec<(String, Tensor)>) -> Result<Model, TrainError> {
+        let tensors = weights
             .into_iter()
             .map(|(n, t)| Ok((n, t.detach().copy()?)))
             .collect::<Result<HashMap<_, _>, TrainError>>()?;

@@ -320,9 +320,17 @@ fn weights_bits(trainable: &Trainable) -> Vec<(String, Vec<u64>)> {
         .collect()
 }
 
+fn named_bits(weights: Vec<(String, Tensor)>) -> Vec<(String, Vec<u64>)> {
+    weights.into_iter().map(|(n, t)| (n, tensor_bits(&t))).collect()
+}
+
+/// With the weight average on (it is saved in the checkpoint and restored).
 #[test]
 fn a_resumed_run_equals_an_unbroken_one_bit_for_bit() {
-    let config = tiny_config();
+    let config = TrainConfig {
+        ema_decay: 0.9,
+        ..tiny_config()
+    };
     let heads = vec![synthetic_head()];
     let (n, m) = (2, 2);
     let unbroken = Trainable::init(&config, &Device::Cpu).unwrap();
@@ -364,6 +372,81 @@ fn a_resumed_run_equals_an_unbroken_one_bit_for_bit() {
         weights_bits(&unbroken) == weights_bits(&resumed),
         "weights differ after resuming"
     );
+    assert!(
+        named_bits(adam.averaged_weights().unwrap()) == named_bits(adam2.averaged_weights().unwrap()),
+        "weight averages differ after resuming"
+    );
+}
+
+/// The weight average is `β·θ̄ + (1−β)·θ` after every step, starts from the weights
+/// it is given (a fresh network, or a checkpoint saved without one), is absent when
+/// off, and a decay outside [0, 1) is refused.
+#[test]
+fn the_weight_average_follows_each_step() {
+    let beta = 0.75;
+    let config = TrainConfig {
+        ema_decay: beta,
+        ..tiny_config()
+    };
+    let heads = vec![synthetic_head()];
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut adam = trainable.optimizer(&config).unwrap();
+    let start = named_bits(trainable.weights().unwrap());
+    assert!(start == named_bits(adam.averaged_weights().unwrap()));
+    let values = |w: Vec<(String, Tensor)>| -> Vec<Vec<f32>> {
+        w.into_iter()
+            .map(|(_, t)| t.flatten_all().unwrap().to_vec1::<f32>().unwrap())
+            .collect()
+    };
+    let mut expected = values(trainable.weights().unwrap());
+    for _ in 0..3 {
+        train_step(&trainable, &mut adam, &heads, &config).unwrap();
+        for (e, w) in expected.iter_mut().zip(values(trainable.weights().unwrap())) {
+            for (a, b) in e.iter_mut().zip(w) {
+                *a = beta as f32 * *a + (1.0 - beta as f32) * b;
+            }
+        }
+    }
+    let average = values(adam.averaged_weights().unwrap());
+    let worst = average
+        .iter()
+        .flatten()
+        .zip(expected.iter().flatten())
+        .map(|(a, b)| (a - b).abs())
+        .fold(0.0f32, f32::max);
+    assert!(worst < 1e-6, "the average is off by {worst}");
+    assert!(
+        values(trainable.weights().unwrap()) != average,
+        "the average is the weights"
+    );
+
+    // Saved without an average, resumed with one: it starts from the weights.
+    let off = tiny_config();
+    let plain = Trainable::init(&off, &Device::Cpu).unwrap();
+    let mut plain_adam = plain.optimizer(&off).unwrap();
+    assert!(plain_adam.averaged_weights().is_none());
+    train_step(&plain, &mut plain_adam, &heads, &off).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let info = CheckpointInfo {
+        step: 1,
+        train_secs: 1.0,
+        config: off.clone(),
+        last_loss: LossParts::default(),
+    };
+    save_checkpoint(dir.path(), &plain, &plain_adam, &info).unwrap();
+    let resumed = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut resumed_adam = resumed.optimizer(&config).unwrap();
+    load_checkpoint(dir.path(), &resumed, &mut resumed_adam).unwrap();
+    assert!(named_bits(resumed_adam.averaged_weights().unwrap()) == weights_bits(&plain));
+
+    for bad in [1.0, -0.1, f64::NAN] {
+        let config = TrainConfig {
+            ema_decay: bad,
+            ..tiny_config()
+        };
+        let message = config.validate().unwrap_err().to_string();
+        assert!(message.contains("--ema-decay"), "{bad}: {message}");
+    }
 }
 
 /// Tensors of a checkpoint file by name, as bits.
