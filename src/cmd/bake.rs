@@ -334,8 +334,9 @@ pub fn capture_source_power(
 pub const NETWORK_VOXEL_FILTER: usize = 2;
 
 /// Bakes `field` (the network over `capture`'s views) with `view_policy` (default:
-/// the network's recommended one), box-filtered over voxels ([`NETWORK_VOXEL_FILTER`]);
-/// `provenance` goes into the asset's metadata.
+/// the network's recommended one), box-filtered over voxels ([`NETWORK_VOXEL_FILTER`]),
+/// its density stored as a signed function of `ln σ` ([`SignedLogDensity`]) unless
+/// `config.network_skin_mm` is 0; `provenance` goes into the asset's metadata.
 pub fn bake_network_field(
     capture: &LoadedCapture,
     field: &NelfField,
