@@ -714,7 +714,8 @@ impl FieldSource for VoxelFiltered<'_> {
 /// about a voxel, a bright halo round every silhouette. Near a surface `ln σ` is
 /// close to affine in the signed distance `d` (σ ∝ `e^{−k·d}`), so
 /// `d̂ = −ln(σ/σ_iso)/k` estimates the distance to the level `σ_iso`, and the stored
-/// value is [`crate::field`]'s signed shell profile of `d̂`:
+/// value is the ground-truth bake's signed shell profile (`nelf-bake`'s
+/// `ShellProfile::Signed`) of `d̂`:
 /// `s = clamp(g · (ℓ − d̂), −g·(ℓ + 2Δ), g·(ℓ + 2Δ))` with `g = 2 ln 2 / ℓ²`, so a
 /// ray meets optical depth `ln 2` exactly at `σ = σ_iso`, as for a mesh. Where the
 /// inner σ is 0 (pruned, empty) `s` is the negative cap. Light transport is the
