@@ -214,6 +214,11 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
     let scale = source["light_transport_scale"].as_f64().unwrap();
     assert!(scale.is_finite() && scale > 0.0 && scale != 1.0, "{source}");
     assert!(asset.voxel_count() > 0);
+    // A network's density is stored signed (`--network-skin-mm`, field/README.md).
+    assert!(nelf_format::asset::has_negative_density(&asset.density));
+    let sidecar: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(asset_path.with_extension("bake.json")).unwrap()).unwrap();
+    assert_eq!(sidecar["config"]["network_skin_mm"], 1.0, "{sidecar}");
 
     // --source truth without a mesh: refused, naming the folder and what is missing.
     let truth = nelf(&[
