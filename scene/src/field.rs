@@ -767,6 +767,24 @@ impl<'a> SignedLogDensity<'a> {
         })
     }
 
+    /// `inner` whose σ grows by `e` every `skin_m` metres across its surface, the
+    /// surface at `σ_iso = ln 2 / skin_m`, where a ray through such a skin reaches
+    /// optical depth ln 2 (`nelf bake --network-skin-mm`).
+    pub fn with_skin(
+        inner: &'a dyn FieldSource,
+        skin_m: f32,
+        lead_m: f32,
+        voxel_m: f32,
+    ) -> Result<Self, FieldError> {
+        Self::new(
+            inner,
+            std::f32::consts::LN_2 / skin_m,
+            1.0 / skin_m,
+            lead_m,
+            voxel_m,
+        )
+    }
+
     /// The stored signed value for an inner density `sigma` (1/m).
     pub fn encode(&self, sigma: f32) -> f32 {
         let slope = 2.0 * std::f32::consts::LN_2 / (self.lead_m * self.lead_m);

@@ -657,8 +657,7 @@ fn a_signed_log_density_keeps_a_steep_skin_in_place() {
             surface_m: voxel * (0.05 + 0.1 * o as f32),
             k_per_m: k,
         };
-        let signed =
-            SignedLogDensity::new(&skin, k * std::f32::consts::LN_2, k, 0.25 * voxel, voxel).unwrap();
+        let signed = SignedLogDensity::with_skin(&skin, 1.0 / k, 0.25 * voxel, voxel).unwrap();
         let points: Vec<Vec3> = (0..17)
             .map(|i| Vec3::new((i as f32 - 8.0) * voxel, 0.0, 0.0))
             .collect();
@@ -681,8 +680,7 @@ fn a_signed_log_density_keeps_a_steep_skin_in_place() {
         let filtered = nelf_scene::field::VoxelFiltered::new(&skin, voxel, 2).unwrap();
         filtered.evaluate_density(&points, &mut raw).unwrap();
         filtered_errors.push((half_transmittance_x(&raw, voxel) - skin.surface_m) / voxel);
-        let signed =
-            SignedLogDensity::new(&filtered, k * std::f32::consts::LN_2, k, 0.25 * voxel, voxel).unwrap();
+        let signed = SignedLogDensity::with_skin(&filtered, 1.0 / k, 0.25 * voxel, voxel).unwrap();
         signed.evaluate_density(&points, &mut encoded).unwrap();
         filtered_signed_errors.push((half_transmittance_x(&encoded, voxel) - skin.surface_m) / voxel);
     }

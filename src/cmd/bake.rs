@@ -348,15 +348,13 @@ pub fn bake_network_field(
 ) -> anyhow::Result<BakeOutput> {
     let planned = plan_capture(capture, config, field, &progress)?;
     let view_policy = view_policy.unwrap_or_else(|| field.recommended_view_policy());
-    let filtered = VoxelFiltered::new(field, planned.voxel_size_m as f32, voxel_filter)?;
     let voxel_m = planned.voxel_size_m as f32;
+    let filtered = VoxelFiltered::new(field, voxel_m, voxel_filter)?;
     let signed;
     let source: &dyn nelf_scene::field::FieldSource = if config.network_skin_mm > 0.0 {
-        let skin_m = config.network_skin_mm / 1000.0;
-        signed = SignedLogDensity::new(
+        signed = SignedLogDensity::with_skin(
             &filtered,
-            std::f32::consts::LN_2 / skin_m,
-            1.0 / skin_m,
+            config.network_skin_mm / 1000.0,
             config.lead_voxels * voxel_m,
             voxel_m,
         )?;

@@ -268,9 +268,6 @@ fn validate_and_log(
     loss: &LossParts,
     progress: &ProgressBar,
 ) -> Result<Option<Validation>, TrainError> {
-    if heads.is_empty() {
-        return Ok(None);
-    }
     let model = trainable.snapshot_of(run_weights(trainable, adam)?)?;
     let Some(v) = validate(&model, heads, config, Some(&paths.dir.join("validation.png")))? else {
         return Ok(None);
