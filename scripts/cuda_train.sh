@@ -54,7 +54,7 @@ export LD_LIBRARY_PATH="$(ls -d $SP/*/lib 2>/dev/null | tr '\n' ':')${LD_LIBRARY
 mkdir -p "$OUT/run"; [ -d .gpu/run ] && cp .gpu/run/checkpoint.* .gpu/run/*.csv "$OUT/run/" 2>/dev/null
 timeout "${DATA_SECS:-150}" /tmp/nelf_train data -o /tmp/data --heads 200 --val-heads 8 --size 64 > "$OUT/data.log" 2>&1
 /tmp/nelf_train run --data /tmp/data -o "$OUT/run" --arch small --image-size 64 --rays 512 --coarse-samples 64 \
-  --fine-samples 64 --distill-weight 0.1 --distill-sigma-weight 1.0 --free-space-weight 0.5 --ema-decay 0.999 --colour-loss srgb-l2 --source-relative-light --max-secs "${TRAIN_SECS:-270}" --checkpoint-secs 60 --val-every 250 \
+  --fine-samples 64 --distill-weight 0 --distill-sigma-weight 1.0 --free-space-weight 0.5 --ema-decay 0.995 --colour-loss srgb-l2 --source-relative-light --max-secs "${TRAIN_SECS:-270}" --checkpoint-secs 60 --val-every 250 \
   --val-heads 4 --steps 1000000 2>&1 | grep -v '^ *[0-9]*: '
 RUN
 chmod +x "$D/train.sh"

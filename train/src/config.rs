@@ -96,6 +96,17 @@ pub struct TrainConfig {
     /// Weight of the 3D distillation loss (σ and T at points near the surface; 0: off).
     #[arg(long, default_value_t = 0.0)]
     pub distill_weight: f64,
+    /// How the distillation compares radiance (`Σ T·L` against `Σ T*·L` under each of
+    /// the head's lightings): `l1` (linear HDR) or `srgb-l2` (clamped sRGB, squared).
+    /// Measured on `nelf-small-run` (2026-12-02): from step 15,136, where validation had
+    /// sat at 15.70–15.86 dB foreground for 3,900 steps with this term as `l1` × 0.1,
+    /// dropping it (`--distill-weight 0`, the σ term kept; the weight average shortened
+    /// to β = 0.995 at the same step) lifted validation to 16.14 dB in 364 steps and
+    /// 16.51 by 18,000, while `srgb-l2` × 1.0 over 435 of those steps (same average)
+    /// lowered it to 15.66. At this scale the term costs pixel accuracy in either form.
+    #[arg(long, value_enum, default_value_t = ColourLoss::L1)]
+    #[serde(default)]
+    pub distill_radiance_loss: ColourLoss,
     /// Weight of the distillation's σ term alone (default: `--distill-weight`). The σ
     /// term is `|log(1 + σ·1 mm) − log(1 + σ*·1 mm)|`, whose gradient `1/(1 + σ)` is
     /// weak where a network's density has saturated: `nelf-small-run` at step 7457
@@ -162,6 +173,7 @@ impl Default for TrainConfig {
             light_weight: 0.1,
             distill_weight: 0.0,
             distill_sigma_weight: None,
+            distill_radiance_loss: ColourLoss::L1,
             free_space_weight: 0.0,
             ema_decay: 0.0,
             distill_points: 256,

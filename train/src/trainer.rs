@@ -13,7 +13,8 @@
 //! fine pass; the log-L1 lighting loss on the encoder's source-light estimate)
 //! plus, when either of its weights is positive, the 3D distillation loss at ground-truth points
 //! near the surface, `λ_σ·|log(1 + σ·1 mm) − log(1 + σ*·1 mm)| + λ_s·|Σ T·L − Σ T*·L|`
-//! (`λ_σ` = `distill_sigma_weight`, by default `λ_s`) and the
+//! (with `--distill-radiance-loss srgb-l2` the radiance term is
+//! `λ_s·(srgb(Σ T·L) − srgb(Σ T*·L))²`; `λ_σ` = `distill_sigma_weight`, by default `λ_s`) and the
 //! light transport compared through the radiance it gives, toward the direction the
 //! true `T*` is for, under each of the head's lightings (its source lighting and its
 //! targets'): `T` lives in the network's light frame and `T*` in the world's, and
@@ -583,7 +584,10 @@ pub fn step_loss(
                 })
                 .collect();
             let want_radiance = Tensor::from_vec(want_radiance, (n_in, lights, 3), device)?;
-            let radiance_loss = l1(&predicted, &want_radiance)?;
+            let radiance_loss = match config.distill_radiance_loss {
+                ColourLoss::L1 => l1(&predicted, &want_radiance)?,
+                ColourLoss::SrgbL2 => srgb_l2(&predicted, &want_radiance)?,
+            };
             distill_value = f64::from((&sigma_loss + &radiance_loss)?.to_scalar::<f32>()?);
             let weighted =
                 ((sigma_loss * config.distill_sigma_weight())? + (radiance_loss * config.distill_weight)?)?;

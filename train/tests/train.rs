@@ -11,6 +11,7 @@ use nelf_field::capture::default_net_from_world;
 use nelf_field::{EncodedViews, NetCapture};
 use nelf_format::conventions::PinholeCamera;
 use nelf_train::TrainConfig;
+use nelf_train::config::ColourLoss;
 use nelf_train::data::TargetMode;
 use nelf_train::trainer::{
     CheckpointInfo, LossParts, PreparedHead, PreparedTarget, Trainable, load_checkpoint, save_checkpoint,
@@ -775,4 +776,42 @@ fn the_srgb_colour_loss_scores_as_8_bit_srgb_does_and_has_finite_gradients() {
         .unwrap();
     assert!(grad.iter().all(|g| g.is_finite()), "{grad:?}");
     assert!(grad[1] < 0.0 && grad[2] > 0.0 && grad[3] == 0.0, "{grad:?}");
+}
+
+/// `--distill-radiance-loss srgb-l2` swaps the distillation's radiance term for the
+/// squared error of clamped sRGB: a positive term, linear in `--distill-weight`, and
+/// not the L1 one (the tiny network's radiance is not the synthetic head's).
+#[test]
+fn the_distillation_radiance_loss_can_be_srgb_l2() {
+    let trainable = Trainable::init(&tiny_config(), &Device::Cpu).unwrap();
+    let head = synthetic_head();
+    let total = |distill_weight: f64, loss: ColourLoss| {
+        let config = TrainConfig {
+            distill_weight,
+            distill_sigma_weight: Some(0.0),
+            distill_radiance_loss: loss,
+            ..tiny_config()
+        };
+        f64::from(
+            loss_at(&trainable, &head, &config, 5)
+                .0
+                .to_scalar::<f32>()
+                .unwrap(),
+        )
+    };
+    let images = total(0.0, ColourLoss::SrgbL2);
+    let (half, one) = (
+        total(0.5, ColourLoss::SrgbL2) - images,
+        total(1.0, ColourLoss::SrgbL2) - images,
+    );
+    let l1 = total(1.0, ColourLoss::L1) - images;
+    assert!(half > 1e-6, "the sRGB radiance term adds to the loss ({half})");
+    assert!(
+        (one - 2.0 * half).abs() <= 1e-3 * one,
+        "linear in its weight: {half} then {one}"
+    );
+    assert!(
+        (one - l1).abs() > 1e-4 * l1.max(one),
+        "not the L1 term: {one} against {l1}"
+    );
 }
