@@ -15,9 +15,9 @@
 # because the shipped weights do not meet it yet (models/README.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-OUT=${1:-out/heldout-heads}
-shift $(( $# > 0 ? 1 : 0 ))
-[ "${1:-}" = "--" ] && shift
+OUT=out/heldout-heads
+if [ $# -gt 0 ] && [ "$1" != "--" ]; then OUT=$1; shift; fi
+if [ "${1:-}" = "--" ]; then shift; fi
 NELF=target/release/nelf
 mkdir -p "$OUT"
 

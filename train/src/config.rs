@@ -103,7 +103,7 @@ pub struct TrainConfig {
     /// dropping it (`--distill-weight 0`, the σ term kept; the weight average shortened
     /// to β = 0.995 at the same step) lifted validation to 16.14 dB in 364 steps and
     /// 16.51 by 18,000, while `srgb-l2` × 1.0 over 435 of those steps (same average)
-    /// lowered it to 15.66. At this scale the term costs pixel accuracy in either form.
+    /// lowered it to 15.66. At this scale the term cost pixel accuracy in both forms tried.
     #[arg(long, value_enum, default_value_t = ColourLoss::L1)]
     #[serde(default)]
     pub distill_radiance_loss: ColourLoss,
