@@ -21,6 +21,7 @@ use nelf_field::render::{NetRay, sample_delta};
 use nelf_field::{EncodedViews, Model, SourceViews, Stage};
 use nelf_format::conventions::ENV_TEXELS;
 
+use crate::config::ColourLoss;
 use crate::error::TrainError;
 
 /// The encoder's outputs that carry gradients.
@@ -283,6 +284,14 @@ pub fn srgb_encode(t: &Tensor) -> Result<Tensor, TrainError> {
 /// `mean (srgb(a) − srgb(b))²` over colours clamped to [0, 1] ([`srgb_encode`]).
 pub fn srgb_l2(a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
     Ok((srgb_encode(a)? - srgb_encode(b)?)?.sqr()?.mean_all()?)
+}
+
+/// The colour loss `kind` between colours `a` and `b` ([`l1`] or [`srgb_l2`]).
+pub fn colour_loss(kind: ColourLoss, a: &Tensor, b: &Tensor) -> Result<Tensor, TrainError> {
+    match kind {
+        ColourLoss::L1 => l1(a, b),
+        ColourLoss::SrgbL2 => srgb_l2(a, b),
+    }
 }
 
 /// `log(1 + max(t, 0))`, elementwise.

@@ -42,10 +42,10 @@ use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};
 
 use crate::adam::Adam;
-use crate::config::{ColourLoss, TrainConfig};
+use crate::config::TrainConfig;
 use crate::data::{Dataset, TargetMode, TrainingSample};
 use crate::error::TrainError;
-use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, render_rays, srgb_l2};
+use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, render_rays};
 
 /// Depth normaliser of the depth loss (the paper's 200 mm).
 const DEPTH_SCALE_MM: f64 = 200.0;
@@ -489,12 +489,7 @@ pub fn step_loss(
         depth_mask.push(if ok { 1.0f32 } else { 0.0 });
         want_depth.push(if ok { (z / cos) as f32 } else { 0.0 });
     }
-    let colour = |rgb: &Tensor| -> Result<Tensor, TrainError> {
-        match config.colour_loss {
-            ColourLoss::L1 => l1(rgb, &want_rgb),
-            ColourLoss::SrgbL2 => srgb_l2(rgb, &want_rgb),
-        }
-    };
+    let colour = |rgb: &Tensor| forward::colour_loss(config.colour_loss, rgb, &want_rgb);
     let rgb_coarse = colour(&coarse.rgb)?;
     let rgb_fine = match &fine {
         Some(f) => colour(&f.rgb)?,
@@ -584,10 +579,8 @@ pub fn step_loss(
                 })
                 .collect();
             let want_radiance = Tensor::from_vec(want_radiance, (n_in, lights, 3), device)?;
-            let radiance_loss = match config.distill_radiance_loss {
-                ColourLoss::L1 => l1(&predicted, &want_radiance)?,
-                ColourLoss::SrgbL2 => srgb_l2(&predicted, &want_radiance)?,
-            };
+            let radiance_loss =
+                forward::colour_loss(config.distill_radiance_loss, &predicted, &want_radiance)?;
             distill_value = f64::from((&sigma_loss + &radiance_loss)?.to_scalar::<f32>()?);
             let weighted =
                 ((sigma_loss * config.distill_sigma_weight())? + (radiance_loss * config.distill_weight)?)?;

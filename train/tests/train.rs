@@ -120,6 +120,16 @@ fn loss_at(
     step_loss(&trainable.model, head, config, &mut step_rng(seed, 0)).unwrap()
 }
 
+/// The loss of [`loss_at`] as a number.
+fn loss_value(trainable: &Trainable, head: &PreparedHead, config: &TrainConfig, seed: u64) -> f64 {
+    f64::from(
+        loss_at(trainable, head, config, seed)
+            .0
+            .to_scalar::<f32>()
+            .unwrap(),
+    )
+}
+
 #[test]
 fn one_step_lowers_the_loss_on_a_fixed_batch() {
     let config = tiny_config();
@@ -248,12 +258,7 @@ fn the_sigma_distillation_weight_scales_its_term_alone() {
             distill_sigma_weight: sigma,
             ..tiny_config()
         };
-        f64::from(
-            loss_at(&trainable, &head, &config, 5)
-                .0
-                .to_scalar::<f32>()
-                .unwrap(),
-        )
+        loss_value(&trainable, &head, &config, 5)
     };
     assert_eq!(total(0.1, None).to_bits(), total(0.1, Some(0.1)).to_bits());
     let images = total(0.0, None);
@@ -278,12 +283,7 @@ fn the_free_space_loss_adds_a_term_linear_in_its_weight() {
             free_space_weight,
             ..tiny_config()
         };
-        f64::from(
-            loss_at(&trainable, &head, &config, 3)
-                .0
-                .to_scalar::<f32>()
-                .unwrap(),
-        )
+        loss_value(&trainable, &head, &config, 3)
     };
     let base = total(0.0);
     let (one, two) = (total(1.0) - base, total(2.0) - base);
@@ -792,12 +792,7 @@ fn the_distillation_radiance_loss_can_be_srgb_l2() {
             distill_radiance_loss: loss,
             ..tiny_config()
         };
-        f64::from(
-            loss_at(&trainable, &head, &config, 5)
-                .0
-                .to_scalar::<f32>()
-                .unwrap(),
-        )
+        loss_value(&trainable, &head, &config, 5)
     };
     let images = total(0.0, ColourLoss::SrgbL2);
     let (half, one) = (
