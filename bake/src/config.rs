@@ -208,6 +208,14 @@ pub struct BakeConfig {
     #[arg(long, default_value_t = DEFAULT_NETWORK_SKIN_MM)]
     #[serde(default = "default_network_skin_mm")]
     pub network_skin_mm: f32,
+    /// Network field: leave its light transport as the network gives it. By default,
+    /// when the capture names the lighting its views were taken in, the light
+    /// transport is scaled by the one gain that makes the network reproduce those
+    /// views under that lighting (`nelf_field::calibrate`; +1.4 dB foreground on
+    /// held-out heads, `field/README.md`).
+    #[arg(long)]
+    #[serde(default)]
+    pub no_source_calibration: bool,
     /// Outgoing direction the light transport is baked for.
     #[arg(long, value_enum, default_value_t)]
     pub view_policy: ViewPolicyChoice,
@@ -303,6 +311,7 @@ impl Default for BakeConfig {
             hollow_voxels: 0.0,
             lt_share_voxels: DEFAULT_LT_SHARE_VOXELS,
             network_skin_mm: DEFAULT_NETWORK_SKIN_MM,
+            no_source_calibration: false,
             view_policy: ViewPolicyChoice::AverageCameras,
             render_size: 128,
             step_voxels: 0.5,

@@ -10,11 +10,14 @@
 //!   must match);
 //! * [`capture`]: a capture folder (metres, our world) as network inputs
 //!   (millimetres, the network's world);
+//! * [`calibrate`]: one gain on the light transport that makes the network reproduce
+//!   its own source views under their known lighting;
 //! * [`shipped`]: the network trained by `nelf train` and shipped with the tool;
 //! * [`source::NelfField`]: the baker's [`nelf_scene::field::FieldSource`].
 //!
 //! Runs in `f32` on the CPU; the `cuda` feature enables candle's CUDA backend.
 
+pub mod calibrate;
 pub mod capture;
 pub mod cpu;
 pub mod encoder;

@@ -266,6 +266,20 @@ impl Model {
         }
     }
 
+    /// The model rendering with `coarse` evenly spaced and `fine` importance samples
+    /// per ray (the weights are shared, not copied).
+    #[must_use]
+    pub fn with_samples(self, coarse: usize, fine: usize) -> Self {
+        Self {
+            config: NelfConfig {
+                coarse_samples: coarse,
+                fine_samples: fine,
+                ..self.config
+            },
+            ..self
+        }
+    }
+
     /// Whether the network takes lightings in units of the source lighting's mean
     /// radiance ([`SOURCE_RELATIVE_LIGHT_KEY`]).
     pub fn source_relative_light(&self) -> bool {

@@ -46,7 +46,13 @@ pub struct NelfField {
     bounds: (Vec3, Vec3),
     stage: Stage,
     chunk_points: usize,
-    light_transport_scale: f32,
+    /// `1/p_S` for a source-relative network told the source power, else 1.
+    light_unit_scale: f32,
+    /// The source-view calibration's gain ([`NelfField::calibrated_to_sources`]), else 1.
+    source_gain: f32,
+    /// The source views and head centre (mm), kept for the calibration.
+    source_views: crate::views::SourceViews,
+    head_centre_mm: [f32; 3],
 }
 
 impl NelfField {
@@ -75,7 +81,10 @@ impl NelfField {
             bounds: (Vec3::ZERO, Vec3::ZERO),
             stage: Stage::Fine,
             chunk_points: 16_384,
-            light_transport_scale: 1.0,
+            light_unit_scale: 1.0,
+            source_gain: 1.0,
+            source_views: capture.views.clone(),
+            head_centre_mm: capture.head_centre_net(),
         };
         field.bounds = field.hull_bounds();
         Ok(field)
@@ -111,15 +120,45 @@ impl NelfField {
             )));
         }
         if self.model.source_relative_light() {
-            self.light_transport_scale = (1.0 / mean_radiance) as f32;
+            self.light_unit_scale = (1.0 / mean_radiance) as f32;
         }
         Ok(self)
     }
 
-    /// The factor this field applies to the network's light transport (1, or `1/p_S`
-    /// after [`NelfField::with_source_light_power`]).
+    /// This field with its light transport multiplied by the gain that makes the
+    /// network reproduce its own source views under `source_light`, the lighting they
+    /// were taken in (8 × 16, this field's light frame, physical units), with the
+    /// fit ([`crate::calibrate`]). Call it after [`NelfField::with_source_light_power`].
+    ///
+    /// # Errors
+    /// Rendering errors, or source masks with too few pixels fully inside.
+    pub fn calibrated_to_sources(
+        mut self,
+        source_light: &LatLong,
+    ) -> Result<(Self, crate::calibrate::SourceGain), NetError> {
+        self.source_gain = 1.0;
+        let light = self.net_light(source_light)?;
+        let fit = crate::calibrate::source_view_gain(
+            &self.model,
+            &self.encoded,
+            &self.source_views,
+            &light,
+            self.head_centre_mm,
+        )?;
+        self.source_gain = fit.gain;
+        Ok((self, fit))
+    }
+
+    /// The factor this field applies to the network's light transport: `1/p_S` after
+    /// [`NelfField::with_source_light_power`] (else 1) times the source-view gain after
+    /// [`NelfField::calibrated_to_sources`] (else 1).
     pub fn light_transport_scale(&self) -> f32 {
-        self.light_transport_scale
+        self.light_unit_scale * self.source_gain
+    }
+
+    /// The source-view calibration's gain (1 when not calibrated).
+    pub fn source_gain(&self) -> f32 {
+        self.source_gain
     }
 
     /// `light` (8 × 16, this field's light frame) in the network's layout and units,
@@ -128,7 +167,7 @@ impl NelfField {
     pub fn net_light(&self, light: &LatLong) -> Result<Vec<f32>, NetError> {
         Ok(latlong_to_net_light(light)?
             .into_iter()
-            .map(|v| v * self.light_transport_scale)
+            .map(|v| v * self.light_transport_scale())
             .collect())
     }
 
@@ -162,7 +201,7 @@ impl NelfField {
     /// A source-relative network's estimate has mean radiance near 1 unless the field
     /// knows the source power ([`NelfField::with_source_light_power`]).
     pub fn source_light(&self) -> Result<LatLong, NetError> {
-        let unit = 1.0 / self.light_transport_scale;
+        let unit = 1.0 / self.light_unit_scale;
         let light: Vec<f32> = self
             .encoded
             .light()
@@ -284,7 +323,7 @@ impl NelfField {
             let net: Vec<[f32; 3]> = p.iter().map(|x| self.to_net(*x)).collect();
             let directions = self.target_directions(p, view);
             let scale = 1.0 / directions.len().max(1) as f32;
-            let lt_scale = scale * self.light_transport_scale;
+            let lt_scale = scale * self.light_transport_scale();
             d.fill(0.0);
             t.fill(0.0);
             for dirs in &directions {

@@ -370,3 +370,60 @@ fn trainable_and_loaded_weights_agree_and_small_widths_round_trip() {
         assert_close(&flat(&ta.blend_softmax), &flat(&tb.blend_softmax), 1e-4, "blend");
     }
 }
+
+/// The source-view calibration (`nelf_field::calibrate`): the gain scales the light
+/// transport and nothing else, it never raises the source views' error, refitting is
+/// idempotent, and it is exactly inverse to the lighting's scale (the objective at
+/// gain `g` under `c·L` is the objective at `c·g` under `L`).
+#[test]
+fn source_calibration_scales_light_transport_inversely_to_the_lighting() {
+    let capture = synthetic_capture(3, 32, 32, DVec3::ZERO);
+    // Small widths keep the dozens of source-view renderings cheap.
+    let small = NelfConfig {
+        architecture: Architecture {
+            encoder_channels: [16, 32, 32, 32],
+            latent_channels: 16,
+            geometry_features: 32,
+            lt_hidden: 32,
+        },
+        ..NelfConfig::default()
+    };
+    let model = deterministic_trainable_model(21, small).0;
+    let plain = NelfField::new(model.clone(), &capture).unwrap();
+    let mut field = NelfField::new(model, &capture).unwrap();
+    let mut rng = Pcg64::seed_from_u64(22);
+    let base: Vec<f32> = (0..LT_DIM).map(|_| rng.random_range(0.2f32..1.0)).collect();
+    let light =
+        |scale: f32| net_light_to_latlong(&base.iter().map(|v| v * scale).collect::<Vec<_>>()).unwrap();
+    // Rescale the lighting until the fitted gain is 1 (inside the searched range).
+    let mut unit = 1.0f32;
+    for _ in 0..3 {
+        let (next, fit) = field.calibrated_to_sources(&light(unit)).unwrap();
+        unit *= fit.gain;
+        field = next;
+    }
+    let (mut field, fit) = field.calibrated_to_sources(&light(unit)).unwrap();
+    assert!((fit.gain - 1.0).abs() < 0.01, "{fit:?}");
+    assert!(fit.rmse_after <= fit.rmse_before && fit.pixels >= nelf_field::calibrate::MIN_PIXELS);
+    let points = points_near(DVec3::ZERO, 20, 23);
+    let view = plain.recommended_view_policy();
+    let (d_raw, t_raw) = evaluate(&plain, &points, &view);
+    for c in [0.8f32, 1.25] {
+        let (calibrated, fit_c) = field.calibrated_to_sources(&light(unit * c)).unwrap();
+        assert!(
+            (fit_c.gain * c - fit.gain).abs() < 0.005,
+            "c {c}: {fit_c:?} vs {fit:?}"
+        );
+        assert!((calibrated.light_transport_scale() - fit_c.gain).abs() < 1e-6);
+        assert_eq!(calibrated.source_gain(), fit_c.gain);
+        // The light transport is the uncalibrated one times the gain; σ is untouched.
+        let (d_cal, t_cal) = evaluate(&calibrated, &points, &view);
+        assert_close(&d_cal, &d_raw, 1e-6, "density is not calibrated");
+        let scaled: Vec<f32> = t_raw.iter().map(|v| v * fit_c.gain).collect();
+        assert_close(&t_cal, &scaled, 1e-5, "light transport × gain");
+        // Refitting under the same lighting gives the same gain (it starts from 1).
+        let (refitted, refit) = calibrated.calibrated_to_sources(&light(unit * c)).unwrap();
+        assert_eq!(refit.gain, fit_c.gain);
+        field = refitted;
+    }
+}

@@ -17,7 +17,8 @@ use nelf_bake::{
 use nelf_field::capture::default_net_from_world;
 use nelf_field::shipped::load_or_shipped;
 use nelf_field::{Model, NelfConfig, NelfField, NetCapture};
-use nelf_scene::field::{SignedLogDensity, VoxelFiltered};
+use nelf_format::conventions::LatLong;
+use nelf_scene::field::{FieldSource as _, SignedLogDensity, VoxelFiltered};
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 
 /// Options of `nelf bake`.
@@ -245,7 +246,7 @@ pub fn bake_network(
     let (model, weights_name) = load_or_shipped(weights, NelfConfig::for_device(&device), &device)
         .context("loading the network's weights")?;
     let model_size = model.working_image_size();
-    let (prepared, field) = network_field(capture, model)?;
+    let (prepared, field) = network_field(capture, model, config.no_source_calibration)?;
     let encoded_size = prepared.cameras.first().map(|c| [c.width, c.height]);
     let provenance = serde_json::json!({
         "kind": "nelf-network",
@@ -255,6 +256,7 @@ pub fn bake_network(
         "device": nelf_field::device_name(&device),
         "view_policy": "toward the mean camera",
         "light_transport_scale": field.light_transport_scale(),
+        "source_gain": field.source_gain(),
         "source_relative_light": field.model().source_relative_light(),
     });
     bake_network_field(
@@ -269,8 +271,14 @@ pub fn bake_network(
 }
 
 /// The network over `capture`'s views, reduced toward its working image size: the
-/// prepared views and the field they encode to.
-pub fn network_field(capture: &LoadedCapture, model: Model) -> anyhow::Result<(NetCapture, NelfField)> {
+/// prepared views and the field they encode to, in the capture's light units and
+/// calibrated to its source views unless `no_source_calibration`
+/// ([`in_capture_light_units`]).
+pub fn network_field(
+    capture: &LoadedCapture,
+    model: Model,
+    no_source_calibration: bool,
+) -> anyhow::Result<(NetCapture, NelfField)> {
     let prepared = NetCapture::for_model(
         &model,
         &capture.cameras,
@@ -280,39 +288,54 @@ pub fn network_field(capture: &LoadedCapture, model: Model) -> anyhow::Result<(N
         default_net_from_world(),
     )?;
     let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
-    let field = in_capture_light_units(field, capture.description(), &capture.dir)?;
+    let field = in_capture_light_units(field, capture.description(), &capture.dir, !no_source_calibration)?;
     Ok((prepared, field))
 }
 
 /// `field` in physical units when its network takes source-relative lightings and the
-/// capture (`description`, in folder `dir`) names its lighting; otherwise as it is,
-/// saying so when its light transport stays relative.
+/// capture (`description`, in folder `dir`) names its lighting, then (with
+/// `calibrate`) scaled by the gain that makes it reproduce the capture's views under
+/// that lighting (`NelfField::calibrated_to_sources`); otherwise as it is, saying so.
 pub fn in_capture_light_units(
     field: NelfField,
     description: Option<&nelf_format::capture::Capture>,
     dir: &std::path::Path,
+    calibrate: bool,
 ) -> anyhow::Result<NelfField> {
-    if !field.model().source_relative_light() {
+    let Some(map) = capture_source_lighting(description, dir)? else {
+        if field.model().source_relative_light() {
+            eprintln!(
+                "note: {} records no lighting of its views, so the network's light transport stays \
+                 relative to it (relit under a map of mean radiance 1 it is as bright as the capture) \
+                 and is not calibrated to the views",
+                dir.display()
+            );
+        }
+        return Ok(field);
+    };
+    let field = field.with_source_light_power(map.mean_radiance())?;
+    if !calibrate {
         return Ok(field);
     }
-    if let Some(power) = capture_source_power(description, dir)? {
-        return Ok(field.with_source_light_power(power)?);
-    }
+    let light = nelf_format::conventions::project_envmap(&map, field.world_from_light())?;
+    let (field, fit) = field
+        .calibrated_to_sources(&light)
+        .with_context(|| format!("calibrating the network to the views of {}", dir.display()))?;
     eprintln!(
-        "note: {} records no lighting of its views, so the network's light transport stays \
-         relative to it (relit under a map of mean radiance 1 it is as bright as the capture)",
-        dir.display()
+        "  calibrated the network to its {} source pixels under their lighting: light transport × {:.3} \
+         (sRGB RMS error {:.4} -> {:.4}; --no-source-calibration leaves it)",
+        fit.pixels, fit.gain, fit.rmse_before, fit.rmse_after
     );
     Ok(field)
 }
 
-/// The mean radiance (`Σ Ω L / 4π`) of the lighting a capture's views were taken
-/// under, when its `cameras.json` (`description`, in folder `dir`) names one
-/// (synthetic captures do).
-pub fn capture_source_power(
+/// The lighting a capture's views were taken under, when its `cameras.json`
+/// (`description`, in folder `dir`) names one (synthetic captures do), checked to
+/// have a positive finite mean radiance (`Σ Ω L / 4π`).
+pub fn capture_source_lighting(
     description: Option<&nelf_format::capture::Capture>,
     dir: &std::path::Path,
-) -> anyhow::Result<Option<f64>> {
+) -> anyhow::Result<Option<LatLong>> {
     let Some(path) = description.and_then(|d| d.envmap_path(dir)) else {
         return Ok(None);
     };
@@ -324,7 +347,7 @@ pub fn capture_source_power(
         "{}: the capture's lighting has mean radiance {power}",
         path.display()
     );
-    Ok(Some(power))
+    Ok(Some(map))
 }
 
 /// Sub-points per voxel edge where a network's field is baked

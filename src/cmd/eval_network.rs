@@ -45,6 +45,11 @@ pub struct NetworkEvalArgs {
     /// thick, mm (`nelf bake --network-skin-mm`; 0: σ itself).
     #[arg(long, default_value_t = nelf_bake::DEFAULT_NETWORK_SKIN_MM)]
     pub network_skin_mm: f32,
+    /// Leave the network uncalibrated (`nelf bake --no-source-calibration`): the
+    /// network's own light transport, without the gain that makes it reproduce the
+    /// capture's views under their lighting.
+    #[arg(long)]
+    pub no_source_calibration: bool,
     /// Also bake the network once per target with its light transport toward that
     /// target's camera (`oracle_view_bake` in the scores): what a bake without a
     /// view-dependent part could reach at best, to tell view dependence from other
@@ -78,6 +83,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         rank: args.rank,
         view_dependence: ViewChoice::Off,
         network_skin_mm: args.network_skin_mm,
+        no_source_calibration: args.no_source_calibration,
         ..BakeConfig::default()
     };
     let progress = Progress::hidden();
@@ -99,8 +105,14 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             .with_context(|| format!("{}: no ground truth (synth_config.json)", dir.display()))?;
 
         // The network, over the capture's views reduced to its working size.
-        let (prepared, field) = super::bake::network_field(&capture, model.clone())?;
-        let provenance = serde_json::json!({ "kind": "nelf-network", "weights": weights_name });
+        let (prepared, field) =
+            super::bake::network_field(&capture, model.clone(), config.no_source_calibration)?;
+        let provenance = serde_json::json!({
+            "kind": "nelf-network",
+            "weights": weights_name,
+            "light_transport_scale": field.light_transport_scale(),
+            "source_gain": field.source_gain(),
+        });
         // The network's bake with a view policy (`None`: its recommended one), written to
         // `name` and read back as a viewer would.
         let network_bake = |view_policy, name: String| -> anyhow::Result<nelf_format::Asset> {
@@ -191,6 +203,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         "resolution": args.resolution,
         "voxel_filter": args.voxel_filter,
         "network_skin_mm": args.network_skin_mm,
+        "no_source_calibration": args.no_source_calibration,
         "rank": args.rank,
         "targets": rows.len(),
         "mean_foreground_psnr": {

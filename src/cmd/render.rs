@@ -52,6 +52,12 @@ pub struct RenderArgs {
     /// (`nelf light`) instead of --envmap / the capture's map / constant white.
     #[arg(long, requires = "field", conflicts_with = "envmap")]
     pub estimated_light: bool,
+    /// --field: leave the network's light transport uncalibrated (by default, when the
+    /// capture names its lighting, it is scaled so that the network reproduces the
+    /// capture's views under it; `nelf bake --no-source-calibration`).
+    #[arg(long, requires = "field")]
+    #[serde(default)]
+    pub no_source_calibration: bool,
     /// --field: random ray samples from this seed instead of stratified ones.
     #[arg(long, requires = "field")]
     pub field_seed: Option<u64>,
@@ -231,7 +237,12 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
     let (capture, description) = load_capture_dir_for_model(capture_dir, default_net_from_world(), &model)
         .with_context(|| format!("loading the capture {}", capture_dir.display()))?;
     let field = nelf_field::NelfField::new(model, &capture).context("encoding the capture")?;
-    let field = super::bake::in_capture_light_units(field, Some(&description), capture_dir)?;
+    let field = super::bake::in_capture_light_units(
+        field,
+        Some(&description),
+        capture_dir,
+        !args.no_source_calibration,
+    )?;
     let (lo, hi) = field.bounds();
     let (camera, capture_envmap) = resolve_camera(&args.view, (lo.as_dvec3(), hi.as_dvec3()))?;
     let world_from_light = field.world_from_light();

@@ -178,11 +178,25 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
         heads.len(),
         args.data.display()
     );
-    println!("  views   PSNR dB   fg PSNR dB   SSIM     | flat colour: PSNR dB   fg PSNR dB   SSIM");
+    println!(
+        "  views   PSNR dB   fg PSNR dB   SSIM     | flat colour: PSNR dB   fg PSNR dB   SSIM     \
+         | source-view calibrated: PSNR dB   fg PSNR dB   SSIM     median gain"
+    );
     for r in &rows {
         println!(
-            "  {:>5}   {:>7.2}   {:>10.2}   {:.4}   |              {:>7.2}   {:>10.2}   {:.4}",
-            r.views, r.psnr, r.foreground_psnr, r.ssim, r.flat_psnr, r.flat_foreground_psnr, r.flat_ssim
+            "  {:>5}   {:>7.2}   {:>10.2}   {:.4}   |              {:>7.2}   {:>10.2}   {:.4}   \
+             |                         {:>7.2}   {:>10.2}   {:.4}   {:.3}",
+            r.views,
+            r.psnr,
+            r.foreground_psnr,
+            r.ssim,
+            r.flat_psnr,
+            r.flat_foreground_psnr,
+            r.flat_ssim,
+            r.calibrated_psnr,
+            r.calibrated_foreground_psnr,
+            r.calibrated_ssim,
+            r.median_gain
         );
     }
     Ok(())

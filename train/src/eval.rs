@@ -7,15 +7,19 @@
 //! image, foreground (inside the true mask) and SSIM, each beside the flat-colour
 //! baseline of the same views (the true foreground mean inside the true silhouette),
 //! so that a network that learned only silhouettes and average colour shows as such.
+//! Each row also scores the same renderings scaled by the source-view gain
+//! ([`nelf_field::calibrate`]: fitted to the head's own source views under its known
+//! source lighting, never to the target), as `nelf bake capture` applies it.
 
 use std::path::Path;
 
 use nelf_field::{EncodedViews, Model};
+use nelf_scene::metrics::{Srgb8Scores, srgb8_scores};
 use serde::Serialize;
 
 use crate::config::TrainConfig;
 use crate::error::TrainError;
-use crate::run::{validate_head, write_validation_sheet};
+use crate::run::{ValidationView, validate_head, write_validation_sheet};
 use crate::trainer::PreparedHead;
 
 /// One row of the view-count table: means over the heads.
@@ -37,6 +41,40 @@ pub struct ViewCountRow {
     pub flat_foreground_psnr: f64,
     /// The flat-colour baseline's SSIM.
     pub flat_ssim: f64,
+    /// Whole-image PSNR of the renderings scaled by their source-view gain, dB.
+    pub calibrated_psnr: f64,
+    /// The same inside the mask, dB.
+    pub calibrated_foreground_psnr: f64,
+    /// The same's SSIM.
+    pub calibrated_ssim: f64,
+    /// Median over the heads of the source-view gain.
+    pub median_gain: f64,
+}
+
+/// `view`'s network rendering scaled by the source-view gain of `head`, scored.
+fn calibrated_scores(
+    model: &Model,
+    head: &PreparedHead,
+    view: &ValidationView,
+) -> Result<(Srgb8Scores, f32), TrainError> {
+    let encoded = model.encode(&head.capture.views)?;
+    let fit = nelf_field::calibrate::source_view_gain(
+        model,
+        &encoded,
+        &head.capture.views,
+        &head.source_light_net,
+        head.capture.head_centre_net(),
+    )?;
+    let scaled: Vec<[f32; 3]> = view.network.iter().map(|c| c.map(|x| x * fit.gain)).collect();
+    let scores = srgb8_scores(
+        &scaled,
+        &view.truth,
+        &view.alpha,
+        view.width as u32,
+        view.height as u32,
+    )
+    .map_err(|e| TrainError::Settings(e.to_string()))?;
+    Ok((scores, fit.gain))
 }
 
 /// `head` with only its first `views` source views (view 0, the frontal one, keeps
@@ -73,11 +111,14 @@ pub fn view_count_table(
     }
     let mut rows = Vec::with_capacity(counts.len());
     for &views in counts {
-        let mut sum = [0.0f64; 6];
+        let mut sum = [0.0f64; 9];
+        let mut gains = Vec::with_capacity(heads.len());
         let mut sheet_views = Vec::with_capacity(heads.len());
         for head in heads {
             let head = first_views(head, views)?;
             let view = validate_head(model, &head, config)?;
+            let (c, gain) = calibrated_scores(model, &head, &view)?;
+            gains.push(f64::from(gain));
             let v = view.scores;
             sheet_views.push(view);
             let values = [
@@ -87,6 +128,9 @@ pub fn view_count_table(
                 v.flat_psnr,
                 v.flat_foreground_psnr,
                 v.flat_ssim,
+                c.psnr,
+                c.foreground_psnr,
+                c.ssim,
             ];
             for (s, x) in sum.iter_mut().zip(values) {
                 *s += x;
@@ -99,7 +143,11 @@ pub fn view_count_table(
             flat_psnr,
             flat_foreground_psnr,
             flat_ssim,
+            calibrated_psnr,
+            calibrated_foreground_psnr,
+            calibrated_ssim,
         ] = sum.map(|s| s / heads.len() as f64);
+        gains.sort_by(f64::total_cmp);
         if let (Some(path), Some(&last)) = (sheet, counts.last())
             && last == views
         {
@@ -114,6 +162,10 @@ pub fn view_count_table(
             flat_psnr,
             flat_foreground_psnr,
             flat_ssim,
+            calibrated_psnr,
+            calibrated_foreground_psnr,
+            calibrated_ssim,
+            median_gain: gains[gains.len() / 2],
         });
     }
     Ok(rows)

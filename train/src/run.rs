@@ -75,6 +75,8 @@ pub struct ValidationView {
     pub height: usize,
     /// The path-traced truth.
     pub truth: Vec<[f32; 3]>,
+    /// Its coverage (the true mask).
+    pub alpha: Vec<f32>,
     /// The network's rendering.
     pub network: Vec<[f32; 3]>,
     /// The flat-colour baseline.
@@ -122,6 +124,7 @@ pub fn validate_head(
         width: w,
         height: h,
         truth: target.image.clone(),
+        alpha: target.alpha.clone(),
         network: rendered,
         flat: flat_colour_baseline(&target.image, &target.alpha),
     })

@@ -1,0 +1,94 @@
+//! Issue 18's must-hold on accuracy: the shipped network's bake of a held-out
+//! procedural head, at small size, beats the flat-colour oracle (the true foreground
+//! mean inside the true silhouette) on foreground PSNR at novel views under novel
+//! light, as `nelf eval network` scores it.
+//!
+//! The head is the first of the five fixed in advance by `scripts/eval_heldout_heads.sh`
+//! (seed 2⁶² + 1, from the validation range `nelf train data` never trains on; 64²
+//! views under the real `forest` HDRI; targets under `interior` and under `forest`
+//! turned 90°). Of those five it is the one where the bake leads the flat colour by
+//! least (models/README.md), so the test is not a chosen easy case.
+#![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
+
+mod common;
+
+use std::path::Path;
+
+use common::succeed;
+
+#[test]
+fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let map = |name: &str| {
+        let path = root.join("data/envmaps").join(name);
+        assert!(
+            path.is_file(),
+            "{} is missing (part of the repository)",
+            path.display()
+        );
+        path.to_str().unwrap().to_string()
+    };
+    let capture = dir.path().join("head");
+    let seed = ((1u64 << 62) + 1).to_string();
+    succeed(&[
+        "capture",
+        "synth",
+        "--head-seed",
+        &seed,
+        "--width",
+        "64",
+        "--height",
+        "64",
+        "--envmap",
+        &map("forest.exr"),
+        "--target-envmap",
+        &map("interior.exr"),
+        "--target-envmap",
+        &map("forest.exr"),
+        "--target-env-rotate-deg",
+        "0",
+        "--target-env-rotate-deg",
+        "90",
+        "-o",
+        capture.to_str().unwrap(),
+    ]);
+    let scores = dir.path().join("scores");
+    succeed(&[
+        "eval",
+        "network",
+        capture.to_str().unwrap(),
+        "--resolution",
+        "32",
+        "-o",
+        scores.to_str().unwrap(),
+    ]);
+    let text = std::fs::read_to_string(scores.join("network.json")).unwrap();
+    let summary: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let rows = summary["rows"].as_array().unwrap();
+    assert_eq!(rows.len(), 2, "{text}");
+    let mean = |kind: &str, key: &str| {
+        rows.iter().map(|r| r[kind][key].as_f64().unwrap()).sum::<f64>() / rows.len() as f64
+    };
+    let bake = mean("network_bake", "foreground_psnr");
+    let flat = mean("network_bake", "flat_foreground_psnr");
+    let truth = mean("truth_bake", "foreground_psnr");
+    // Measured 21.63 against 21.48 dB (ground-truth bake 28.54): the margin is thin,
+    // so any loss of accuracy in the network, its calibration or the bake shows.
+    assert!(
+        bake > flat,
+        "network bake {bake:.2} dB ≤ flat colour {flat:.2} dB (foreground)"
+    );
+    assert!(
+        truth > bake + 3.0,
+        "ground-truth bake {truth:.2} vs network bake {bake:.2}"
+    );
+    // The network was calibrated to the capture's source views under their lighting.
+    let asset = nelf_format::read_asset(&scores.join("capture0_network.nelf")).unwrap();
+    let gain = asset.metadata["source"]["source"]["source_gain"].as_f64();
+    assert!(
+        gain.is_some_and(|g| g > 1.05 && g < 2.0),
+        "source gain {gain:?}: {}",
+        asset.metadata
+    );
+}
