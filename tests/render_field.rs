@@ -35,6 +35,8 @@ fn render_field_matches_the_library() {
         "--height",
         "12",
         "--estimated-light",
+        // The library render below is uncalibrated (nelf_field::calibrate).
+        "--no-source-calibration",
         "-o",
         out.to_str().unwrap(),
     ]);
