@@ -736,6 +736,15 @@ fn the_view_count_table_scores_subsets_of_the_source_views() {
             "{r:?}"
         );
         assert_eq!(r.heads, 1);
+        // The source-view calibrated scores: finite, with a gain in the searched range.
+        assert!(
+            r.calibrated_psnr.is_finite()
+                && r.calibrated_foreground_psnr.is_finite()
+                && r.calibrated_ssim.is_finite(),
+            "{r:?}"
+        );
+        let (lo, hi) = nelf_field::calibrate::GAIN_RANGE;
+        assert!((f64::from(lo)..=f64::from(hi)).contains(&r.median_gain), "{r:?}");
     }
     assert_eq!(rows[0].flat_psnr, rows[1].flat_psnr);
     assert_eq!(rows[0].flat_ssim, rows[1].flat_ssim);
