@@ -101,7 +101,7 @@ pub const MAX_PIXELS: usize = 1536;
 /// Coarse and fine samples per ray of the calibration's renderings (those of
 /// training). On the five heads of `scripts/eval_heldout_heads.sh`, every inside
 /// pixel at the model's 64 + 128 samples gave gains 1.6–3.2 % lower and a bake
-/// 0.04 dB better on the mean, at about 25× the cost (57 s against 2 s per capture).
+/// 0.04 dB better on the mean, at about 14× the cost (57 s against about 4 s per 64² capture).
 pub const SAMPLES: (usize, usize) = (32, 32);
 
 /// Renders the source views of `views` through `model` (encoded as `encoded`)
