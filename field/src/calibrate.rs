@@ -23,7 +23,7 @@ use nelf_scene::mesh_io::linear_to_srgb;
 use crate::error::NetError;
 use crate::model::Model;
 use crate::render::{NetRay, RayUniforms, render_rays};
-use crate::views::{EncodedViews, SourceViews};
+use crate::views::EncodedViews;
 
 /// Smallest and largest gain searched.
 pub const GAIN_RANGE: (f32, f32) = (0.25, 4.0);
@@ -104,26 +104,33 @@ pub const MAX_PIXELS: usize = 1536;
 /// 0.04 dB better on the mean, at about 14× the cost (57 s against about 4 s per 64² capture).
 pub const SAMPLES: (usize, usize) = (32, 32);
 
-/// Renders the source views of `views` through `model` (encoded as `encoded`)
-/// under `light_net` (network layout and units, e.g. [`crate::NelfField::net_light`]
-/// of the known source lighting) at an even subsample of at most [`MAX_PIXELS`] of
-/// the pixels fully inside the masks, and fits the gain that matches them to the
-/// photos ([`fit_srgb_gain`]).
+/// Renders the source views encoded in `encoded` through `model` under `light_net`
+/// (network layout and units, e.g. [`crate::NelfField::net_light`] of the known
+/// source lighting) at an even subsample of at most [`MAX_PIXELS`] of the pixels
+/// fully inside their masks `masks` (`(V, H, W)`, the views' own, not dilated), and
+/// fits the gain that matches them to the photos ([`fit_srgb_gain`]).
 ///
 /// # Errors
-/// Rendering errors, or fewer than [`MIN_PIXELS`] such pixels.
+/// Masks of the wrong size, rendering errors, or fewer than [`MIN_PIXELS`] such
+/// pixels.
 pub fn source_view_gain(
     model: &Model,
     encoded: &EncodedViews,
-    views: &SourceViews,
+    masks: &[f32],
     light_net: &[f32],
     head_centre_mm: [f32; 3],
 ) -> Result<SourceGain, NetError> {
-    views.validate()?;
-    let pixels = views.width * views.height;
-    let inside: Vec<usize> = (0..views.masks.len())
-        .filter(|&i| views.masks[i] >= INSIDE_MASK)
-        .collect();
+    let (width, pixels) = (encoded.width, encoded.width * encoded.height);
+    if masks.len() != encoded.views() * pixels {
+        return Err(NetError::input(format!(
+            "{} mask values for {} views of {}×{}",
+            masks.len(),
+            encoded.views(),
+            encoded.width,
+            encoded.height
+        )));
+    }
+    let inside: Vec<usize> = (0..masks.len()).filter(|&i| masks[i] >= INSIDE_MASK).collect();
     if inside.len() < MIN_PIXELS {
         return Err(NetError::input(format!(
             "{} source pixels lie fully inside the masks; at least {MIN_PIXELS} are needed to calibrate",
@@ -135,14 +142,15 @@ pub fn source_view_gain(
     let model = model.clone().with_samples(SAMPLES.0, SAMPLES.1);
     let radius = model.config().head_radius_mm;
     let mut pairs = Vec::with_capacity(chosen.len());
-    for (v, camera) in views.cameras.iter().enumerate() {
-        let here: Vec<usize> = chosen.iter().copied().filter(|i| i / pixels == v).collect();
-        for chunk in here.chunks(512) {
+    // `chosen` is in view order: each run of one view's pixels renders through its camera.
+    for view_pixels in chosen.chunk_by(|a, b| a / pixels == b / pixels) {
+        let camera = &encoded.cameras[view_pixels[0] / pixels];
+        for chunk in view_pixels.chunks(512) {
             let rays: Vec<NetRay> = chunk
                 .iter()
                 .map(|&i| {
                     let p = i % pixels;
-                    let (x, y) = ((p % views.width) as f64 + 0.5, (p / views.width) as f64 + 0.5);
+                    let (x, y) = ((p % width) as f64 + 0.5, (p / width) as f64 + 0.5);
                     NetRay::through_pixel(camera, x, y, head_centre_mm, radius)
                 })
                 .collect();
@@ -150,9 +158,9 @@ pub fn source_view_gain(
             let out = render_rays(&model, encoded, &rays, &uniforms, light_net)?;
             for (&i, rendered) in chunk.iter().zip(out.fine.rgb.chunks(3)) {
                 let truth = [
-                    views.images[i * 3],
-                    views.images[i * 3 + 1],
-                    views.images[i * 3 + 2],
+                    encoded.images[i * 3],
+                    encoded.images[i * 3 + 1],
+                    encoded.images[i * 3 + 2],
                 ];
                 pairs.push((truth, [rendered[0], rendered[1], rendered[2]]));
             }

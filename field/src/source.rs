@@ -50,9 +50,9 @@ pub struct NelfField {
     light_unit_scale: f32,
     /// The source-view calibration's gain ([`NelfField::calibrated_to_sources`]), else 1.
     source_gain: f32,
-    /// The source views and head centre (mm), kept for the calibration.
-    source_views: crate::views::SourceViews,
-    head_centre_mm: [f32; 3],
+    /// `(V, H, W)` the source views' masks (the encoded views keep only dilated
+    /// ones), for the calibration.
+    source_masks: Vec<f32>,
 }
 
 impl NelfField {
@@ -83,8 +83,7 @@ impl NelfField {
             chunk_points: 16_384,
             light_unit_scale: 1.0,
             source_gain: 1.0,
-            source_views: capture.views.clone(),
-            head_centre_mm: capture.head_centre_net(),
+            source_masks: capture.views.masks.clone(),
         };
         field.bounds = field.hull_bounds();
         Ok(field)
@@ -138,12 +137,15 @@ impl NelfField {
     ) -> Result<(Self, crate::calibrate::SourceGain), NetError> {
         self.source_gain = 1.0;
         let light = self.net_light(source_light)?;
+        let head_centre_mm = (self.net_from_world * self.head_centre_m * MM_PER_M)
+            .as_vec3()
+            .to_array();
         let fit = crate::calibrate::source_view_gain(
             &self.model,
             &self.encoded,
-            &self.source_views,
+            &self.source_masks,
             &light,
-            self.head_centre_mm,
+            head_centre_mm,
         )?;
         self.source_gain = fit.gain;
         Ok((self, fit))

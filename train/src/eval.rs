@@ -61,7 +61,7 @@ fn calibrated_scores(
     let fit = nelf_field::calibrate::source_view_gain(
         model,
         &encoded,
-        &head.capture.views,
+        &head.capture.views.masks,
         &head.source_light_net,
         head.capture.head_centre_net(),
     )?;
