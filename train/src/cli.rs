@@ -92,6 +92,20 @@ pub struct EvalArgs {
     /// Write the last view count's sheet here (PNG; per head: truth | network | flat colour).
     #[arg(long)]
     pub sheet: Option<PathBuf>,
+    /// Fine-tune the network on each head's own source views for this many steps
+    /// before scoring it (0: score the network as it is).
+    #[arg(long, default_value_t = 0)]
+    pub fine_tune_steps: u64,
+    /// Rays per fine-tuning step.
+    #[arg(long, default_value_t = 256)]
+    pub fine_tune_rays: usize,
+    /// Adam step size of the fine-tuning (MLPs and encoder).
+    #[arg(long, default_value_t = 1e-4)]
+    pub fine_tune_lr: f64,
+    /// Fine-tune by rendering each step's view from the other source views only
+    /// (default: from all of them; measured worse, train/README.md).
+    #[arg(long)]
+    pub fine_tune_leave_one_out: bool,
 }
 
 /// The heads `nelf train eval` scores.
@@ -161,7 +175,31 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
     };
     let ids: Vec<u32> = ids.into_iter().take(args.heads).collect();
     let heads = crate::trainer::prepare_heads(&dataset, &ids, image_size, model.source_relative_light())?;
-    let rows = crate::eval::view_count_table(&model, &heads, &config, &args.views, args.sheet.as_deref())?;
+    let bytes = match &args.weights {
+        Some(path) => std::borrow::Cow::Owned(nelf_field::model::read_safetensors_bytes(path)?),
+        None => std::borrow::Cow::Borrowed(nelf_field::shipped::SHIPPED_WEIGHTS),
+    };
+    let origin = PathBuf::from(&name);
+    let fine_tune_from = (args.fine_tune_steps > 0).then(|| crate::eval::FineTuneFrom {
+        bytes: &bytes,
+        origin: &origin,
+        tune: crate::finetune::FineTuneConfig {
+            steps: args.fine_tune_steps,
+            rays: args.fine_tune_rays,
+            lr_mlp: args.fine_tune_lr,
+            lr_encoder: args.fine_tune_lr,
+            leave_one_out: args.fine_tune_leave_one_out,
+            ..crate::finetune::FineTuneConfig::default()
+        },
+    });
+    let rows = crate::eval::view_count_table(
+        &model,
+        &heads,
+        &config,
+        &args.views,
+        args.sheet.as_deref(),
+        fine_tune_from.as_ref(),
+    )?;
     if args.json {
         let text = serde_json::to_string_pretty(&serde_json::json!({
             "weights": name,

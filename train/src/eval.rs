@@ -9,7 +9,9 @@
 //! so that a network that learned only silhouettes and average colour shows as such.
 //! Each row also scores the same renderings scaled by the source-view gain
 //! ([`nelf_field::calibrate`]: fitted to the head's own source views under its known
-//! source lighting, never to the target), as `nelf bake capture` applies it.
+//! source lighting, never to the target), as `nelf bake capture` applies it. With
+//! [`FineTuneFrom`], each head is scored by the network fine-tuned on that head's
+//! own source views first ([`crate::finetune`]).
 
 use std::path::Path;
 
@@ -19,8 +21,20 @@ use serde::Serialize;
 
 use crate::config::TrainConfig;
 use crate::error::TrainError;
+use crate::finetune::{FineTuneConfig, fine_tune};
 use crate::run::{ValidationView, validate_head, write_validation_sheet};
-use crate::trainer::PreparedHead;
+use crate::trainer::{PreparedHead, Trainable};
+
+/// Weights to fine-tune on each head before it is scored, and how.
+#[derive(Debug, Clone, Copy)]
+pub struct FineTuneFrom<'a> {
+    /// The weights (a safetensors file's bytes).
+    pub bytes: &'a [u8],
+    /// What to name them by in errors.
+    pub origin: &'a Path,
+    /// The fine-tuning.
+    pub tune: FineTuneConfig,
+}
 
 /// One row of the view-count table: means over the heads.
 #[derive(Debug, Clone, Copy, Serialize)]
@@ -86,13 +100,34 @@ pub fn first_views(head: &PreparedHead, views: usize) -> Result<PreparedHead, Tr
             "{views} source views asked for; the head has {all} and the network needs at least 2"
         )));
     }
+    select_views(head, &(0..views).collect::<Vec<_>>())
+}
+
+/// `head` with only the source views `keep` (in that order; targets and the rest as
+/// they are), its hull and projections recomputed.
+pub fn select_views(head: &PreparedHead, keep: &[usize]) -> Result<PreparedHead, TrainError> {
+    let sv = &head.capture.views;
+    let (all, pixels) = (sv.views(), sv.width * sv.height);
+    if let Some(bad) = keep.iter().find(|&&k| k >= all) {
+        return Err(TrainError::Settings(format!(
+            "source view {bad} asked for; the head has {all}"
+        )));
+    }
     let mut out = head.clone();
-    let sv = &mut out.capture.views;
-    let pixels = sv.width * sv.height;
-    sv.images.truncate(views * pixels * 3);
-    sv.masks.truncate(views * pixels);
-    sv.cameras.truncate(views);
-    out.capture.cameras.truncate(views);
+    let views = &mut out.capture.views;
+    views.images = keep
+        .iter()
+        .flat_map(|&k| sv.images[k * pixels * 3..(k + 1) * pixels * 3].iter().copied())
+        .collect();
+    views.masks = keep
+        .iter()
+        .flat_map(|&k| sv.masks[k * pixels..(k + 1) * pixels].iter().copied())
+        .collect();
+    views.cameras = keep.iter().map(|&k| sv.cameras[k]).collect();
+    out.capture.cameras = keep
+        .iter()
+        .filter_map(|&k| head.capture.cameras.get(k).copied())
+        .collect();
     out.geometry = EncodedViews::geometry_only(&out.capture.views)?;
     Ok(out)
 }
@@ -105,6 +140,7 @@ pub fn view_count_table(
     config: &TrainConfig,
     counts: &[usize],
     sheet: Option<&Path>,
+    fine_tune_from: Option<&FineTuneFrom<'_>>,
 ) -> Result<Vec<ViewCountRow>, TrainError> {
     if heads.is_empty() {
         return Err(TrainError::Settings("no heads to score".into()));
@@ -116,6 +152,24 @@ pub fn view_count_table(
         let mut sheet_views = Vec::with_capacity(heads.len());
         for head in heads {
             let head = first_views(head, views)?;
+            let tuned = match fine_tune_from {
+                Some(from) => {
+                    let trainable = Trainable::from_safetensors_bytes(
+                        from.bytes,
+                        from.origin,
+                        *model.config(),
+                        model.device(),
+                    )?;
+                    let (tuned, report) = fine_tune(&trainable, &head, &from.tune, config, |_, _| {})?;
+                    eprintln!(
+                        "  fine-tuned {} steps on {views} source views in {:.0} s: colour loss {:.5} -> {:.5}",
+                        report.steps, report.secs, report.first_loss, report.last_loss
+                    );
+                    Some(tuned)
+                }
+                None => None,
+            };
+            let model = tuned.as_ref().unwrap_or(model);
             let view = validate_head(model, &head, config)?;
             let (c, gain) = calibrated_scores(model, &head, &view)?;
             gains.push(f64::from(gain));

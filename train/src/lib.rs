@@ -14,6 +14,7 @@
 //! * [`trainer`]: the paper's losses and modes, steps, checkpoints;
 //! * [`run`]: the resumable loop with validation on held-out heads;
 //! * [`eval`]: a network on held-out heads with 2–5 source views (the view-count table);
+//! * [`finetune`]: test-time fine-tuning on one capture's own source views;
 //! * [`cli`]: the `nelf train` subcommands (also the `nelf_train` example binary);
 //! * [`error`]: the crate's error type, [`TrainError`].
 
@@ -23,6 +24,7 @@ pub mod config;
 pub mod data;
 pub mod error;
 pub mod eval;
+pub mod finetune;
 pub mod forward;
 pub mod run;
 pub mod trainer;

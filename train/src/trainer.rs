@@ -434,10 +434,6 @@ pub fn step_loss(
     config: &TrainConfig,
     rng: &mut Pcg64,
 ) -> Result<(Tensor, LossParts), TrainError> {
-    let device = model.device();
-    let clock = Instant::now();
-    let encoded = encode(model, &head.capture.views)?;
-    let encode_secs = secs_since(clock);
     let want_mode = if rng.random::<f64>() < config.novel_light_share {
         TargetMode::NovelLight
     } else {
@@ -449,6 +445,23 @@ pub fn step_loss(
         .find(|t| t.mode == want_mode)
         .or_else(|| head.targets.first())
         .ok_or_else(|| TrainError::Settings("a head without target views".into()))?;
+    step_loss_on(model, head, target, config, rng)
+}
+
+/// The loss of one step that renders `target` from `head`'s source views (module
+/// docs), with the graph for its gradients; `target` need not be one of `head`'s
+/// (test-time fine-tuning renders a source view left out of the encoder's inputs).
+pub fn step_loss_on(
+    model: &Model,
+    head: &PreparedHead,
+    target: &PreparedTarget,
+    config: &TrainConfig,
+    rng: &mut Pcg64,
+) -> Result<(Tensor, LossParts), TrainError> {
+    let device = model.device();
+    let clock = Instant::now();
+    let encoded = encode(model, &head.capture.views)?;
+    let encode_secs = secs_since(clock);
     let width = target.camera.width;
     let pixels = pick_pixels(target, width, config.rays, rng);
     let rays = target_rays(
@@ -670,6 +683,29 @@ impl Trainable {
         Ok(Self { varmap, model })
     }
 
+    /// A network to go on training from the weights in `bytes` (a safetensors file,
+    /// official key names, as [`Model::from_safetensors_bytes`] reads it: its widths,
+    /// working image size and light units come from the file; `origin` names it in
+    /// errors).
+    pub fn from_safetensors_bytes(
+        bytes: &[u8],
+        origin: &Path,
+        config: nelf_field::NelfConfig,
+        device: &Device,
+    ) -> Result<Self, TrainError> {
+        let read = Model::from_safetensors_bytes(bytes, origin, config, device)?;
+        let tensors = candle_core::safetensors::load_buffer(bytes, device)
+            .map_err(|e| TrainError::file(origin, format!("not a safetensors file: {e}")))?;
+        let varmap = VarMap::new();
+        let vb = VarBuilder::from_varmap(&varmap, DType::F32, device);
+        let model = Model::new(&vb, *read.config())?
+            .with_working_image_size(read.working_image_size())
+            .with_source_relative_light(read.source_relative_light());
+        let trainable = Self { varmap, model };
+        trainable.load_weights(&tensors, "")?;
+        Ok(trainable)
+    }
+
     /// The variables with the step size of their module (encoder or MLPs).
     pub fn optimizer(&self, config: &TrainConfig) -> Result<Adam, TrainError> {
         let vars = sorted_vars(&self.varmap)?
@@ -709,7 +745,9 @@ impl Trainable {
             .map(|(n, t)| Ok((n, t.detach().copy()?)))
             .collect::<Result<HashMap<_, _>, TrainError>>()?;
         let vb = VarBuilder::from_tensors(tensors, DType::F32, self.model.device());
-        Ok(Model::new(&vb, *self.model.config())?)
+        Ok(Model::new(&vb, *self.model.config())?
+            .with_working_image_size(self.model.working_image_size())
+            .with_source_relative_light(self.model.source_relative_light()))
     }
 
     /// Sets the weights from named tensors (every variable must be present).

@@ -728,7 +728,7 @@ fn the_view_count_table_scores_subsets_of_the_source_views() {
     );
     assert!(first_views(&head, 1).is_err());
     assert!(first_views(&head, all + 1).is_err());
-    let rows = view_count_table(&model, &[head], &config, &[2, all], None).unwrap();
+    let rows = view_count_table(&model, &[head], &config, &[2, all], None, None).unwrap();
     assert_eq!(rows.iter().map(|r| r.views).collect::<Vec<_>>(), [2, all]);
     for r in &rows {
         assert!(
@@ -818,4 +818,71 @@ fn the_distillation_radiance_loss_can_be_srgb_l2() {
         (one - l1).abs() > 1e-4 * l1.max(one),
         "not the L1 term: {one} against {l1}"
     );
+}
+
+/// Test-time fine-tuning: weights read back from their file give the network they
+/// were written from, a few steps on the source views lower the colour loss there,
+/// and leaving a view out removes exactly that view.
+#[test]
+fn fine_tuning_on_the_source_views_lowers_their_colour_loss() {
+    use nelf_train::finetune::{FineTuneConfig, fine_tune, source_targets, without_view};
+    use rand::SeedableRng;
+
+    let config = tiny_config();
+    let head = synthetic_head();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("weights.safetensors");
+    nelf_train::run::export_weights(&trainable, &config, &path).unwrap();
+    let bytes = std::fs::read(&path).unwrap();
+    let loaded =
+        Trainable::from_safetensors_bytes(&bytes, &path, *trainable.model.config(), &Device::Cpu).unwrap();
+    let targets = source_targets(&head);
+    assert_eq!(targets.len(), head.capture.views.views());
+    assert_eq!(targets[1].light_net, head.source_light_net);
+    let colour_loss = |model: &nelf_field::Model| -> f64 {
+        targets
+            .iter()
+            .map(|t| {
+                let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
+                nelf_train::trainer::step_loss_on(model, &head, t, &config, &mut rng)
+                    .unwrap()
+                    .1
+                    .rgb_fine
+            })
+            .sum()
+    };
+    let before = colour_loss(&trainable.model);
+    assert_eq!(
+        colour_loss(&loaded.model),
+        before,
+        "the weights changed on their way through the file"
+    );
+    let tune = FineTuneConfig {
+        steps: 30,
+        rays: 64,
+        lr_mlp: 1e-3,
+        lr_encoder: 1e-3,
+        ..FineTuneConfig::default()
+    };
+    let mut seen = 0;
+    let (tuned, report) = fine_tune(&loaded, &head, &tune, &config, |_, _| seen += 1).unwrap();
+    assert_eq!((seen, report.steps), (30, 30));
+    let after = colour_loss(&tuned);
+    eprintln!(
+        "fine-tuning: colour loss {before:.5} -> {after:.5} ({:.1} s)",
+        report.secs
+    );
+    assert!(after < 0.8 * before, "colour loss {before} -> {after}");
+
+    let two = without_view(&head, 1).unwrap();
+    let pixels = head.capture.views.width * head.capture.views.height;
+    assert_eq!(two.capture.views.views(), 2);
+    assert_eq!(two.capture.views.cameras[1], head.capture.views.cameras[2]);
+    assert_eq!(
+        two.capture.views.masks[pixels..],
+        head.capture.views.masks[2 * pixels..]
+    );
+    assert!(without_view(&head, 0).is_err(), "view 0 holds the light frame");
+    assert!(without_view(&two, 1).is_err(), "the network needs 2 views");
 }
