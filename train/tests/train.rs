@@ -555,6 +555,23 @@ fn a_damaged_checkpoint_is_refused_with_its_name() {
     assert!(err.contains("checkpoint.safetensors"), "{err}");
 }
 
+/// The tiny configuration, the synthetic head, a seeded network and its weights
+/// exported to a file (in the returned folder).
+fn exported_tiny_network() -> (
+    TrainConfig,
+    PreparedHead,
+    Trainable,
+    tempfile::TempDir,
+    std::path::PathBuf,
+) {
+    let config = tiny_config();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("weights.safetensors");
+    nelf_train::run::export_weights(&trainable, &config, &path).unwrap();
+    (config, synthetic_head(), trainable, dir, path)
+}
+
 /// The training renderer (gradients, candle ops) and the inference renderer
 /// (`nelf_field::render`, fused kernels) give the same pixels for the same weights
 /// and depths: what is trained is what bakes.
@@ -564,12 +581,7 @@ fn the_training_renderer_matches_the_inference_renderer() {
     use nelf_field::{Model, NelfConfig, Stage};
     use nelf_train::forward::{encode, irradiance, render_rays};
 
-    let config = tiny_config();
-    let head = synthetic_head();
-    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("weights.safetensors");
-    nelf_train::run::export_weights(&trainable, &config, &path).unwrap();
+    let (config, head, trainable, _dir, path) = exported_tiny_network();
     let nelf_config = NelfConfig {
         coarse_samples: config.coarse_samples,
         fine_samples: config.fine_samples,
@@ -828,12 +840,7 @@ fn fine_tuning_on_the_source_views_lowers_their_colour_loss() {
     use nelf_train::finetune::{FineTuneConfig, fine_tune, source_targets, without_view};
     use rand::SeedableRng;
 
-    let config = tiny_config();
-    let head = synthetic_head();
-    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("weights.safetensors");
-    nelf_train::run::export_weights(&trainable, &config, &path).unwrap();
+    let (config, head, trainable, _dir, path) = exported_tiny_network();
     let bytes = std::fs::read(&path).unwrap();
     let loaded =
         Trainable::from_safetensors_bytes(&bytes, &path, *trainable.model.config(), &Device::Cpu).unwrap();
