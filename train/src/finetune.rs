@@ -19,15 +19,14 @@ use std::time::Instant;
 
 use candle_core::Tensor;
 use nelf_field::Model;
-use rand::{Rng, SeedableRng};
-use rand_pcg::Pcg64;
+use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use crate::config::{ColourLoss, TrainConfig};
 use crate::data::TargetMode;
 use crate::error::TrainError;
 use crate::eval::select_views;
-use crate::trainer::{PreparedHead, PreparedTarget, Trainable, secs_since, step_loss_on};
+use crate::trainer::{PreparedHead, PreparedTarget, Trainable, secs_since, step_loss_on, step_rng};
 
 /// Settings of a fine-tuning.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -101,8 +100,7 @@ pub fn source_targets(head: &PreparedHead) -> Vec<PreparedTarget> {
         .collect()
 }
 
-/// `head` without source view `k` (`k ≥ 1`: view 0 keeps the light frame), and no
-/// targets or distillation points.
+/// `head` without source view `k` (`k ≥ 1`: view 0 keeps the light frame).
 pub fn without_view(head: &PreparedHead, k: usize) -> Result<PreparedHead, TrainError> {
     let all = head.capture.views.views();
     if k == 0 || k >= all || all < 3 {
@@ -111,20 +109,13 @@ pub fn without_view(head: &PreparedHead, k: usize) -> Result<PreparedHead, Train
         )));
     }
     let keep: Vec<usize> = (0..all).filter(|&v| v != k).collect();
-    Ok(PreparedHead {
-        targets: Vec::new(),
-        distill_points: Vec::new(),
-        distill_sigma: Vec::new(),
-        distill_dirs: Vec::new(),
-        distill_lights: Vec::new(),
-        distill_radiance: Vec::new(),
-        ..select_views(head, &keep)?
-    })
+    select_views(head, &keep)
 }
 
 /// Fine-tunes `trainable` on `head`'s source views (module docs) and returns the
 /// tuned network (plain tensors, [`Trainable::snapshot`]). `train` gives the loss
-/// weights and samples per ray; its distillation is not used.
+/// weights and samples per ray; its distillation is switched off, so `head`'s
+/// targets and distillation points are not used.
 pub fn fine_tune(
     trainable: &Trainable,
     head: &PreparedHead,
@@ -135,11 +126,6 @@ pub fn fine_tune(
     let clock = Instant::now();
     let targets = source_targets(head);
     let views = targets.len();
-    if tune.leave_one_out && views < 3 {
-        return Err(TrainError::Settings(format!(
-            "leave-one-out fine-tuning needs 3 source views or more, the capture has {views}"
-        )));
-    }
     let config = TrainConfig {
         rays: tune.rays,
         lr_mlp: tune.lr_mlp,
@@ -151,27 +137,23 @@ pub fn fine_tune(
         free_space_weight: tune.free_space_weight,
         ..train.clone()
     };
-    // The heads each step encodes: all views, or all but the rendered one.
-    let inputs: Vec<PreparedHead> = if tune.leave_one_out {
+    // With leave-one-out, the heads each step encodes: all views but the rendered one.
+    let left_out: Vec<PreparedHead> = if tune.leave_one_out {
         (1..views)
             .map(|k| without_view(head, k))
             .collect::<Result<_, _>>()?
     } else {
-        vec![PreparedHead {
-            targets: Vec::new(),
-            distill_points: Vec::new(),
-            ..head.clone()
-        }]
+        Vec::new()
     };
     let mut adam = trainable.optimizer(&config)?;
     let mut losses = Vec::with_capacity(tune.steps as usize);
     for step in 0..tune.steps {
-        let mut rng = Pcg64::seed_from_u64(tune.seed ^ step.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        let mut rng = step_rng(tune.seed, step);
         let (input, target) = if tune.leave_one_out {
             let k = rng.random_range(1..views);
-            (&inputs[k - 1], &targets[k])
+            (&left_out[k - 1], &targets[k])
         } else {
-            (&inputs[0], &targets[rng.random_range(0..views)])
+            (head, &targets[rng.random_range(0..views)])
         };
         let (loss, parts): (Tensor, _) = step_loss_on(&trainable.model, input, target, &config, &mut rng)?;
         let grads = loss.backward()?;

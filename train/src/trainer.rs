@@ -450,7 +450,7 @@ pub fn step_loss(
 
 /// The loss of one step that renders `target` from `head`'s source views (module
 /// docs), with the graph for its gradients; `target` need not be one of `head`'s
-/// (test-time fine-tuning renders a source view left out of the encoder's inputs).
+/// (test-time fine-tuning renders the source views themselves).
 pub fn step_loss_on(
     model: &Model,
     head: &PreparedHead,
