@@ -198,6 +198,9 @@ pub struct Model {
     device: Device,
     working_image_size: Option<usize>,
     source_relative_light: bool,
+    /// `(3, 128)` irradiance `L_S·Ω` of the capture's known source lighting when the
+    /// light transport is normalised to it ([`Model::with_source_normalisation`]).
+    source_irradiance: Option<Tensor>,
 }
 
 /// The key of the optional one-element tensor in a weights file that holds the image
@@ -248,6 +251,7 @@ impl Model {
             device: vb.device().clone(),
             working_image_size: None,
             source_relative_light: false,
+            source_irradiance: None,
         })
     }
 
@@ -293,6 +297,40 @@ impl Model {
             source_relative_light: relative,
             ..self
         }
+    }
+
+    /// The model with every view's light transport normalised to the source lighting
+    /// `light` (network layout `(3, 8, 16)`, radiance), or without normalisation for
+    /// `None`: each per-view vector `lt_v` is divided, per channel, by `lt_v·(L_S·Ω)`
+    /// ([`crate::nelfnet::normalise_to_source`]), so that the network reproduces its
+    /// source colours exactly under the lighting they were taken in, and its light
+    /// transport is in the units of `light`.
+    pub fn with_source_normalisation(self, light: Option<&[f32]>) -> Result<Self, NetError> {
+        let source_irradiance = match light {
+            Some(light) => Some(self.irradiance(light)?),
+            None => None,
+        };
+        Ok(Self {
+            source_irradiance,
+            ..self
+        })
+    }
+
+    /// Whether the light transport is normalised to a source lighting
+    /// ([`Model::with_source_normalisation`]).
+    pub fn source_normalised(&self) -> bool {
+        self.source_irradiance.is_some()
+    }
+
+    /// Runs `stage`'s per-point network on `inputs`, with the source normalisation
+    /// when the model has one: every caller that shades or reads light transport
+    /// goes through here.
+    pub fn forward_points(&self, stage: Stage, inputs: &PointInputs) -> Result<NelfNetTrace, NetError> {
+        let mut trace = self.net(stage).forward(inputs)?;
+        if let Some(e) = &self.source_irradiance {
+            trace.lt_scale = crate::nelfnet::normalise_to_source(&trace.lt_scale, e)?;
+        }
+        Ok(trace)
     }
 
     /// Loads the weights from a safetensors file (official key names; f32, or any
@@ -449,7 +487,7 @@ impl Model {
         let inputs = encoded
             .gather(points, target_dirc, stage)?
             .to_tensors(&self.device)?;
-        let trace = self.net(stage).forward(&inputs)?;
+        let trace = self.forward_points(stage, &inputs)?;
         Ok((inputs, trace))
     }
 

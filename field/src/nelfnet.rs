@@ -128,6 +128,33 @@ pub struct Shaded {
     pub rgb: Tensor,
 }
 
+/// Smallest source shading `lt_v·(L_S·Ω)` a view's light transport is divided by
+/// in [`normalise_to_source`] (the ideal is 1): a point the network thinks the
+/// source light barely reaches is raised at most 50×.
+pub const MIN_SOURCE_SHADING: f64 = 0.02;
+
+/// Per-point source normalisation: `lt_v[c, ·] / max(lt_v[c, ·]·E_S[c, ·], ε)` for
+/// `lt` `(N, V, 384)` and the source irradiance `E_S = L_S·Ω` `(3, 128)`.
+///
+/// A view's colour is `rgb_v ⊙ (lt_v·E)`, so under the lighting `L_S` the source
+/// photos were taken in, the ideal `lt_v·E_S` is exactly 1 (the photo itself):
+/// for a Lambertian point `lt_v ∝ max(0, n·ω)·V(ω)` divided by the point's source
+/// irradiance. The division imposes that, point by point and channel by channel,
+/// leaving the network only the *shape* of `lt_v` over the 128 directions (the
+/// ratio of target to source shading) and taking its overall scale — which five
+/// photos cannot tell apart from albedo — from the known lighting. The same
+/// consistency is fitted as one gain per capture by [`crate::calibrate`].
+pub fn normalise_to_source(lt: &Tensor, source_irradiance: &Tensor) -> Result<Tensor, NetError> {
+    let (n, v, _) = lt.dims3()?;
+    let lt4 = lt.reshape((n, v, 3, ENV_TEXELS))?;
+    let e = source_irradiance.reshape((1, 1, 3, ENV_TEXELS))?;
+    let shading = lt4
+        .broadcast_mul(&e)?
+        .sum_keepdim(3)?
+        .maximum(MIN_SOURCE_SHADING)?;
+    Ok(lt4.broadcast_div(&shading)?.reshape((n, v, LT_DIM))?)
+}
+
 /// One per-point network (`coarse_appearance_encoder` or `fine_appearance_encoder`).
 #[derive(Debug, Clone)]
 #[allow(

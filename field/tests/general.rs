@@ -427,3 +427,77 @@ fn source_calibration_scales_light_transport_inversely_to_the_lighting() {
         field = refitted;
     }
 }
+
+#[test]
+fn source_normalisation_reproduces_the_source_colours_under_the_source_light() {
+    let model = deterministic_model(11);
+    let capture = synthetic_capture(3, 32, 32, DVec3::ZERO);
+    let encoded = model.encode(&capture.views).unwrap();
+    let points: Vec<[f32; 3]> = points_near(DVec3::ZERO, 40, 12)
+        .iter()
+        .map(|p| capture.to_net_point(p.as_dvec3()))
+        .collect();
+    let dirs = vec![[0.0f32, -0.2, 0.98]; points.len()];
+    let mut rng = Pcg64::seed_from_u64(13);
+    let source: Vec<f32> = (0..LT_DIM).map(|_| rng.random_range(0.2f32..2.0)).collect();
+    let target: Vec<f32> = (0..LT_DIM).map(|_| rng.random_range(0.0f32..3.0)).collect();
+    let normalised = model.clone().with_source_normalisation(Some(&source)).unwrap();
+    assert!(normalised.source_normalised() && !model.source_normalised());
+    let inside: Vec<[f32; 3]> = points
+        .iter()
+        .zip(encoded.hull(&points).inside)
+        .filter_map(|(p, i)| i.then_some(*p))
+        .collect();
+    assert!(inside.len() > 20, "{} points inside", inside.len());
+    for stage in [Stage::Coarse, Stage::Fine] {
+        // Under the source light each point's colour is the blend of its source colours.
+        let (inputs, trace) = normalised
+            .run_points(&encoded, &inside, &dirs[..inside.len()], stage)
+            .unwrap();
+        let blended = inputs
+            .source_rgb
+            .broadcast_mul(&trace.blend_softmax)
+            .unwrap()
+            .sum(1)
+            .unwrap()
+            .flatten_all()
+            .unwrap()
+            .to_vec1::<f32>()
+            .unwrap();
+        let under_source = normalised
+            .shade_points(&encoded, &inside, &dirs[..inside.len()], stage, &source)
+            .unwrap();
+        assert_close(
+            &under_source.values,
+            &blended,
+            1e-4,
+            "source light vs blended photos",
+        );
+        let raw = model
+            .shade_points(&encoded, &inside, &dirs[..inside.len()], stage, &source)
+            .unwrap();
+        let off: f32 = raw
+            .values
+            .iter()
+            .zip(&blended)
+            .map(|(a, b)| (a - b).abs())
+            .fold(0.0, f32::max);
+        assert!(off > 1e-2, "the raw network already matched its photos ({off})");
+        // The normalisation fixes the units: a source light k times as bright makes the
+        // same colours under any other light 1/k as bright; σ is untouched.
+        let k = 2.5f32;
+        let brighter: Vec<f32> = source.iter().map(|v| v * k).collect();
+        let a = normalised
+            .shade_points(&encoded, &inside, &dirs[..inside.len()], stage, &target)
+            .unwrap();
+        let b = model
+            .clone()
+            .with_source_normalisation(Some(&brighter))
+            .unwrap()
+            .shade_points(&encoded, &inside, &dirs[..inside.len()], stage, &target)
+            .unwrap();
+        let scaled: Vec<f32> = b.values.iter().map(|v| v * k).collect();
+        assert_close(&scaled, &a.values, 1e-4, "normalised to k·L_S, times k");
+        assert_eq!(a.sigma, raw.sigma);
+    }
+}

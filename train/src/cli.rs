@@ -218,12 +218,14 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
     );
     println!(
         "  views   PSNR dB   fg PSNR dB   SSIM     | flat colour: PSNR dB   fg PSNR dB   SSIM     \
-         | source-view calibrated: PSNR dB   fg PSNR dB   SSIM     median gain"
+         | source-view calibrated: PSNR dB   fg PSNR dB   SSIM     median gain \
+         | source-normalised: PSNR dB   fg PSNR dB   SSIM"
     );
     for r in &rows {
         println!(
             "  {:>5}   {:>7.2}   {:>10.2}   {:.4}   |              {:>7.2}   {:>10.2}   {:.4}   \
-             |                         {:>7.2}   {:>10.2}   {:.4}   {:.3}",
+             |                         {:>7.2}   {:>10.2}   {:.4}   {:.3}       \
+             |                    {:>7.2}   {:>10.2}   {:.4}",
             r.views,
             r.psnr,
             r.foreground_psnr,
@@ -234,7 +236,10 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
             r.calibrated_psnr,
             r.calibrated_foreground_psnr,
             r.calibrated_ssim,
-            r.median_gain
+            r.median_gain,
+            r.normalised_psnr,
+            r.normalised_foreground_psnr,
+            r.normalised_ssim
         );
     }
     Ok(())

@@ -9,7 +9,9 @@
 //! so that a network that learned only silhouettes and average colour shows as such.
 //! Each row also scores the same renderings scaled by the source-view gain
 //! ([`nelf_field::calibrate`]: fitted to the head's own source views under its known
-//! source lighting, never to the target), as `nelf bake capture` applies it. With
+//! source lighting, never to the target), as `nelf bake capture` applies it, and the
+//! network with its light transport normalised point by point to that lighting
+//! ([`nelf_field::nelfnet::normalise_to_source`], a diagnosis: `train/README.md`). With
 //! [`FineTuneFrom`], each head is scored by the network fine-tuned on that head's
 //! own source views first ([`crate::finetune`]).
 
@@ -63,6 +65,14 @@ pub struct ViewCountRow {
     pub calibrated_ssim: f64,
     /// Median over the heads of the source-view gain.
     pub median_gain: f64,
+    /// Whole-image PSNR of the network with its light transport normalised, point by
+    /// point, to the head's known source lighting
+    /// ([`nelf_field::nelfnet::normalise_to_source`]), dB.
+    pub normalised_psnr: f64,
+    /// The same inside the mask, dB.
+    pub normalised_foreground_psnr: f64,
+    /// The same's SSIM.
+    pub normalised_ssim: f64,
 }
 
 /// `view`'s network rendering scaled by the source-view gain of `head`, scored.
@@ -147,7 +157,7 @@ pub fn view_count_table(
     }
     let mut rows = Vec::with_capacity(counts.len());
     for &views in counts {
-        let mut sum = [0.0f64; 9];
+        let mut sum = [0.0f64; 12];
         let mut gains = Vec::with_capacity(heads.len());
         let mut sheet_views = Vec::with_capacity(heads.len());
         for head in heads {
@@ -173,6 +183,10 @@ pub fn view_count_table(
             let view = validate_head(model, &head, config)?;
             let (c, gain) = calibrated_scores(model, &head, &view)?;
             gains.push(f64::from(gain));
+            let normalised = model
+                .clone()
+                .with_source_normalisation(Some(&head.source_light_net))?;
+            let n = validate_head(&normalised, &head, config)?.scores;
             let v = view.scores;
             sheet_views.push(view);
             let values = [
@@ -185,6 +199,9 @@ pub fn view_count_table(
                 c.psnr,
                 c.foreground_psnr,
                 c.ssim,
+                n.psnr,
+                n.foreground_psnr,
+                n.ssim,
             ];
             for (s, x) in sum.iter_mut().zip(values) {
                 *s += x;
@@ -200,6 +217,9 @@ pub fn view_count_table(
             calibrated_psnr,
             calibrated_foreground_psnr,
             calibrated_ssim,
+            normalised_psnr,
+            normalised_foreground_psnr,
+            normalised_ssim,
         ] = sum.map(|s| s / heads.len() as f64);
         gains.sort_by(f64::total_cmp);
         if let (Some(path), Some(&last)) = (sheet, counts.last())
@@ -220,6 +240,9 @@ pub fn view_count_table(
             calibrated_foreground_psnr,
             calibrated_ssim,
             median_gain: gains[gains.len() / 2],
+            normalised_psnr,
+            normalised_foreground_psnr,
+            normalised_ssim,
         });
     }
     Ok(rows)

@@ -148,7 +148,7 @@ pub fn run_points(
         source_dirc: Tensor::from_slice(&taps.source_dirc, (n, v, 3), device)?,
         target_dirc: Tensor::from_vec(dirs, (n, 3), device)?,
     };
-    let trace = model.net(stage).forward(&inputs)?;
+    let trace = model.forward_points(stage, &inputs)?;
     Ok(Some(PointPass {
         inside,
         trace,

@@ -757,6 +757,14 @@ fn the_view_count_table_scores_subsets_of_the_source_views() {
         );
         let (lo, hi) = nelf_field::calibrate::GAIN_RANGE;
         assert!((f64::from(lo)..=f64::from(hi)).contains(&r.median_gain), "{r:?}");
+        // The source-normalised rendering is scored too, and differs from the raw one.
+        assert!(
+            r.normalised_psnr.is_finite()
+                && r.normalised_foreground_psnr.is_finite()
+                && r.normalised_ssim.is_finite()
+                && r.normalised_psnr != r.psnr,
+            "{r:?}"
+        );
     }
     assert_eq!(rows[0].flat_psnr, rows[1].flat_psnr);
     assert_eq!(rows[0].flat_ssim, rows[1].flat_ssim);
