@@ -306,10 +306,7 @@ impl Model {
     /// source colours exactly under the lighting they were taken in, and its light
     /// transport is in the units of `light`.
     pub fn with_source_normalisation(self, light: Option<&[f32]>) -> Result<Self, NetError> {
-        let source_irradiance = match light {
-            Some(light) => Some(self.irradiance(light)?),
-            None => None,
-        };
+        let source_irradiance = light.map(|l| self.irradiance(l)).transpose()?;
         Ok(Self {
             source_irradiance,
             ..self

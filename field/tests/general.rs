@@ -118,6 +118,14 @@ fn points_near(centre: DVec3, count: usize, seed: u64) -> Vec<Vec3> {
         .collect()
 }
 
+/// [`points_near`] in `capture`'s network frame (millimetres).
+fn net_points_near(capture: &NetCapture, centre: DVec3, count: usize, seed: u64) -> Vec<[f32; 3]> {
+    points_near(centre, count, seed)
+        .iter()
+        .map(|p| capture.to_net_point(p.as_dvec3()))
+        .collect()
+}
+
 fn evaluate(field: &NelfField, points: &[Vec3], view: &ViewPolicy) -> (Vec<f32>, Vec<f32>) {
     let mut density = vec![0.0f32; points.len()];
     let mut lt = vec![0.0f32; points.len() * LT_DIM];
@@ -214,10 +222,7 @@ fn light_transport_reproduces_the_networks_shading() {
     let model = deterministic_model(5);
     let capture = synthetic_capture(3, 32, 32, DVec3::ZERO);
     let encoded = model.encode(&capture.views).unwrap();
-    let points: Vec<[f32; 3]> = points_near(DVec3::ZERO, 40, 6)
-        .iter()
-        .map(|p| capture.to_net_point(p.as_dvec3()))
-        .collect();
+    let points = net_points_near(&capture, DVec3::ZERO, 40, 6);
     let dirs: Vec<[f32; 3]> = (0..points.len())
         .map(|i| {
             let d = DVec3::new(0.1 * (i % 3) as f64, -1.0, 0.2).normalize();
@@ -356,10 +361,7 @@ fn trainable_and_loaded_weights_agree_and_small_widths_round_trip() {
         1e-4,
         "source light",
     );
-    let points: Vec<[f32; 3]> = points_near(centre, 64, 3)
-        .iter()
-        .map(|p| capture.to_net_point(p.as_dvec3()))
-        .collect();
+    let points = net_points_near(&capture, centre, 64, 3);
     let dirs = vec![[0.0f32, -1.0, 0.0]; points.len()];
     for stage in [Stage::Coarse, Stage::Fine] {
         let (_, ta) = trainable.run_points(&a, &points, &dirs, stage).unwrap();
@@ -433,11 +435,7 @@ fn source_normalisation_reproduces_the_source_colours_under_the_source_light() {
     let model = deterministic_model(11);
     let capture = synthetic_capture(3, 32, 32, DVec3::ZERO);
     let encoded = model.encode(&capture.views).unwrap();
-    let points: Vec<[f32; 3]> = points_near(DVec3::ZERO, 40, 12)
-        .iter()
-        .map(|p| capture.to_net_point(p.as_dvec3()))
-        .collect();
-    let dirs = vec![[0.0f32, -0.2, 0.98]; points.len()];
+    let points = net_points_near(&capture, DVec3::ZERO, 40, 12);
     let mut rng = Pcg64::seed_from_u64(13);
     let source: Vec<f32> = (0..LT_DIM).map(|_| rng.random_range(0.2f32..2.0)).collect();
     let target: Vec<f32> = (0..LT_DIM).map(|_| rng.random_range(0.0f32..3.0)).collect();
@@ -449,11 +447,10 @@ fn source_normalisation_reproduces_the_source_colours_under_the_source_light() {
         .filter_map(|(p, i)| i.then_some(*p))
         .collect();
     assert!(inside.len() > 20, "{} points inside", inside.len());
+    let dirs = vec![[0.0f32, -0.2, 0.98]; inside.len()];
     for stage in [Stage::Coarse, Stage::Fine] {
         // Under the source light each point's colour is the blend of its source colours.
-        let (inputs, trace) = normalised
-            .run_points(&encoded, &inside, &dirs[..inside.len()], stage)
-            .unwrap();
+        let (inputs, trace) = normalised.run_points(&encoded, &inside, &dirs, stage).unwrap();
         let blended = inputs
             .source_rgb
             .broadcast_mul(&trace.blend_softmax)
@@ -465,7 +462,7 @@ fn source_normalisation_reproduces_the_source_colours_under_the_source_light() {
             .to_vec1::<f32>()
             .unwrap();
         let under_source = normalised
-            .shade_points(&encoded, &inside, &dirs[..inside.len()], stage, &source)
+            .shade_points(&encoded, &inside, &dirs, stage, &source)
             .unwrap();
         assert_close(
             &under_source.values,
@@ -474,7 +471,7 @@ fn source_normalisation_reproduces_the_source_colours_under_the_source_light() {
             "source light vs blended photos",
         );
         let raw = model
-            .shade_points(&encoded, &inside, &dirs[..inside.len()], stage, &source)
+            .shade_points(&encoded, &inside, &dirs, stage, &source)
             .unwrap();
         let off: f32 = raw
             .values
@@ -488,13 +485,13 @@ fn source_normalisation_reproduces_the_source_colours_under_the_source_light() {
         let k = 2.5f32;
         let brighter: Vec<f32> = source.iter().map(|v| v * k).collect();
         let a = normalised
-            .shade_points(&encoded, &inside, &dirs[..inside.len()], stage, &target)
+            .shade_points(&encoded, &inside, &dirs, stage, &target)
             .unwrap();
         let b = model
             .clone()
             .with_source_normalisation(Some(&brighter))
             .unwrap()
-            .shade_points(&encoded, &inside, &dirs[..inside.len()], stage, &target)
+            .shade_points(&encoded, &inside, &dirs, stage, &target)
             .unwrap();
         let scaled: Vec<f32> = b.values.iter().map(|v| v * k).collect();
         assert_close(&scaled, &a.values, 1e-4, "normalised to k·L_S, times k");
