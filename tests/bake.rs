@@ -208,17 +208,57 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
     );
     // The shipped network was trained at 64 pixels: the views are encoded so.
     assert_eq!(source["encoded_image_size"][0], source["working_image_size"]);
-    // It takes lightings relative to the source lighting's power, which this
-    // capture's cameras.json names: its transport is divided by that power.
+    // It takes lightings relative to the source lighting's power. This capture's
+    // cameras.json names that lighting, so by default every view's transport is
+    // normalised to it point by point (physical units, no scale) with the Lambertian
+    // shading prior mixed in.
     assert_eq!(source["source_relative_light"], true, "{source}");
-    let scale = source["light_transport_scale"].as_f64().unwrap();
-    assert!(scale.is_finite() && scale > 0.0 && scale != 1.0, "{source}");
+    assert_eq!(source["source_normalised"], true, "{source}");
+    assert_eq!(
+        nelf_bake::DEFAULT_SHADING_PRIOR_MM,
+        nelf_field::prior::DEFAULT_STEP_MM
+    );
+    assert_eq!(
+        nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT,
+        nelf_field::prior::DEFAULT_WEIGHT
+    );
+    assert_eq!(source["light_transport_scale"].as_f64(), Some(1.0), "{source}");
+    assert_eq!(
+        source["shading_prior"],
+        serde_json::json!({"step_mm": nelf_bake::DEFAULT_SHADING_PRIOR_MM, "weight": nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT}),
+        "{source}"
+    );
     assert!(asset.voxel_count() > 0);
     // A network's density is stored signed (`--network-skin-mm`, field/README.md).
     assert!(nelf_format::asset::has_negative_density(&asset.density));
     let sidecar: serde_json::Value =
         serde_json::from_slice(&std::fs::read(asset_path.with_extension("bake.json")).unwrap()).unwrap();
     assert_eq!(sidecar["config"]["network_skin_mm"], 1.0, "{sidecar}");
+    assert_eq!(sidecar["config"]["shading_prior_weight"], 0.5, "{sidecar}");
+
+    // --shading-prior-mm 0: the one-gain calibration instead, the transport divided by
+    // the source lighting's power and scaled by the gain.
+    let gain_path = dir.path().join("gain.nelf");
+    succeed(&[
+        "bake",
+        "capture",
+        out,
+        "-o",
+        gain_path.to_str().unwrap(),
+        "--resolution",
+        "24",
+        "--view-dependence",
+        "off",
+        "--shading-prior-mm",
+        "0",
+        "--quiet",
+    ]);
+    let gain = read_asset(&gain_path).unwrap();
+    let source = &gain.metadata["source"]["source"];
+    assert_eq!(source["source_normalised"], false, "{source}");
+    assert!(source["shading_prior"].is_null(), "{source}");
+    let scale = source["light_transport_scale"].as_f64().unwrap();
+    assert!(scale.is_finite() && scale > 0.0 && scale != 1.0, "{source}");
 
     // --source truth without a mesh: refused, naming the folder and what is missing.
     let truth = nelf(&[

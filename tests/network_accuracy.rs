@@ -73,22 +73,37 @@ fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
     let bake = mean("network_bake", "foreground_psnr");
     let flat = mean("network_bake", "flat_foreground_psnr");
     let truth = mean("truth_bake", "foreground_psnr");
-    // Measured 21.63 against 21.48 dB (ground-truth bake 28.54): the margin is thin,
-    // so any loss of accuracy in the network, its calibration or the bake shows.
+    // Measured 23.73 against 21.48 dB (ground-truth bake 28.54; 21.63 with the one-gain
+    // calibration the bake used before the shading prior): a third of the gap, on the
+    // head where the bake leads by least. A network that learned only the silhouette
+    // and the average colour scores about the flat colour.
     assert!(
-        bake > flat,
-        "network bake {bake:.2} dB ≤ flat colour {flat:.2} dB (foreground)"
+        bake > flat + 1.5,
+        "network bake {bake:.2} dB vs flat colour {flat:.2} dB (foreground): less than 1.5 dB ahead"
     );
     assert!(
         truth > bake + 3.0,
         "ground-truth bake {truth:.2} vs network bake {bake:.2}"
     );
-    // The network was calibrated to the capture's source views under their lighting.
+    // The network was normalised to the capture's source lighting, with the default prior.
     let asset = nelf_format::read_asset(&scores.join("capture0_network.nelf")).unwrap();
-    let gain = asset.metadata["source"]["source"]["source_gain"].as_f64();
-    assert!(
-        gain.is_some_and(|g| g > 1.05 && g < 2.0),
-        "source gain {gain:?}: {}",
+    let source = &asset.metadata["source"]["source"];
+    assert_eq!(
+        source["source_normalised"],
+        serde_json::json!(true),
+        "{}",
+        asset.metadata
+    );
+    assert_eq!(
+        source["shading_prior"],
+        serde_json::json!({"step_mm": 8.0, "weight": 0.5}),
+        "{}",
+        asset.metadata
+    );
+    assert_eq!(
+        source["light_transport_scale"].as_f64(),
+        Some(1.0),
+        "{}",
         asset.metadata
     );
 }

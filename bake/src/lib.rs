@@ -42,7 +42,8 @@ pub mod view;
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
 pub use choose::{ChoiceArgs, ChoiceReport, bake_capture_to_target};
 pub use config::{
-    BakeConfig, DEFAULT_NETWORK_SKIN_MM, EncodingChoice, ShellPlacement, TraceOverrides, ViewPolicyChoice,
+    BakeConfig, DEFAULT_NETWORK_SKIN_MM, DEFAULT_SHADING_PRIOR_MM, DEFAULT_SHADING_PRIOR_WEIGHT,
+    EncodingChoice, ShellPlacement, TraceOverrides, ViewPolicyChoice,
 };
 pub use error::BakeError;
 pub use jobs::{

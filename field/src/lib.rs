@@ -27,6 +27,7 @@ pub mod layers;
 pub mod light;
 pub mod model;
 pub mod nelfnet;
+pub mod prior;
 pub mod render;
 pub mod shipped;
 pub mod source;

@@ -16,6 +16,7 @@ use crate::encoder::{EncoderOutput, ImageEncoder};
 use crate::error::NetError;
 use crate::light::{aggregate_light, net_solid_angles};
 use crate::nelfnet::{NelfNet, NelfNetTrace, PointInputs};
+use crate::prior::ShadingPrior;
 use crate::views::{EncodedViews, SourceViews, Stage};
 
 /// zstd's frame magic number (RFC 8878, section 3.1.1), little-endian.
@@ -201,6 +202,9 @@ pub struct Model {
     /// `(3, 128)` irradiance `L_S·Ω` of the capture's known source lighting when the
     /// light transport is normalised to it ([`Model::with_source_normalisation`]).
     source_irradiance: Option<Tensor>,
+    /// The Lambertian shading prior mixed into the normalised light transport
+    /// ([`Model::with_shading_prior`]).
+    shading_prior: Option<ShadingPrior>,
 }
 
 /// The key of the optional one-element tensor in a weights file that holds the image
@@ -252,6 +256,7 @@ impl Model {
             working_image_size: None,
             source_relative_light: false,
             source_irradiance: None,
+            shading_prior: None,
         })
     }
 
@@ -317,6 +322,35 @@ impl Model {
     /// ([`Model::with_source_normalisation`]).
     pub fn source_normalised(&self) -> bool {
         self.source_irradiance.is_some()
+    }
+
+    /// The model with the Lambertian shading prior ([`crate::prior`]) mixed into its
+    /// light transport (`None`: the network's own). The prior is normalised to the
+    /// source lighting, so the model must have one ([`Model::with_source_normalisation`]).
+    pub fn with_shading_prior(self, prior: Option<ShadingPrior>) -> Result<Self, NetError> {
+        if let Some(p) = &prior {
+            p.validate()?;
+            if self.source_irradiance.is_none() {
+                return Err(NetError::input(
+                    "the shading prior needs the source lighting (with_source_normalisation)",
+                ));
+            }
+        }
+        Ok(Self {
+            shading_prior: prior,
+            ..self
+        })
+    }
+
+    /// The source irradiance `(3, 128)` the light transport is normalised to, if any
+    /// ([`Model::with_source_normalisation`]).
+    pub fn source_irradiance(&self) -> Option<&Tensor> {
+        self.source_irradiance.as_ref()
+    }
+
+    /// The shading prior, if any ([`Model::with_shading_prior`]).
+    pub fn shading_prior(&self) -> Option<ShadingPrior> {
+        self.shading_prior
     }
 
     /// Runs `stage`'s per-point network on `inputs`, with the source normalisation
@@ -484,7 +518,25 @@ impl Model {
         let inputs = encoded
             .gather(points, target_dirc, stage)?
             .to_tensors(&self.device)?;
-        let trace = self.forward_points(stage, &inputs)?;
+        let mut trace = self.forward_points(stage, &inputs)?;
+        if let (Some(prior), Some(e)) = (&self.shading_prior, &self.source_irradiance) {
+            let dirs: Vec<[f32; 3]> = target_dirc.iter().flat_map(|d| [*d; 6]).collect();
+            let normals = crate::prior::density_normals(points, prior.step_mm, |probes| {
+                let inputs = encoded.gather(probes, &dirs, stage)?.to_tensors(&self.device)?;
+                Ok::<_, NetError>(
+                    self.net(stage)
+                        .density(&inputs)?
+                        .flatten_all()?
+                        .to_vec1::<f32>()?,
+                )
+            })?;
+            let cam0 = encoded
+                .cameras()
+                .first()
+                .ok_or_else(|| NetError::input("no source views"))?
+                .rotation();
+            trace.lt_scale = crate::prior::shading_prior(prior, &trace.lt_scale, e, &normals, cam0)?;
+        }
         Ok((inputs, trace))
     }
 

@@ -50,6 +50,9 @@ pub struct NelfField {
     light_unit_scale: f32,
     /// The source-view calibration's gain ([`NelfField::calibrated_to_sources`]), else 1.
     source_gain: f32,
+    /// Whether the light transport is normalised to the source lighting
+    /// ([`NelfField::normalised_to_sources`]): then in physical units as it is.
+    normalised: bool,
     /// `(V, H, W)` the source views' masks (the encoded views keep only dilated
     /// ones), for the calibration.
     source_masks: Vec<f32>,
@@ -83,6 +86,7 @@ impl NelfField {
             chunk_points: 16_384,
             light_unit_scale: 1.0,
             source_gain: 1.0,
+            normalised: false,
             source_masks: capture.views.masks.clone(),
         };
         field.bounds = field.hull_bounds();
@@ -151,11 +155,41 @@ impl NelfField {
         Ok((self, fit))
     }
 
+    /// This field with every view's light transport normalised, point by point, to
+    /// `source_light` (8 × 16, this field's light frame, physical units), the lighting
+    /// the views were taken in ([`Model::with_source_normalisation`]), and with the
+    /// Lambertian shading `prior` mixed in ([`crate::prior`]): the network then
+    /// reproduces its source colours exactly under that lighting, its transport is in
+    /// physical units (no source power, no gain), and it keeps only the shape of its
+    /// transport over the 128 directions. Replaces [`NelfField::calibrated_to_sources`].
+    ///
+    /// # Errors
+    /// A source lighting that is not 8 × 16, or a prior out of range.
+    pub fn normalised_to_sources(
+        mut self,
+        source_light: &LatLong,
+        prior: Option<crate::prior::ShadingPrior>,
+    ) -> Result<Self, NetError> {
+        let light = latlong_to_net_light(source_light)?;
+        self.model = self
+            .model
+            .with_source_normalisation(Some(&light))?
+            .with_shading_prior(prior)?;
+        self.source_gain = 1.0;
+        self.normalised = true;
+        Ok(self)
+    }
+
     /// The factor this field applies to the network's light transport: `1/p_S` after
     /// [`NelfField::with_source_light_power`] (else 1) times the source-view gain after
-    /// [`NelfField::calibrated_to_sources`] (else 1).
+    /// [`NelfField::calibrated_to_sources`] (else 1); 1 after
+    /// [`NelfField::normalised_to_sources`].
     pub fn light_transport_scale(&self) -> f32 {
-        self.light_unit_scale * self.source_gain
+        if self.normalised {
+            1.0
+        } else {
+            self.light_unit_scale * self.source_gain
+        }
     }
 
     /// The source-view calibration's gain (1 when not calibrated).

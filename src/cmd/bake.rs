@@ -246,7 +246,7 @@ pub fn bake_network(
     let (model, weights_name) = load_or_shipped(weights, NelfConfig::for_device(&device), &device)
         .context("loading the network's weights")?;
     let model_size = model.working_image_size();
-    let (prepared, field) = network_field(capture, model, config.no_source_calibration)?;
+    let (prepared, field) = network_field(capture, model, SourceFit::of_config(config))?;
     let encoded_size = prepared.cameras.first().map(|c| [c.width, c.height]);
     let provenance = serde_json::json!({
         "kind": "nelf-network",
@@ -257,6 +257,8 @@ pub fn bake_network(
         "view_policy": "toward the mean camera",
         "light_transport_scale": field.light_transport_scale(),
         "source_gain": field.source_gain(),
+        "source_normalised": field.model().source_normalised(),
+        "shading_prior": field.model().shading_prior().map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
         "source_relative_light": field.model().source_relative_light(),
     });
     bake_network_field(
@@ -270,14 +272,44 @@ pub fn bake_network(
     )
 }
 
+/// How a network field is fitted to the capture's source views when the capture
+/// names the lighting they were taken in.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum SourceFit {
+    /// Left as the network gives it (in physical units when its lighting is known).
+    None,
+    /// Scaled by the one gain that makes it reproduce the views
+    /// (`NelfField::calibrated_to_sources`).
+    Gain,
+    /// Normalised to the lighting point by point, with an optional Lambertian shading
+    /// prior (`NelfField::normalised_to_sources`).
+    Normalised(Option<nelf_field::prior::ShadingPrior>),
+}
+
+impl SourceFit {
+    /// The fit a bake configuration asks for: none with `--no-source-calibration`,
+    /// normalised with a prior for `--shading-prior-mm` > 0, else the gain.
+    pub fn of_config(config: &BakeConfig) -> Self {
+        if config.no_source_calibration {
+            Self::None
+        } else if config.shading_prior_mm > 0.0 {
+            Self::Normalised(Some(nelf_field::prior::ShadingPrior {
+                step_mm: config.shading_prior_mm,
+                weight: config.shading_prior_weight,
+            }))
+        } else {
+            Self::Gain
+        }
+    }
+}
+
 /// The network over `capture`'s views, reduced toward its working image size: the
 /// prepared views and the field they encode to, in the capture's light units and
-/// calibrated to its source views unless `no_source_calibration`
-/// ([`in_capture_light_units`]).
+/// fitted to its source views by `fit`.
 pub fn network_field(
     capture: &LoadedCapture,
     model: Model,
-    no_source_calibration: bool,
+    fit: SourceFit,
 ) -> anyhow::Result<(NetCapture, NelfField)> {
     let prepared = NetCapture::for_model(
         &model,
@@ -288,19 +320,18 @@ pub fn network_field(
         default_net_from_world(),
     )?;
     let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
-    let field = in_capture_light_units(field, capture.description(), &capture.dir, !no_source_calibration)?;
+    let field = in_capture_light_units(field, capture.description(), &capture.dir, fit)?;
     Ok((prepared, field))
 }
 
 /// `field` in physical units when its network takes source-relative lightings and the
-/// capture (`description`, in folder `dir`) names its lighting, then (with
-/// `calibrate`) scaled by the gain that makes it reproduce the capture's views under
-/// that lighting (`NelfField::calibrated_to_sources`); otherwise as it is, saying so.
+/// capture (`description`, in folder `dir`) names its lighting, then fitted to the
+/// capture's views under that lighting by `fit`; otherwise as it is, saying so.
 pub fn in_capture_light_units(
     field: NelfField,
     description: Option<&nelf_format::capture::Capture>,
     dir: &std::path::Path,
-    calibrate: bool,
+    fit: SourceFit,
 ) -> anyhow::Result<NelfField> {
     let Some(map) = capture_source_lighting(description, dir)? else {
         if field.model().source_relative_light() {
@@ -314,19 +345,34 @@ pub fn in_capture_light_units(
         return Ok(field);
     };
     let field = field.with_source_light_power(map.mean_radiance())?;
-    if !calibrate {
-        return Ok(field);
-    }
     let light = nelf_format::conventions::project_envmap(&map, field.world_from_light())?;
-    let (field, fit) = field
-        .calibrated_to_sources(&light)
-        .with_context(|| format!("calibrating the network to the views of {}", dir.display()))?;
-    eprintln!(
-        "  calibrated the network to its {} source pixels under their lighting: light transport × {:.3} \
-         (sRGB RMS error {:.4} -> {:.4}; --no-source-calibration leaves it)",
-        fit.pixels, fit.gain, fit.rmse_before, fit.rmse_after
-    );
-    Ok(field)
+    match fit {
+        SourceFit::None => Ok(field),
+        SourceFit::Gain => {
+            let (field, fit) = field
+                .calibrated_to_sources(&light)
+                .with_context(|| format!("calibrating the network to the views of {}", dir.display()))?;
+            eprintln!(
+                "  calibrated the network to its {} source pixels under their lighting: light transport × {:.3} \
+                 (sRGB RMS error {:.4} -> {:.4}; --no-source-calibration leaves it)",
+                fit.pixels, fit.gain, fit.rmse_before, fit.rmse_after
+            );
+            Ok(field)
+        }
+        SourceFit::Normalised(prior) => {
+            let field = field
+                .normalised_to_sources(&light, prior)
+                .with_context(|| format!("normalising the network to the lighting of {}", dir.display()))?;
+            eprintln!(
+                "  normalised the network's light transport to the lighting of its source views{}",
+                prior.map_or(String::new(), |p| format!(
+                    ", with a Lambertian shading prior (weight {}, normals over {} mm)",
+                    p.weight, p.step_mm
+                ))
+            );
+            Ok(field)
+        }
+    }
 }
 
 /// The lighting a capture's views were taken under, when its `cameras.json`

@@ -50,6 +50,14 @@ pub struct NetworkEvalArgs {
     /// capture's views under their lighting.
     #[arg(long)]
     pub no_source_calibration: bool,
+    /// Normalise the network to the capture's source lighting point by point and mix
+    /// in the Lambertian shading prior, normals over this many mm
+    /// (`nelf bake --shading-prior-mm`; 0: the one gain).
+    #[arg(long, default_value_t = nelf_bake::DEFAULT_SHADING_PRIOR_MM)]
+    pub shading_prior_mm: f32,
+    /// The prior's weight (`nelf bake --shading-prior-weight`).
+    #[arg(long, default_value_t = nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT)]
+    pub shading_prior_weight: f32,
     /// Also bake the network once per target with its light transport toward that
     /// target's camera (`oracle_view_bake` in the scores): what a bake without a
     /// view-dependent part could reach at best, to tell view dependence from other
@@ -84,6 +92,8 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         view_dependence: ViewChoice::Off,
         network_skin_mm: args.network_skin_mm,
         no_source_calibration: args.no_source_calibration,
+        shading_prior_mm: args.shading_prior_mm,
+        shading_prior_weight: args.shading_prior_weight,
         ..BakeConfig::default()
     };
     let progress = Progress::hidden();
@@ -105,13 +115,18 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             .with_context(|| format!("{}: no ground truth (synth_config.json)", dir.display()))?;
 
         // The network, over the capture's views reduced to its working size.
-        let (prepared, field) =
-            super::bake::network_field(&capture, model.clone(), config.no_source_calibration)?;
+        let (prepared, field) = super::bake::network_field(
+            &capture,
+            model.clone(),
+            super::bake::SourceFit::of_config(&config),
+        )?;
         let provenance = serde_json::json!({
             "kind": "nelf-network",
             "weights": weights_name,
             "light_transport_scale": field.light_transport_scale(),
             "source_gain": field.source_gain(),
+            "source_normalised": field.model().source_normalised(),
+            "shading_prior": field.model().shading_prior().map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
         });
         // The network's bake with a view policy (`None`: its recommended one), written to
         // `name` and read back as a viewer would.
@@ -204,6 +219,8 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         "voxel_filter": args.voxel_filter,
         "network_skin_mm": args.network_skin_mm,
         "no_source_calibration": args.no_source_calibration,
+        "shading_prior_mm": args.shading_prior_mm,
+        "shading_prior_weight": args.shading_prior_weight,
         "rank": args.rank,
         "targets": rows.len(),
         "mean_foreground_psnr": {

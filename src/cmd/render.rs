@@ -241,7 +241,11 @@ fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyho
         field,
         Some(&description),
         capture_dir,
-        !args.no_source_calibration,
+        if args.no_source_calibration {
+            super::bake::SourceFit::None
+        } else {
+            super::bake::SourceFit::Normalised(Some(nelf_field::prior::ShadingPrior::default()))
+        },
     )?;
     let (lo, hi) = field.bounds();
     let (camera, capture_envmap) = resolve_camera(&args.view, (lo.as_dvec3(), hi.as_dvec3()))?;

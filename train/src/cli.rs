@@ -106,6 +106,14 @@ pub struct EvalArgs {
     /// (default: from all of them; measured worse, train/README.md).
     #[arg(long)]
     pub fine_tune_leave_one_out: bool,
+    /// The Lambertian shading prior (`nelf_field::prior`, as `nelf bake` mixes it in)
+    /// of the source-normalised column: its density-gradient step, mm (0: the network's
+    /// own normalised transport, no prior).
+    #[arg(long, default_value_t = nelf_field::prior::DEFAULT_STEP_MM)]
+    pub shading_prior_mm: f32,
+    /// The prior's weight against the network's own transport (1: the prior alone).
+    #[arg(long, default_value_t = nelf_field::prior::DEFAULT_WEIGHT)]
+    pub shading_prior_weight: f32,
 }
 
 /// The heads `nelf train eval` scores.
@@ -199,6 +207,10 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
         &args.views,
         args.sheet.as_deref(),
         fine_tune_from.as_ref(),
+        (args.shading_prior_mm > 0.0).then_some(nelf_field::prior::ShadingPrior {
+            step_mm: args.shading_prior_mm,
+            weight: args.shading_prior_weight,
+        }),
     )?;
     if args.json {
         let text = serde_json::to_string_pretty(&serde_json::json!({
@@ -219,13 +231,13 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
     println!(
         "  views   PSNR dB   fg PSNR dB   SSIM     | flat colour: PSNR dB   fg PSNR dB   SSIM     \
          | source-view calibrated: PSNR dB   fg PSNR dB   SSIM     median gain \
-         | source-normalised: PSNR dB   fg PSNR dB   SSIM"
+         | source-normalised + prior: PSNR dB   fg PSNR dB   SSIM"
     );
     for r in &rows {
         println!(
             "  {:>5}   {:>7.2}   {:>10.2}   {:.4}   |              {:>7.2}   {:>10.2}   {:.4}   \
              |                         {:>7.2}   {:>10.2}   {:.4}   {:.3}       \
-             |                    {:>7.2}   {:>10.2}   {:.4}",
+             |                            {:>7.2}   {:>10.2}   {:.4}",
             r.views,
             r.psnr,
             r.foreground_psnr,

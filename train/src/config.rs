@@ -7,7 +7,7 @@
 
 use std::path::PathBuf;
 
-use nelf_field::{Architecture, NelfConfig};
+use nelf_field::{Architecture, Model, NelfConfig};
 use serde::{Deserialize, Serialize};
 
 use crate::error::TrainError;
@@ -134,6 +134,19 @@ pub struct TrainConfig {
     #[arg(long, default_value_t = 0.0)]
     #[serde(default)]
     pub ema_decay: f64,
+    /// Train through the Lambertian shading prior (`nelf_field::prior`) as bakes apply
+    /// it: each head's per-view light transport normalised to its known source
+    /// lighting and mixed with the clamped cosine about the normal of the density,
+    /// whose gradient is taken over this many mm (0: the network's own transport, as
+    /// the paper). The network then learns what the prior misses; validation scores
+    /// the same mix.
+    #[arg(long, default_value_t = 0.0)]
+    #[serde(default)]
+    pub shading_prior_mm: f32,
+    /// Weight of the prior against the network's own transport.
+    #[arg(long, default_value_t = nelf_field::prior::DEFAULT_WEIGHT)]
+    #[serde(default = "default_shading_prior_weight")]
+    pub shading_prior_weight: f32,
     /// Distillation points per step.
     #[arg(long, default_value_t = 256)]
     pub distill_points: usize,
@@ -176,6 +189,8 @@ impl Default for TrainConfig {
             distill_radiance_loss: ColourLoss::L1,
             free_space_weight: 0.0,
             ema_decay: 0.0,
+            shading_prior_mm: 0.0,
+            shading_prior_weight: nelf_field::prior::DEFAULT_WEIGHT,
             distill_points: 256,
             seed: 0,
             checkpoint_secs: 300.0,
@@ -185,7 +200,30 @@ impl Default for TrainConfig {
     }
 }
 
+fn default_shading_prior_weight() -> f32 {
+    nelf_field::prior::DEFAULT_WEIGHT
+}
+
 impl TrainConfig {
+    /// The shading prior this run trains through (`None` for `shading_prior_mm` 0).
+    pub fn shading_prior(&self) -> Option<nelf_field::prior::ShadingPrior> {
+        (self.shading_prior_mm > 0.0).then_some(nelf_field::prior::ShadingPrior {
+            step_mm: self.shading_prior_mm,
+            weight: self.shading_prior_weight,
+        })
+    }
+
+    /// `model` as this run applies it to `head`: with the shading prior, normalised to
+    /// the head's source lighting and the prior mixed in; otherwise as it is.
+    pub fn model_for_head(&self, model: &Model, head_source_light_net: &[f32]) -> Result<Model, TrainError> {
+        Ok(match self.shading_prior() {
+            Some(prior) => model
+                .clone()
+                .with_source_normalisation(Some(head_source_light_net))?
+                .with_shading_prior(Some(prior))?,
+            None => model.clone(),
+        })
+    }
     /// The weight of the distillation's σ term: `distill_sigma_weight`, else
     /// `distill_weight`.
     pub fn distill_sigma_weight(&self) -> f64 {
@@ -265,6 +303,15 @@ impl TrainConfig {
         ];
         if !weights.iter().all(|w| w.is_finite() && *w >= 0.0) {
             return bad(format!("loss weights {weights:?} must be non-negative"));
+        }
+        if !(self.shading_prior_mm.is_finite() && self.shading_prior_mm >= 0.0) {
+            return bad(format!(
+                "--shading-prior-mm {} must be ≥ 0 (0: off)",
+                self.shading_prior_mm
+            ));
+        }
+        if let Some(prior) = self.shading_prior() {
+            prior.validate()?;
         }
         if !(0.0..1.0).contains(&self.ema_decay) {
             return bad(format!(

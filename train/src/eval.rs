@@ -9,9 +9,11 @@
 //! so that a network that learned only silhouettes and average colour shows as such.
 //! Each row also scores the same renderings scaled by the source-view gain
 //! ([`nelf_field::calibrate`]: fitted to the head's own source views under its known
-//! source lighting, never to the target), as `nelf bake capture` applies it, and the
-//! network with its light transport normalised point by point to that lighting
-//! ([`nelf_field::nelfnet::normalise_to_source`], a diagnosis: `train/README.md`). With
+//! source lighting, never to the target), as `nelf bake capture` applied it before the
+//! prior, and the network with its light transport normalised point by point to that
+//! lighting ([`nelf_field::nelfnet::normalise_to_source`]) with the Lambertian shading
+//! prior mixed in ([`nelf_field::prior`]), as `nelf bake capture` applies them now
+//! (`train/README.md`). With
 //! [`FineTuneFrom`], each head is scored by the network fine-tuned on that head's
 //! own source views first ([`crate::finetune`]).
 
@@ -67,7 +69,8 @@ pub struct ViewCountRow {
     pub median_gain: f64,
     /// Whole-image PSNR of the network with its light transport normalised, point by
     /// point, to the head's known source lighting
-    /// ([`nelf_field::nelfnet::normalise_to_source`]), dB.
+    /// ([`nelf_field::nelfnet::normalise_to_source`]) and the shading prior given to
+    /// [`view_count_table`] mixed in ([`nelf_field::prior`]), dB.
     pub normalised_psnr: f64,
     /// The same inside the mask, dB.
     pub normalised_foreground_psnr: f64,
@@ -144,6 +147,7 @@ pub fn select_views(head: &PreparedHead, keep: &[usize]) -> Result<PreparedHead,
 
 /// The view-count table of `model` over `heads`, one row per count in `counts`; with
 /// `sheet`, the last count's views are written there (truth | network | flat colour).
+/// The normalised columns mix in `prior` (`None`: the network's own transport).
 pub fn view_count_table(
     model: &Model,
     heads: &[PreparedHead],
@@ -151,6 +155,7 @@ pub fn view_count_table(
     counts: &[usize],
     sheet: Option<&Path>,
     fine_tune_from: Option<&FineTuneFrom<'_>>,
+    prior: Option<nelf_field::prior::ShadingPrior>,
 ) -> Result<Vec<ViewCountRow>, TrainError> {
     if heads.is_empty() {
         return Err(TrainError::Settings("no heads to score".into()));
@@ -185,7 +190,8 @@ pub fn view_count_table(
             gains.push(f64::from(gain));
             let normalised = model
                 .clone()
-                .with_source_normalisation(Some(&head.source_light_net))?;
+                .with_source_normalisation(Some(&head.source_light_net))?
+                .with_shading_prior(prior)?;
             let n = validate_head(&normalised, &head, config)?.scores;
             let v = view.scores;
             sheet_views.push(view);

@@ -110,7 +110,6 @@ pub fn run_points(
     target_dirc: &[[f32; 3]],
     stage: Stage,
 ) -> Result<Option<PointPass>, TrainError> {
-    let device = model.device();
     let hull = geometry.hull(points);
     let inside: Vec<u32> = (0..points.len() as u32)
         .filter(|&i| hull.inside[i as usize])
@@ -119,9 +118,53 @@ pub fn run_points(
         return Ok(None);
     }
     let chosen: Vec<[f32; 3]> = inside.iter().map(|&i| points[i as usize]).collect();
-    let dirs: Vec<f32> = inside.iter().flat_map(|&i| target_dirc[i as usize]).collect();
-    let taps = geometry.gather_taps(&chosen);
-    let (n, v) = (chosen.len(), geometry.views());
+    let dirs: Vec<[f32; 3]> = inside.iter().map(|&i| target_dirc[i as usize]).collect();
+    let inputs = point_inputs(model, encoded, geometry, &chosen, &dirs, stage)?;
+    let source_rgb = inputs.source_rgb.clone();
+    let mut trace = model.forward_points(stage, &inputs)?;
+    if let (Some(prior), Some(e)) = (model.shading_prior(), model.source_irradiance()) {
+        // The normals come from the network's density without gradients: the prior
+        // shapes the transport, it does not train the geometry.
+        let probe_dirs: Vec<[f32; 3]> = dirs.iter().flat_map(|d| [*d; 6]).collect();
+        let normals = nelf_field::prior::density_normals(&chosen, prior.step_mm, |probes| {
+            let inputs = point_inputs(model, encoded, geometry, probes, &probe_dirs, stage)?;
+            Ok::<_, TrainError>(
+                model
+                    .net(stage)
+                    .density(&inputs)?
+                    .detach()
+                    .flatten_all()?
+                    .to_vec1::<f32>()?,
+            )
+        })?;
+        let cam0 = geometry
+            .cameras()
+            .first()
+            .ok_or_else(|| TrainError::Settings("no source views".into()))?
+            .rotation();
+        trace.lt_scale = nelf_field::prior::shading_prior(&prior, &trace.lt_scale, e, &normals, cam0)?;
+    }
+    Ok(Some(PointPass {
+        inside,
+        trace,
+        source_rgb,
+    }))
+}
+
+/// The network inputs of `points` (mm) seen along `target_dirc`, their latents
+/// gathered from `encoded`'s feature rows with gradients. No hull test.
+fn point_inputs(
+    model: &Model,
+    encoded: &Encoded,
+    geometry: &EncodedViews,
+    points: &[[f32; 3]],
+    target_dirc: &[[f32; 3]],
+    stage: Stage,
+) -> Result<PointInputs, TrainError> {
+    let device = model.device();
+    let dirs: Vec<f32> = target_dirc.iter().flatten().copied().collect();
+    let taps = geometry.gather_taps(points);
+    let (n, v) = (points.len(), geometry.views());
     let channels = encoded.feature_rows.dim(1)?;
     let latent_channels = channels / 2;
     let rows = encoded
@@ -142,18 +185,12 @@ pub fn run_points(
         .ok_or_else(|| TrainError::Settings("no taps".into()))?
         .reshape((n, v, latent_channels))?;
     let source_rgb = Tensor::from_slice(&taps.source_rgb, (n, v, 3), device)?;
-    let inputs = PointInputs {
-        source_rgb: source_rgb.clone(),
+    Ok(PointInputs {
+        source_rgb,
         latent,
         source_dirc: Tensor::from_slice(&taps.source_dirc, (n, v, 3), device)?,
         target_dirc: Tensor::from_vec(dirs, (n, 3), device)?,
-    };
-    let trace = model.forward_points(stage, &inputs)?;
-    Ok(Some(PointPass {
-        inside,
-        trace,
-        source_rgb,
-    }))
+    })
 }
 
 /// One composited pass over `R` rays.

@@ -98,6 +98,7 @@ pub fn validate_head(
         .or_else(|| head.targets.first())
         .ok_or_else(|| TrainError::Settings("a head without target views".into()))?;
     let (w, h) = (target.camera.width, target.camera.height);
+    let model = &config.model_for_head(model, &head.source_light_net)?;
     let encoded = encode(model, &head.capture.views)?;
     let irr = irradiance(&target.light_net, model.device())?;
     let centre = head.capture.head_centre_net();

@@ -994,7 +994,8 @@ pub fn train_step(
         return Err(TrainError::Settings("no training heads".into()));
     }
     let head = &heads[rng.random_range(0..heads.len())];
-    let (loss, mut parts) = step_loss(&trainable.model, head, config, &mut rng)?;
+    let model = config.model_for_head(&trainable.model, &head.source_light_net)?;
+    let (loss, mut parts) = step_loss(&model, head, config, &mut rng)?;
     let clock = Instant::now();
     let grads = loss.backward()?;
     parts.phase_secs[3] = secs_since(clock);

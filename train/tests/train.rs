@@ -152,6 +152,50 @@ fn one_step_lowers_the_loss_on_a_fixed_batch() {
     );
 }
 
+/// Training through the shading prior: one optimiser step on the head lowers the
+/// loss of the mixed transport, and the mix is what the step trains (the loss differs
+/// from the network's own).
+#[test]
+fn one_step_through_the_shading_prior_lowers_its_loss() {
+    let plain = tiny_config();
+    let config = TrainConfig {
+        shading_prior_mm: 8.0,
+        ..tiny_config()
+    };
+    assert!(config.validate().is_ok());
+    let head = synthetic_head();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let mut adam = trainable.optimizer(&config).unwrap();
+    let with_prior = |t: &Trainable| config.model_for_head(&t.model, &head.source_light_net).unwrap();
+    let loss = |model: &nelf_field::Model, config: &TrainConfig| {
+        step_loss(model, &head, config, &mut step_rng(11, 0)).unwrap()
+    };
+    let (graph, before) = loss(&with_prior(&trainable), &config);
+    let (_, own) = loss(&trainable.model, &plain);
+    assert!(before.total.is_finite() && before.total > 0.0, "{before:?}");
+    assert!(
+        (before.rgb_fine - own.rgb_fine).abs() > 1e-6,
+        "the prior changed nothing: {before:?} vs {own:?}"
+    );
+    adam.step(&graph.backward().unwrap()).unwrap();
+    let (_, after) = loss(&with_prior(&trainable), &config);
+    assert!(
+        after.total < before.total,
+        "loss {} → {}",
+        before.total,
+        after.total
+    );
+    // Bad settings are refused before any work.
+    for (mm, weight) in [(-1.0, 0.5), (8.0, 1.5), (f32::NAN, 0.5)] {
+        let bad = TrainConfig {
+            shading_prior_mm: mm,
+            shading_prior_weight: weight,
+            ..tiny_config()
+        };
+        assert!(bad.validate().is_err(), "{mm} {weight}");
+    }
+}
+
 /// Central differences (step `h`, f32 losses near 1) against the analytic gradient
 /// of the entry of each named parameter with the largest gradient.
 fn check_gradients(config: &TrainConfig, names: &[&str]) {
@@ -577,6 +621,18 @@ fn exported_tiny_network() -> (
 /// and depths: what is trained is what bakes.
 #[test]
 fn the_training_renderer_matches_the_inference_renderer() {
+    check_training_matches_inference(None);
+}
+
+/// With the Lambertian shading prior (normals from the density, the transport
+/// normalised to the head's source lighting), the training forward pass and the
+/// inference one still agree.
+#[test]
+fn the_training_renderer_matches_the_inference_renderer_with_the_shading_prior() {
+    check_training_matches_inference(Some(nelf_field::prior::ShadingPrior::default()));
+}
+
+fn check_training_matches_inference(prior: Option<nelf_field::prior::ShadingPrior>) {
     use nelf_field::render::{NetRay, RayUniforms, render_rays as infer};
     use nelf_field::{Model, NelfConfig, Stage};
     use nelf_train::forward::{encode, irradiance, render_rays};
@@ -590,6 +646,17 @@ fn the_training_renderer_matches_the_inference_renderer() {
     let model = Model::load(&path, nelf_config, &Device::Cpu).unwrap();
     // The exported weights say what image size they were trained at.
     assert_eq!(model.working_image_size(), Some(config.image_size));
+    let config = TrainConfig {
+        shading_prior_mm: prior.map_or(0.0, |p| p.step_mm),
+        shading_prior_weight: prior.map_or(0.5, |p| p.weight),
+        ..config
+    };
+    let model = config.model_for_head(&model, &head.source_light_net).unwrap();
+    let trained = config
+        .model_for_head(&trainable.model, &head.source_light_net)
+        .unwrap();
+    assert_eq!(model.shading_prior(), prior);
+    assert_eq!(trained.shading_prior(), prior);
     let target = &head.targets[1];
     let centre = head.capture.head_centre_net();
     let rays: Vec<NetRay> = (0..40)
@@ -607,13 +674,13 @@ fn the_training_renderer_matches_the_inference_renderer() {
         &target.light_net,
     )
     .unwrap();
-    let encoded = encode(&trainable.model, &head.capture.views).unwrap();
+    let encoded = encode(&trained, &head.capture.views).unwrap();
     let irr = irradiance(&target.light_net, &Device::Cpu).unwrap();
     let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
     let mut opaque = 0;
     for (stage, composite) in [(Stage::Coarse, &want.coarse), (Stage::Fine, &want.fine)] {
         let got = render_rays(
-            &trainable.model,
+            &trained,
             &encoded,
             &head.geometry,
             &rays,
@@ -740,7 +807,7 @@ fn the_view_count_table_scores_subsets_of_the_source_views() {
     );
     assert!(first_views(&head, 1).is_err());
     assert!(first_views(&head, all + 1).is_err());
-    let rows = view_count_table(&model, &[head], &config, &[2, all], None, None).unwrap();
+    let rows = view_count_table(&model, &[head], &config, &[2, all], None, None, None).unwrap();
     assert_eq!(rows.iter().map(|r| r.views).collect::<Vec<_>>(), [2, all]);
     for r in &rows {
         assert!(
