@@ -73,13 +73,13 @@ fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
     let bake = mean("network_bake", "foreground_psnr");
     let flat = mean("network_bake", "flat_foreground_psnr");
     let truth = mean("truth_bake", "foreground_psnr");
-    // Measured 23.73 against 21.48 dB (ground-truth bake 28.54; 21.63 with the one-gain
-    // calibration the bake used before the shading prior): a third of the gap, on the
-    // head where the bake leads by least. A network that learned only the silhouette
-    // and the average colour scores about the flat colour.
+    // Measured 24.32 against 21.48 dB (ground-truth bake 28.54; 21.63 with the
+    // one-gain calibration and the weights shipped before the shading prior): 40 % of
+    // the gap, on the head where the bake leads by least. A network that learned only
+    // the silhouette and the average colour scores about the flat colour.
     assert!(
-        bake > flat + 1.5,
-        "network bake {bake:.2} dB vs flat colour {flat:.2} dB (foreground): less than 1.5 dB ahead"
+        bake > flat + 2.0,
+        "network bake {bake:.2} dB vs flat colour {flat:.2} dB (foreground): less than 2 dB ahead"
     );
     assert!(
         truth > bake + 3.0,
