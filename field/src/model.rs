@@ -353,6 +353,32 @@ impl Model {
         self.shading_prior
     }
 
+    /// The per-view transport `lt` `(N, V, 384)` of `points` (mm, seen along
+    /// `target_dirc`) with the model's shading prior mixed in ([`crate::prior`]), or
+    /// `None` when the model has none. `density` gives σ of a batch of probe points
+    /// seen along the given directions (without gradients); `encoded` supplies the
+    /// view-0 camera the prior's directions are expressed in.
+    pub fn shading_prior_transport<E: From<NetError>>(
+        &self,
+        encoded: &EncodedViews,
+        points: &[[f32; 3]],
+        target_dirc: &[[f32; 3]],
+        lt: &Tensor,
+        density: impl Fn(&[[f32; 3]], &[[f32; 3]]) -> Result<Vec<f32>, E>,
+    ) -> Result<Option<Tensor>, E> {
+        let (Some(prior), Some(e)) = (&self.shading_prior, &self.source_irradiance) else {
+            return Ok(None);
+        };
+        let dirs: Vec<[f32; 3]> = target_dirc.iter().flat_map(|d| [*d; 6]).collect();
+        let normals = crate::prior::density_normals(points, prior.step_mm, |probes| density(probes, &dirs))?;
+        let cam0 = encoded
+            .cameras()
+            .first()
+            .ok_or_else(|| NetError::input("no source views"))?
+            .rotation();
+        Ok(Some(crate::prior::shading_prior(prior, lt, e, &normals, cam0)?))
+    }
+
     /// Runs `stage`'s per-point network on `inputs`, with the source normalisation
     /// when the model has one: every caller that shades or reads light transport
     /// goes through here.
@@ -519,23 +545,18 @@ impl Model {
             .gather(points, target_dirc, stage)?
             .to_tensors(&self.device)?;
         let mut trace = self.forward_points(stage, &inputs)?;
-        if let (Some(prior), Some(e)) = (&self.shading_prior, &self.source_irradiance) {
-            let dirs: Vec<[f32; 3]> = target_dirc.iter().flat_map(|d| [*d; 6]).collect();
-            let normals = crate::prior::density_normals(points, prior.step_mm, |probes| {
-                let inputs = encoded.gather(probes, &dirs, stage)?.to_tensors(&self.device)?;
+        if let Some(lt) =
+            self.shading_prior_transport(encoded, points, target_dirc, &trace.lt_scale, |probes, dirs| {
+                let inputs = encoded.gather(probes, dirs, stage)?.to_tensors(&self.device)?;
                 Ok::<_, NetError>(
                     self.net(stage)
                         .density(&inputs)?
                         .flatten_all()?
                         .to_vec1::<f32>()?,
                 )
-            })?;
-            let cam0 = encoded
-                .cameras()
-                .first()
-                .ok_or_else(|| NetError::input("no source views"))?
-                .rotation();
-            trace.lt_scale = crate::prior::shading_prior(prior, &trace.lt_scale, e, &normals, cam0)?;
+            })?
+        {
+            trace.lt_scale = lt;
         }
         Ok((inputs, trace))
     }

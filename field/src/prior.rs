@@ -57,6 +57,11 @@ impl Default for ShadingPrior {
 }
 
 impl ShadingPrior {
+    /// The prior of a command-line step and weight: `None` for a step of 0 mm (off).
+    pub fn from_step_mm(step_mm: f32, weight: f32) -> Option<Self> {
+        (step_mm > 0.0).then_some(Self { step_mm, weight })
+    }
+
     /// Checks the step and weight.
     pub fn validate(&self) -> Result<(), NetError> {
         if !(self.step_mm.is_finite() && self.step_mm > 0.0) {

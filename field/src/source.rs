@@ -50,9 +50,6 @@ pub struct NelfField {
     light_unit_scale: f32,
     /// The source-view calibration's gain ([`NelfField::calibrated_to_sources`]), else 1.
     source_gain: f32,
-    /// Whether the light transport is normalised to the source lighting
-    /// ([`NelfField::normalised_to_sources`]): then in physical units as it is.
-    normalised: bool,
     /// `(V, H, W)` the source views' masks (the encoded views keep only dilated
     /// ones), for the calibration.
     source_masks: Vec<f32>,
@@ -86,7 +83,6 @@ impl NelfField {
             chunk_points: 16_384,
             light_unit_scale: 1.0,
             source_gain: 1.0,
-            normalised: false,
             source_masks: capture.views.masks.clone(),
         };
         field.bounds = field.hull_bounds();
@@ -176,7 +172,6 @@ impl NelfField {
             .with_source_normalisation(Some(&light))?
             .with_shading_prior(prior)?;
         self.source_gain = 1.0;
-        self.normalised = true;
         Ok(self)
     }
 
@@ -185,7 +180,8 @@ impl NelfField {
     /// [`NelfField::calibrated_to_sources`] (else 1); 1 after
     /// [`NelfField::normalised_to_sources`].
     pub fn light_transport_scale(&self) -> f32 {
-        if self.normalised {
+        // Normalised to the source lighting, the transport is in physical units as it is.
+        if self.model.source_normalised() {
             1.0
         } else {
             self.light_unit_scale * self.source_gain

@@ -292,13 +292,12 @@ impl SourceFit {
     pub fn of_config(config: &BakeConfig) -> Self {
         if config.no_source_calibration {
             Self::None
-        } else if config.shading_prior_mm > 0.0 {
-            Self::Normalised(Some(nelf_field::prior::ShadingPrior {
-                step_mm: config.shading_prior_mm,
-                weight: config.shading_prior_weight,
-            }))
         } else {
-            Self::Gain
+            nelf_field::prior::ShadingPrior::from_step_mm(
+                config.shading_prior_mm,
+                config.shading_prior_weight,
+            )
+            .map_or(Self::Gain, |prior| Self::Normalised(Some(prior)))
         }
     }
 }

@@ -207,10 +207,7 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
         &args.views,
         args.sheet.as_deref(),
         fine_tune_from.as_ref(),
-        (args.shading_prior_mm > 0.0).then_some(nelf_field::prior::ShadingPrior {
-            step_mm: args.shading_prior_mm,
-            weight: args.shading_prior_weight,
-        }),
+        nelf_field::prior::ShadingPrior::from_step_mm(args.shading_prior_mm, args.shading_prior_weight),
     )?;
     if args.json {
         let text = serde_json::to_string_pretty(&serde_json::json!({

@@ -207,10 +207,7 @@ fn default_shading_prior_weight() -> f32 {
 impl TrainConfig {
     /// The shading prior this run trains through (`None` for `shading_prior_mm` 0).
     pub fn shading_prior(&self) -> Option<nelf_field::prior::ShadingPrior> {
-        (self.shading_prior_mm > 0.0).then_some(nelf_field::prior::ShadingPrior {
-            step_mm: self.shading_prior_mm,
-            weight: self.shading_prior_weight,
-        })
+        nelf_field::prior::ShadingPrior::from_step_mm(self.shading_prior_mm, self.shading_prior_weight)
     }
 
     /// `model` as this run applies it to `head`: with the shading prior, normalised to

@@ -122,12 +122,11 @@ pub fn run_points(
     let inputs = point_inputs(model, encoded, geometry, &chosen, &dirs, stage)?;
     let source_rgb = inputs.source_rgb.clone();
     let mut trace = model.forward_points(stage, &inputs)?;
-    if let (Some(prior), Some(e)) = (model.shading_prior(), model.source_irradiance()) {
-        // The normals come from the network's density without gradients: the prior
-        // shapes the transport, it does not train the geometry.
-        let probe_dirs: Vec<[f32; 3]> = dirs.iter().flat_map(|d| [*d; 6]).collect();
-        let normals = nelf_field::prior::density_normals(&chosen, prior.step_mm, |probes| {
-            let inputs = point_inputs(model, encoded, geometry, probes, &probe_dirs, stage)?;
+    // The normals come from the network's density without gradients: the prior
+    // shapes the transport, it does not train the geometry.
+    if let Some(lt) =
+        model.shading_prior_transport(geometry, &chosen, &dirs, &trace.lt_scale, |probes, probe_dirs| {
+            let inputs = point_inputs(model, encoded, geometry, probes, probe_dirs, stage)?;
             Ok::<_, TrainError>(
                 model
                     .net(stage)
@@ -136,13 +135,9 @@ pub fn run_points(
                     .flatten_all()?
                     .to_vec1::<f32>()?,
             )
-        })?;
-        let cam0 = geometry
-            .cameras()
-            .first()
-            .ok_or_else(|| TrainError::Settings("no source views".into()))?
-            .rotation();
-        trace.lt_scale = nelf_field::prior::shading_prior(&prior, &trace.lt_scale, e, &normals, cam0)?;
+        })?
+    {
+        trace.lt_scale = lt;
     }
     Ok(Some(PointPass {
         inside,
