@@ -185,21 +185,28 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
     // A synthetic capture carries its ground truth (synth_config.json); without
     // it, the capture is like a photographed one.
     std::fs::remove_file(cap.join("synth_config.json")).unwrap();
-    let asset_path = dir.path().join("shipped.nelf");
     let out = cap.to_str().unwrap();
-    succeed(&[
-        "bake",
-        "capture",
-        out,
-        "-o",
-        asset_path.to_str().unwrap(),
-        "--resolution",
-        "24",
-        "--view-dependence",
-        "off",
-        "--quiet",
-    ]);
-    let asset = read_asset(&asset_path).unwrap();
+    // The shipped network's bake of the capture at 24³, without view dependence,
+    // written to `name` with the `extra` options and read back.
+    let bake_shipped = |name: &str, extra: &[&str]| {
+        let path = dir.path().join(name);
+        let mut args = vec![
+            "bake",
+            "capture",
+            out,
+            "-o",
+            path.to_str().unwrap(),
+            "--resolution",
+            "24",
+            "--view-dependence",
+            "off",
+            "--quiet",
+        ];
+        args.extend_from_slice(extra);
+        succeed(&args);
+        (read_asset(&path).unwrap(), path)
+    };
+    let (asset, asset_path) = bake_shipped("shipped.nelf", &[]);
     let source = &asset.metadata["source"]["source"];
     assert_eq!(source["kind"], "nelf-network", "{}", asset.metadata);
     assert!(
@@ -238,22 +245,7 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
 
     // --shading-prior-mm 0: the one-gain calibration instead, the transport divided by
     // the source lighting's power and scaled by the gain.
-    let gain_path = dir.path().join("gain.nelf");
-    succeed(&[
-        "bake",
-        "capture",
-        out,
-        "-o",
-        gain_path.to_str().unwrap(),
-        "--resolution",
-        "24",
-        "--view-dependence",
-        "off",
-        "--shading-prior-mm",
-        "0",
-        "--quiet",
-    ]);
-    let gain = read_asset(&gain_path).unwrap();
+    let (gain, _) = bake_shipped("gain.nelf", &["--shading-prior-mm", "0"]);
     let source = &gain.metadata["source"]["source"];
     assert_eq!(source["source_normalised"], false, "{source}");
     assert!(source["shading_prior"].is_null(), "{source}");

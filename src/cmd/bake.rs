@@ -248,19 +248,11 @@ pub fn bake_network(
     let model_size = model.working_image_size();
     let (prepared, field) = network_field(capture, model, SourceFit::of_config(config))?;
     let encoded_size = prepared.cameras.first().map(|c| [c.width, c.height]);
-    let provenance = serde_json::json!({
-        "kind": "nelf-network",
-        "weights": weights_name,
-        "working_image_size": model_size,
-        "encoded_image_size": encoded_size,
-        "device": nelf_field::device_name(&device),
-        "view_policy": "toward the mean camera",
-        "light_transport_scale": field.light_transport_scale(),
-        "source_gain": field.source_gain(),
-        "source_normalised": field.model().source_normalised(),
-        "shading_prior": field.model().shading_prior().map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
-        "source_relative_light": field.model().source_relative_light(),
-    });
+    let mut provenance = network_provenance(&field, &weights_name);
+    provenance["working_image_size"] = serde_json::json!(model_size);
+    provenance["encoded_image_size"] = serde_json::json!(encoded_size);
+    provenance["device"] = serde_json::json!(nelf_field::device_name(&device));
+    provenance["view_policy"] = serde_json::json!("toward the mean camera");
     bake_network_field(
         capture,
         &field,
@@ -270,6 +262,23 @@ pub fn bake_network(
         NETWORK_VOXEL_FILTER,
         None,
     )
+}
+
+/// What a network bake records of its field: the weights it came from and how its
+/// light transport was put in the capture's units (gain, normalisation, shading prior).
+pub fn network_provenance(field: &NelfField, weights_name: &str) -> serde_json::Value {
+    let model = field.model();
+    serde_json::json!({
+        "kind": "nelf-network",
+        "weights": weights_name,
+        "light_transport_scale": field.light_transport_scale(),
+        "source_gain": field.source_gain(),
+        "source_normalised": model.source_normalised(),
+        "shading_prior": model
+            .shading_prior()
+            .map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
+        "source_relative_light": model.source_relative_light(),
+    })
 }
 
 /// How a network field is fitted to the capture's source views when the capture

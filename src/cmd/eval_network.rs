@@ -120,14 +120,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             model.clone(),
             super::bake::SourceFit::of_config(&config),
         )?;
-        let provenance = serde_json::json!({
-            "kind": "nelf-network",
-            "weights": weights_name,
-            "light_transport_scale": field.light_transport_scale(),
-            "source_gain": field.source_gain(),
-            "source_normalised": field.model().source_normalised(),
-            "shading_prior": field.model().shading_prior().map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
-        });
+        let provenance = super::bake::network_provenance(&field, &weights_name);
         // The network's bake with a view policy (`None`: its recommended one), written to
         // `name` and read back as a viewer would.
         let network_bake = |view_policy, name: String| -> anyhow::Result<nelf_format::Asset> {
