@@ -20,18 +20,24 @@
 # (tests/network_accuracy.rs); the five take ~7 minutes (models/README.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
-OUT=out/heldout-heads
+SIZE=${SIZE:-64}
+OUT=out/heldout-heads-$SIZE
 if [ $# -gt 0 ] && [ "$1" != "--" ]; then OUT=$1; shift; fi
 if [ "${1:-}" = "--" ]; then shift; fi
 NELF=target/release/nelf
-SIZE=${SIZE:-64}
 mkdir -p "$OUT"
 
 captures=()
 for k in 1 2 3 4 5; do
   seed=$(( (1 << 62) + k ))
   dir="$OUT/head$k"
-  if [ ! -f "$dir/cameras.json" ]; then
+  if [ -f "$dir/cameras.json" ]; then
+    width=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["views"][0]["width"])' "$dir/cameras.json")
+    if [ "$width" != "$SIZE" ]; then
+      echo "$dir holds ${width}² views, not ${SIZE}²: choose another OUT_DIR" >&2
+      exit 2
+    fi
+  else
     "$NELF" capture synth --head-seed "$seed" --width "$SIZE" --height "$SIZE" \
       --envmap data/envmaps/forest.exr \
       --target-envmap data/envmaps/interior.exr --target-envmap data/envmaps/forest.exr \
