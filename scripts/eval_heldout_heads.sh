@@ -2,22 +2,24 @@
 # The issue-18 check "the network bake of a held-out procedural head beats the flat
 # colour", on five held-out heads fixed in advance: the first five seeds of the
 # validation range (2^62 + 1 ... 5, which `nelf train data` never trains on), 64² views
-# under the repository's `forest` HDRI, two novel-light targets (`interior`, and
+# (SIZE) under the repository's `forest` HDRI, two novel-light targets (`interior`, and
 # `forest` turned 90°), baked at resolution 32 by `nelf eval network`.
 #
 #   cargo build --release -p nelf --bins
 #   bash scripts/eval_heldout_heads.sh [OUT_DIR] [-- EXTRA nelf eval network ARGS, e.g. --weights W]
-#   SIZE=128 bash scripts/eval_heldout_heads.sh out/heldout-128   # the same heads at 128² views
+#   SIZE=128 bash scripts/eval_heldout_heads.sh   # the same heads at 128² views
 #
-# Prints, per head, foreground PSNR (8-bit sRGB, mean of its two targets) of the network,
-# its bake, the ground-truth bake and the flat colour; the share of the gap between the
-# flat colour and the ground-truth bake that the network and its bake close (foreground
-# and whole-image); then the verdict of the rule set
-# before the weights that meet it were trained: the bake beats the flat colour on at
-# least 4 of the 5 heads and by at least 0.5 dB on their mean. The shipped weights
-# meet it with the source-view calibration (the default; `-- --no-source-calibration`
-# scores without it, and fails). CI tests the first head alone
-# (tests/network_accuracy.rs); the five take ~7 minutes (models/README.md).
+# OUT_DIR defaults to out/heldout-heads-SIZE; heads already rendered there are reused,
+# and a folder holding another size is refused. Prints, per head, foreground PSNR (8-bit
+# sRGB, mean of its two targets) of the network, its bake, the ground-truth bake and the
+# flat colour; the share of the gap between the flat colour and the ground-truth bake
+# that the network and its bake close (foreground and whole-image); then the verdict of
+# the rule set before the weights that meet it were trained: the bake beats the flat
+# colour on at least 4 of the 5 heads and by at least 0.5 dB on their mean. The shipped
+# weights meet it with the defaults (normalised to the source lighting, with the shading
+# prior; `-- --no-source-calibration` scores the raw network). CI tests the first head
+# alone (tests/network_accuracy.rs); the five take ~7 minutes at 64², ~40 at 128² (beside CI)
+# (models/README.md).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SIZE=${SIZE:-64}
