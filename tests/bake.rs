@@ -242,6 +242,13 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
         serde_json::from_slice(&std::fs::read(asset_path.with_extension("bake.json")).unwrap()).unwrap();
     assert_eq!(sidecar["config"]["network_skin_mm"], 1.0, "{sidecar}");
     assert_eq!(sidecar["config"]["shading_prior_weight"], 0.5, "{sidecar}");
+    // ... and carved to the visual hull of the masks (`nelf_bake::silhouette`).
+    assert_eq!(sidecar["config"]["no_network_hull_carve"], false, "{sidecar}");
+    assert_eq!(
+        sidecar["config"]["network_hull_margin_px"].as_f64(),
+        Some(f64::from(nelf_bake::config::DEFAULT_NETWORK_HULL_MARGIN_PX)),
+        "{sidecar}"
+    );
 
     // --shading-prior-mm 0: the one-gain calibration instead, the transport divided by
     // the source lighting's power and scaled by the gain.

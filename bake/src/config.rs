@@ -54,6 +54,13 @@ fn default_shading_prior_weight() -> f32 {
     DEFAULT_SHADING_PRIOR_WEIGHT
 }
 
+/// Default [`BakeConfig::network_hull_margin_px`].
+pub const DEFAULT_NETWORK_HULL_MARGIN_PX: f32 = 0.5;
+
+fn default_network_hull_margin_px() -> f32 {
+    DEFAULT_NETWORK_HULL_MARGIN_PX
+}
+
 fn default_network_skin_mm() -> f32 {
     DEFAULT_NETWORK_SKIN_MM
 }
@@ -248,6 +255,18 @@ pub struct BakeConfig {
     #[arg(long, default_value_t = DEFAULT_SHADING_PRIOR_WEIGHT)]
     #[serde(default = "default_shading_prior_weight")]
     pub shading_prior_weight: f32,
+    /// Network field: leave its density uncarved. By default its signed density
+    /// is carved to the visual hull of the masks (`nelf_bake::silhouette`), grown by
+    /// `--network-hull-margin-px`, so that the bake keeps the photos' silhouettes
+    /// instead of a halo outside them.
+    #[arg(long)]
+    #[serde(default)]
+    pub no_network_hull_carve: bool,
+    /// Network field: pixels every mask is grown by before the carve (room for mask
+    /// errors; 0: the exact hull of the masks thresholded at ½).
+    #[arg(long, default_value_t = DEFAULT_NETWORK_HULL_MARGIN_PX)]
+    #[serde(default = "default_network_hull_margin_px")]
+    pub network_hull_margin_px: f32,
     /// Outgoing direction the light transport is baked for.
     #[arg(long, value_enum, default_value_t)]
     pub view_policy: ViewPolicyChoice,
@@ -346,6 +365,8 @@ impl Default for BakeConfig {
             no_source_calibration: false,
             shading_prior_mm: DEFAULT_SHADING_PRIOR_MM,
             shading_prior_weight: DEFAULT_SHADING_PRIOR_WEIGHT,
+            no_network_hull_carve: false,
+            network_hull_margin_px: DEFAULT_NETWORK_HULL_MARGIN_PX,
             view_policy: ViewPolicyChoice::AverageCameras,
             render_size: 128,
             step_voxels: 0.5,
@@ -434,6 +455,12 @@ impl BakeConfig {
                 self.network_skin_mm
             ));
         }
+        if !(self.network_hull_margin_px.is_finite() && self.network_hull_margin_px >= 0.0) {
+            return bad(format!(
+                "--network-hull-margin-px {} must be ≥ 0",
+                self.network_hull_margin_px
+            ));
+        }
         if !(self.shading_prior_mm.is_finite() && self.shading_prior_mm >= 0.0) {
             return bad(format!(
                 "--shading-prior-mm {} must be ≥ 0 (0: no prior)",
@@ -509,5 +536,25 @@ mod tests {
         }
         let read: BakeConfig = serde_json::from_value(json).unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(read.network_skin_mm, DEFAULT_NETWORK_SKIN_MM);
+    }
+
+    #[test]
+    fn hull_carve_is_validated_and_defaults_on_for_older_configs() {
+        for bad in [-0.5f32, f32::NAN, f32::INFINITY] {
+            let config = BakeConfig {
+                network_hull_margin_px: bad,
+                ..BakeConfig::default()
+            };
+            let message = config.validate().err().map(|e| e.to_string()).unwrap_or_default();
+            assert!(message.contains("--network-hull-margin-px"), "{bad}: {message}");
+        }
+        let mut json = serde_json::to_value(BakeConfig::default()).unwrap_or_default();
+        if let Some(map) = json.as_object_mut() {
+            map.remove("network_hull_margin_px");
+            map.remove("no_network_hull_carve");
+        }
+        let read: BakeConfig = serde_json::from_value(json).unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(read.network_hull_margin_px, DEFAULT_NETWORK_HULL_MARGIN_PX);
+        assert!(!read.no_network_hull_carve);
     }
 }

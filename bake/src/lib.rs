@@ -9,7 +9,8 @@
 //!    bricks below an opacity threshold, and the band of voxels whose light
 //!    transport can show.
 //! 4. **Field sources** ([`source`]): anything implementing
-//!    `nelf_scene::field::FieldSource`; today the ground-truth mesh field.
+//!    `nelf_scene::field::FieldSource`; today the ground-truth mesh field. A
+//!    network's density is carved to the masks' visual hull ([`silhouette`]).
 //! 5. **PCA** ([`pca`]) weighted by visibility in the capture's views, the **rank**
 //!    chosen per scene by rendered-image loss ([`rank`]), quantized and written
 //!    ([`pipeline`]), for a capture or a mesh ([`jobs`]), with every setting in
@@ -36,6 +37,7 @@ pub mod pca;
 pub mod pipeline;
 pub mod progress;
 pub mod rank;
+pub mod silhouette;
 pub mod source;
 pub mod view;
 
@@ -55,5 +57,6 @@ pub use pipeline::{
     sample_field, sidecar_path, write_bake,
 };
 pub use progress::Progress;
+pub use silhouette::{HullCarved, HullDistance};
 pub use source::{GroundTruth, ShellMeshField, ShellProfile};
 pub use view::ViewChoice;

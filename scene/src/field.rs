@@ -787,13 +787,22 @@ impl<'a> SignedLogDensity<'a> {
 
     /// The stored signed value for an inner density `sigma` (1/m).
     pub fn encode(&self, sigma: f32) -> f32 {
+        if sigma <= 0.0 || sigma.is_nan() {
+            return self.encode_distance(f32::INFINITY);
+        }
+        self.encode_distance(-(sigma / self.iso_per_m).ln() / self.decay_per_m)
+    }
+
+    /// The stored signed value at `distance_m` outside a surface (negative: inside),
+    /// the profile [`SignedLogDensity::encode`] gives its estimate `d̂`: another
+    /// surface, such as the visual hull, stored the same way.
+    pub fn encode_distance(&self, distance_m: f32) -> f32 {
         let slope = 2.0 * std::f32::consts::LN_2 / (self.lead_m * self.lead_m);
         let cap = slope * (self.lead_m + 2.0 * self.voxel_m);
-        if sigma <= 0.0 || sigma.is_nan() {
+        if distance_m.is_nan() {
             return -cap;
         }
-        let distance = -(sigma / self.iso_per_m).ln() / self.decay_per_m;
-        (slope * (self.lead_m - distance)).clamp(-cap, cap)
+        (slope * (self.lead_m - distance_m)).clamp(-cap, cap)
     }
 }
 

@@ -715,6 +715,12 @@ fn a_signed_log_density_keeps_a_steep_skin_in_place() {
     assert!(signed.encode(0.0) <= signed.encode(1.0));
     assert!(signed.encode(1.0) < signed.encode(693.0) && signed.encode(693.0) < signed.encode(1e5));
     assert!(signed.encode(693.0) > 0.0 && signed.encode(1e12) == -signed.encode(0.0));
+    // The same profile of a distance (another surface stored alike, e.g. a visual
+    // hull): zero at the lead outside, σ_iso's value at the surface, capped both ways.
+    assert!(signed.encode_distance(0.001).abs() < 1e-3 * signed.encode(0.0).abs());
+    assert!((signed.encode_distance(0.0) - signed.encode(693.0)).abs() < 1e-3 * signed.encode(693.0));
+    assert_eq!(signed.encode_distance(f32::INFINITY), signed.encode(0.0));
+    assert_eq!(signed.encode_distance(-1.0), -signed.encode(0.0));
     assert!(SignedLogDensity::new(&skin, 0.0, k, 0.001, voxel).is_err());
     assert!(SignedLogDensity::new(&skin, 693.0, f32::NAN, 0.001, voxel).is_err());
 }

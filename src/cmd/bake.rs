@@ -11,8 +11,8 @@ use std::path::PathBuf;
 use anyhow::Context;
 use nelf_bake::{
     BakeConfig, BakeOutput, CaptureFormat, CaptureLoadOptions, ChoiceArgs, ChoiceReport, GroundTruth,
-    LoadedCapture, Progress, bake_capture, bake_capture_field, bake_mesh, load_capture, plan_capture,
-    sidecar_path, write_bake,
+    HullCarved, HullDistance, LoadedCapture, Progress, bake_capture, bake_capture_field, bake_mesh,
+    load_capture, plan_capture, sidecar_path, write_bake,
 };
 use nelf_field::capture::default_net_from_world;
 use nelf_field::shipped::load_or_shipped;
@@ -427,7 +427,7 @@ pub fn bake_network_field(
     let view_policy = view_policy.unwrap_or_else(|| field.recommended_view_policy());
     let voxel_m = planned.voxel_size_m as f32;
     let filtered = VoxelFiltered::new(field, voxel_m, voxel_filter)?;
-    let signed;
+    let (signed, carved);
     let source: &dyn nelf_scene::field::FieldSource = if config.network_skin_mm > 0.0 {
         signed = SignedLogDensity::with_skin(
             &filtered,
@@ -435,7 +435,18 @@ pub fn bake_network_field(
             config.lead_voxels * voxel_m,
             voxel_m,
         )?;
-        &signed
+        if config.no_network_hull_carve {
+            &signed
+        } else {
+            let hull = HullDistance::new(
+                &capture.cameras,
+                &capture.masks,
+                f64::from(config.network_hull_margin_px),
+            )
+            .with_context(|| format!("the visual hull of {}", capture.dir.display()))?;
+            carved = HullCarved::new(&signed, hull);
+            &carved
+        }
     } else {
         &filtered
     };

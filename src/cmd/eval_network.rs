@@ -58,6 +58,14 @@ pub struct NetworkEvalArgs {
     /// The prior's weight (`nelf bake --shading-prior-weight`).
     #[arg(long, default_value_t = nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT)]
     pub shading_prior_weight: f32,
+    /// The network's bake: leave its density uncarved by the visual hull
+    /// (`nelf bake --no-network-hull-carve`).
+    #[arg(long)]
+    pub no_network_hull_carve: bool,
+    /// The network's bake: pixels the masks are grown by before the carve
+    /// (`nelf bake --network-hull-margin-px`).
+    #[arg(long, default_value_t = nelf_bake::config::DEFAULT_NETWORK_HULL_MARGIN_PX)]
+    pub network_hull_margin_px: f32,
     /// Also bake the network once per target with its light transport toward that
     /// target's camera (`oracle_view_bake` in the scores): what a bake without a
     /// view-dependent part could reach at best, to tell view dependence from other
@@ -94,6 +102,8 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         no_source_calibration: args.no_source_calibration,
         shading_prior_mm: args.shading_prior_mm,
         shading_prior_weight: args.shading_prior_weight,
+        no_network_hull_carve: args.no_network_hull_carve,
+        network_hull_margin_px: args.network_hull_margin_px,
         ..BakeConfig::default()
     };
     let progress = Progress::hidden();
@@ -214,6 +224,8 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         "no_source_calibration": args.no_source_calibration,
         "shading_prior_mm": args.shading_prior_mm,
         "shading_prior_weight": args.shading_prior_weight,
+        "network_hull_carve": !args.no_network_hull_carve,
+        "network_hull_margin_px": args.network_hull_margin_px,
         "rank": args.rank,
         "targets": rows.len(),
         "mean_foreground_psnr": {
