@@ -390,6 +390,38 @@ mod tests {
         Ok(())
     }
 
+    #[test]
+    fn soft_masks_odd_intrinsics_and_non_square_frames() -> Result<()> {
+        // 48 × 32, fx ≠ fy, the principal point off centre; a 0.2 m disc facing the
+        // camera, its mask soft over a band about two pixels wide (½ on the ellipse).
+        let mut cam = camera();
+        (cam.width, cam.height) = (48, 32);
+        (cam.fx, cam.fy, cam.cx, cam.cy) = (70.0, 52.0, 21.3, 17.6);
+        let (a, b) = (cam.fx * 0.1, cam.fy * 0.1);
+        let mask: Vec<f32> = (0..48 * 32)
+            .map(|i| {
+                let (u, v) = ((i % 48) as f64 + 0.5, (i / 48) as f64 + 0.5);
+                let rho = (((u - cam.cx) / a).powi(2) + ((v - cam.cy) / b).powi(2)).sqrt();
+                (0.5 + (1.0 - rho) * 0.5 * a).clamp(0.0, 1.0) as f32
+            })
+            .collect();
+        assert!(mask.iter().any(|&m| m > 0.05 && m < 0.95));
+        let hull = HullDistance::new(&[cam], &[mask], 0.0)?;
+        // Two pixels in from the silhouette and two out, along image x and y (image y
+        // points along −world y for this camera).
+        for (axis, f) in [(DVec3::X, cam.fx), (DVec3::Y, cam.fy)] {
+            for sign in [1.0, -1.0] {
+                let step = 2.0 * 2.0 / f;
+                let inside = hull.distance_m(sign * (0.2 - step) * axis);
+                let outside = hull.distance_m(sign * (0.2 + step) * axis);
+                assert!(inside < 0.0 && outside > 0.0, "{axis} {sign}: {inside} {outside}");
+            }
+        }
+        // Off the frame: outside.
+        assert!(hull.distance_m(DVec3::new(1.0, 0.0, 0.0)) > 0.2);
+        Ok(())
+    }
+
     /// A ball of radius `radius_m` about the origin, uniformly dense, with light
     /// transport 1 everywhere: a network's field that spills past the silhouettes.
     struct Ball {
