@@ -41,7 +41,37 @@ use rayon::prelude::*;
 
 use crate::error::{BakeError, Result};
 
-/// Summed-area table of a binary mask (foreground = value > 0.5).
+/// Whether a mask value is foreground: the one threshold of the hull and of the
+/// network's carve ([`crate::silhouette`]).
+pub(crate) fn is_foreground(value: f32) -> bool {
+    value > 0.5
+}
+
+/// Checks that `mask` holds `width × height` values of a non-empty image.
+pub(crate) fn check_mask_size(mask: &[f32], width: usize, height: usize) -> Result<()> {
+    if mask.len() != width * height || width == 0 || height == 0 {
+        return Err(BakeError::Hull(format!(
+            "a {width}×{height} mask needs {} values, got {}",
+            width * height,
+            mask.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Checks that there is one mask per camera, and at least one camera.
+pub(crate) fn check_mask_count(cameras: &[PinholeCamera], masks: &[Vec<f32>]) -> Result<()> {
+    if cameras.len() != masks.len() || cameras.is_empty() {
+        return Err(BakeError::Hull(format!(
+            "{} cameras and {} masks: a hull needs one mask per camera",
+            cameras.len(),
+            masks.len()
+        )));
+    }
+    Ok(())
+}
+
+/// Summed-area table of a binary mask (foreground: [`is_foreground`]).
 #[derive(Debug, Clone)]
 pub struct MaskTable {
     width: usize,
@@ -54,19 +84,13 @@ pub struct MaskTable {
 impl MaskTable {
     /// Builds the table of `mask` (`width × height`, row-major, values in `[0, 1]`).
     pub fn new(mask: &[f32], width: usize, height: usize) -> Result<Self> {
-        if mask.len() != width * height || width == 0 || height == 0 {
-            return Err(BakeError::Hull(format!(
-                "a {width}×{height} mask needs {} values, got {}",
-                width * height,
-                mask.len()
-            )));
-        }
+        check_mask_size(mask, width, height)?;
         let stride = width + 1;
         let mut sums = vec![0u32; stride * (height + 1)];
         for y in 0..height {
             let mut row = 0u32;
             for x in 0..width {
-                row += u32::from(mask[y * width + x] > 0.5);
+                row += u32::from(is_foreground(mask[y * width + x]));
                 sums[(y + 1) * stride + x + 1] = sums[y * stride + x + 1] + row;
             }
         }
@@ -108,13 +132,7 @@ pub struct HullCarver {
 impl HullCarver {
     /// A carver for `cameras` and their masks (each `width × height` of its camera).
     pub fn new(cameras: &[PinholeCamera], masks: &[Vec<f32>], dilate_px: u32) -> Result<Self> {
-        if cameras.len() != masks.len() || cameras.is_empty() {
-            return Err(BakeError::Hull(format!(
-                "{} cameras and {} masks",
-                cameras.len(),
-                masks.len()
-            )));
-        }
+        check_mask_count(cameras, masks)?;
         let tables = cameras
             .iter()
             .zip(masks)

@@ -9,8 +9,8 @@
 //! subject exactly: no point outside the visual hull (Laurentini 1994) can be
 //! occupied.
 //!
-//! **Signed distance to the hull.** Per view, the mask (foreground = value > 0.5,
-//! as [`crate::hull`]) is padded with one pixel of background on every side (pixels
+//! **Signed distance to the hull.** Per view, the mask (foreground as
+//! [`crate::hull`] has it, value > ½) is padded with one pixel of background on every side (pixels
 //! outside the frame are background) and its exact Euclidean distance transform is
 //! taken both ways (Felzenszwalb & Huttenlocher 2012, the separable lower envelope
 //! of parabolas): a pixel outside gets `+(distance to the nearest foreground
@@ -35,6 +35,7 @@ use nelf_format::conventions::PinholeCamera;
 use nelf_scene::field::{FieldError, FieldSource, SignedLogDensity, ViewPolicy};
 
 use crate::error::{BakeError, Result};
+use crate::hull::{check_mask_count, check_mask_size, is_foreground};
 
 /// Squared-distance stand-in for "no such pixel" in the distance transform.
 const FAR: f64 = 1e20;
@@ -55,18 +56,12 @@ struct ViewDistance {
 impl ViewDistance {
     fn new(camera: &PinholeCamera, mask: &[f32]) -> Result<Self> {
         let (w, h) = (camera.width as usize, camera.height as usize);
-        if mask.len() != w * h || w == 0 || h == 0 {
-            return Err(BakeError::Hull(format!(
-                "a {w}×{h} view needs a mask of {} values, got {}",
-                w * h,
-                mask.len()
-            )));
-        }
+        check_mask_size(mask, w, h)?;
         let (pw, ph) = (w + 2, h + 2);
         let inside: Vec<bool> = (0..pw * ph)
             .map(|i| {
                 let (x, y) = (i % pw, i / pw);
-                (1..=w).contains(&x) && (1..=h).contains(&y) && mask[(y - 1) * w + (x - 1)] > 0.5
+                (1..=w).contains(&x) && (1..=h).contains(&y) && is_foreground(mask[(y - 1) * w + (x - 1)])
             })
             .collect();
         let to_inside = distance_transform(&inside, pw, ph);
@@ -200,13 +195,7 @@ impl HullDistance {
     /// # Errors
     /// Cameras and masks disagree in number or size, or the margin is not finite.
     pub fn new(cameras: &[PinholeCamera], masks: &[Vec<f32>], margin_px: f64) -> Result<Self> {
-        if cameras.len() != masks.len() || cameras.is_empty() {
-            return Err(BakeError::Hull(format!(
-                "{} cameras and {} masks: a hull needs one mask per camera",
-                cameras.len(),
-                masks.len()
-            )));
-        }
+        check_mask_count(cameras, masks)?;
         if !margin_px.is_finite() {
             return Err(BakeError::Hull(format!(
                 "the hull's margin {margin_px} px is not finite"
