@@ -64,6 +64,9 @@ pub const VIEW_DIRECTIONS: usize = 64;
 /// Band voxels the view basis is fitted on (evenly strided).
 pub const BASIS_SAMPLE: usize = 2048;
 
+/// Band voxels (evenly strided) `auto`'s probe fits ([`FitScope::Sample`]): one batch.
+pub const PROBE_SAMPLE: usize = 512;
+
 /// Concentration of the direction weights around the directions toward the views'
 /// eyes: `exp(κ (c·ω − 1))`, κ = 4 (a von Mises–Fisher kernel ≈ 30° wide).
 const VIEW_KERNEL: f64 = 8.0;
@@ -257,8 +260,12 @@ pub struct ViewFit {
     normal: Vec<f64>,
     /// Per band voxel: `h` (9 × `K_max`).
     projected: Vec<f64>,
-    /// Per band voxel: weight (visibility) for the learned lobes.
+    /// Per fitted voxel: weight (visibility) for the learned lobes.
     weights: Vec<f64>,
+    /// The band entries (indices into the band's voxel list) the per-voxel arrays
+    /// cover, in order: the whole band, or the basis subsample of a probe
+    /// ([`FitScope::Sample`]); empty when skipped.
+    pub entries: Vec<usize>,
     /// Relative RMS of the residual over the subsample (`|R| / |T̄|`, weighted).
     pub residual_ratio: f64,
     /// Seconds spent.
@@ -476,9 +483,20 @@ fn fit_reflection_voxel(
 /// `(G, h)` and, when asked for, its reflection normal and scales.
 type PerVoxel = ((Vec<f64>, Vec<f64>), Option<([f32; 3], Vec<f32>)>);
 
+/// Which band voxels [`fit_view`] keeps normal equations for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FitScope {
+    /// Every band voxel: the view part of the asset.
+    Band,
+    /// Only an evenly strided subsample of [`PROBE_SAMPLE`] voxels, which also gives
+    /// the basis: a probe of what a view part could gain, at `PROBE_SAMPLE / band` of
+    /// the cost of [`FitScope::Band`] (each voxel's transport is sampled once).
+    Sample,
+}
+
 /// Samples and fits the residual of `field` over the band voxels `lt_voxels` (whose
 /// view-independent vectors are `lt`, `384` each, and visibility weights `weights`).
-/// `max_rank` caps the view basis.
+/// `max_rank` caps the view basis; `scope` says which voxels' equations are kept.
 #[allow(clippy::too_many_arguments)] // the band's five arrays, where and how to sample
 pub fn fit_view(
     field: &dyn FieldSource,
@@ -490,6 +508,7 @@ pub fn fit_view(
     eyes: &[DVec3],
     max_rank: usize,
     reflect: Option<&ReflectionTarget>,
+    scope: FitScope,
     progress: &Progress,
 ) -> Result<ViewFit> {
     let start = std::time::Instant::now();
@@ -545,11 +564,17 @@ pub fn fit_view(
 
     // 1. The basis, from the harmonic fit of a strided subsample.
     let n = lt_voxels.len();
-    let sample: Vec<usize> = if n <= BASIS_SAMPLE {
+    let sample_size = match scope {
+        FitScope::Band => BASIS_SAMPLE,
+        FitScope::Sample => PROBE_SAMPLE,
+    };
+    let sample: Vec<usize> = if n <= sample_size {
         (0..n).collect()
     } else {
-        (0..BASIS_SAMPLE).map(|i| i * n / BASIS_SAMPLE).collect()
+        (0..sample_size).map(|i| i * n / sample_size).collect()
     };
+    // A probe fits the same voxels twice: the first pass's residuals are kept.
+    let mut kept: Vec<Vec<f64>> = Vec::new();
     let mut rows: Vec<f64> = Vec::with_capacity(sample.len() * VIEW_HARMONICS * LT_DIM);
     let (mut residual_energy, mut mean_energy) = (0.0f64, 0.0f64);
     let identity = identity_rows(VIEW_HARMONICS, VIEW_HARMONICS);
@@ -568,6 +593,7 @@ pub fn fit_view(
                 normal: Vec::new(),
                 projected: Vec::new(),
                 weights: Vec::new(),
+                entries: Vec::new(),
                 residual_ratio: (residual_energy / mean_energy.max(1e-300)).sqrt(),
                 secs: start.elapsed().as_secs_f64(),
                 skipped: true,
@@ -612,6 +638,9 @@ pub fn fit_view(
             residual_energy += res;
             mean_energy += m;
         }
+        if scope == FitScope::Sample {
+            kept.push(r);
+        }
     }
     let count = rows.len() / LT_DIM;
     let x = DMatrix::from_row_slice(count, LT_DIM, &rows);
@@ -637,6 +666,7 @@ pub fn fit_view(
             normal: Vec::new(),
             projected: Vec::new(),
             weights: Vec::new(),
+            entries: Vec::new(),
             residual_ratio,
             secs: start.elapsed().as_secs_f64(),
             skipped: true,
@@ -644,14 +674,21 @@ pub fn fit_view(
         });
     }
 
-    // 2. Every band voxel: project the residual on V, keep the normal equations.
-    let bar = progress.bar("view", n as u64, "voxels");
-    let mut normal = vec![0.0f64; n * VIEW_HARMONICS * VIEW_HARMONICS];
-    let mut projected = vec![0.0f64; n * VIEW_HARMONICS * k_max];
-    let mut reflection = Vec::with_capacity(if reflect.is_some() { n } else { 0 });
-    let entries: Vec<usize> = (0..n).collect();
+    // 2. Every band voxel in scope: project the residual on V, keep the normal equations.
+    let entries: Vec<usize> = match scope {
+        FitScope::Band => (0..n).collect(),
+        FitScope::Sample => sample,
+    };
+    let m = entries.len();
+    let bar = progress.bar("view", m as u64, "voxels");
+    let mut normal = vec![0.0f64; m * VIEW_HARMONICS * VIEW_HARMONICS];
+    let mut projected = vec![0.0f64; m * VIEW_HARMONICS * k_max];
+    let mut reflection = Vec::with_capacity(if reflect.is_some() { m } else { 0 });
     for (c, chunk) in entries.chunks(BATCH).enumerate() {
-        let r = residuals(chunk)?;
+        let r = match kept.get_mut(c) {
+            Some(r) => std::mem::take(r),
+            None => residuals(chunk)?,
+        };
         let per: Vec<PerVoxel> = chunk
             .par_iter()
             .enumerate()
@@ -706,7 +743,8 @@ pub fn fit_view(
         eigenvalues,
         normal,
         projected,
-        weights: weights.to_vec(),
+        weights: entries.iter().map(|&e| weights[e]).collect(),
+        entries,
         residual_ratio,
         secs: start.elapsed().as_secs_f64(),
         skipped: false,
@@ -752,7 +790,8 @@ impl ViewFit {
     }
 
     /// The view part for lobes `lobes` (`J × 9`) at view rank `rank` over a grid of
-    /// `voxels` voxels whose band is `lt_voxels` (voxels off the band get 0).
+    /// `voxels` voxels whose band is `lt_voxels` (voxels off the band, or outside the
+    /// fit's [`ViewFit::entries`], get 0).
     pub fn view_part(
         &self,
         lobes: &[f64],
@@ -770,7 +809,7 @@ impl ViewFit {
             )));
         }
         let per_voxel = j * rank;
-        let solved: Vec<Vec<f64>> = (0..lt_voxels.len())
+        let solved: Vec<Vec<f64>> = (0..self.entries.len())
             .into_par_iter()
             .map(|e| {
                 let g = &self.normal[e * G_LEN..(e + 1) * G_LEN];
@@ -780,7 +819,13 @@ impl ViewFit {
             })
             .collect();
         let mut values = vec![0.0f32; voxels * per_voxel];
-        for (b, &v) in solved.iter().zip(lt_voxels) {
+        for (b, &e) in solved.iter().zip(&self.entries) {
+            let v = *lt_voxels.get(e).ok_or_else(|| {
+                BakeError::Settings(format!(
+                    "view fit: entry {e} is outside a band of {}",
+                    lt_voxels.len()
+                ))
+            })?;
             for l in 0..j {
                 for i in 0..rank {
                     values[v * per_voxel + l * rank + i] = b[l * k_max + i] as f32;
@@ -873,6 +918,24 @@ mod tests {
     }
 
     #[test]
+    fn the_extrapolated_gain_scales_the_removed_error() {
+        // The whole band probed: the gain itself.
+        assert!((extrapolated_gain_db(30.0, 0.4, 1.0) - 0.4).abs() < 1e-12);
+        // No gain, or a loss, stays so.
+        assert!(extrapolated_gain_db(30.0, 0.0, 0.05).abs() < 1e-12);
+        assert!(extrapolated_gain_db(30.0, -0.01, 0.05) < 0.0);
+        // A tenth of the band removing 1 % of the error: the band removes 10 %.
+        let base = 10f64.powf(-3.0);
+        let probe = 10.0 * (base / (0.99 * base)).log10();
+        let full = extrapolated_gain_db(30.0, probe, 0.1);
+        assert!((full - 10.0 * (1.0 / 0.9f64).log10()).abs() < 1e-9, "{full}");
+        // More than all the error: unbounded, so the band is fitted.
+        assert_eq!(extrapolated_gain_db(30.0, probe, 0.005), f64::INFINITY);
+        // Monotonic in the probe's gain.
+        assert!(extrapolated_gain_db(25.0, 0.02, 0.04) < extrapolated_gain_db(25.0, 0.03, 0.04));
+    }
+
+    #[test]
     fn lobe_fit_recovers_an_exact_harmonic() {
         // r(ω) = 2·y_1(ω) − y_5(ω) (+ nothing else) for dim = 1, all directions weighted.
         let dirs = sample_directions();
@@ -938,8 +1001,54 @@ pub struct ViewReport {
     pub candidates: Vec<ViewCandidate>,
     /// Where the judging views came from.
     pub judged_at: String,
+    /// `auto`'s probe on a subsample of the band, where it ran ([`ViewProbe`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe: Option<ViewProbe>,
     /// Seconds spent (sampling, fitting, judging).
     pub secs: f64,
+}
+
+/// How far below `--view-min-gain-db` the probe's extrapolated gain may be and the
+/// band still be fitted: twice the largest undersell measured
+/// ([`extrapolated_gain_db`]).
+pub const PROBE_MARGIN: f64 = 4.0;
+
+/// `auto`'s probe: the candidates fitted on [`PROBE_SAMPLE`] band voxels only, basis
+/// included (the rest of the band without a view part), and judged, their gains extrapolated to the whole band
+/// ([`extrapolated_gain_db`]). Where no extrapolated gain reaches
+/// `--view-min-gain-db / PROBE_MARGIN` the band is not fitted and the asset stays
+/// view-independent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewProbe {
+    /// Band voxels the probe fitted.
+    pub voxels: usize,
+    /// Band voxels.
+    pub band_voxels: usize,
+    /// The candidates as judged with the probe's view part.
+    pub candidates: Vec<ViewCandidate>,
+    /// The largest extrapolated gain, dB.
+    pub best_extrapolated_gain_db: f64,
+    /// Whether the band was then fitted.
+    pub band_fitted: bool,
+}
+
+/// The gain a view part fitted on every band voxel could reach, estimated from the
+/// gain `probe_gain_db` of one fitted on a fraction `fraction` of them, over a
+/// view-independent asset of PSNR `base_psnr_db`: the squared error the probe removed,
+/// scaled by `1/fraction`. An estimate, not a bound: measured, it undersells the band's
+/// fit about twice (the probe's basis comes from fewer voxels, and a voxel's correction
+/// reaches a pixel only through its neighbours' interpolation). Extrapolated +0.257,
+/// +1.665 and +0.009 dB where the band's fit gained +0.553, +2.124 and +0.016 dB (the
+/// tiny ground-truth head with sheen 0.04 and 0.3, `bake/tests/view.rs` `sheen_gains`;
+/// the shipped network on validation head h00200): hence [`PROBE_MARGIN`].
+pub fn extrapolated_gain_db(base_psnr_db: f64, probe_gain_db: f64, fraction: f64) -> f64 {
+    let mse = |psnr: f64| 10f64.powf(-psnr / 10.0);
+    let base = mse(base_psnr_db);
+    let removed = (base - mse(base_psnr_db + probe_gain_db)) / fraction.clamp(1e-9, 1.0);
+    if removed >= base {
+        return f64::INFINITY;
+    }
+    10.0 * (base / (base - removed)).log10()
 }
 
 /// Mean PSNR of `asset` over `views` with [`JUDGE_PIXEL_GRID`]² rays per pixel.
@@ -977,9 +1086,109 @@ pub struct ViewSettings {
     pub step_voxels: f32,
 }
 
+/// One judged candidate and the part it would attach (a view part or a reflection part).
+type JudgedPart = (ViewCandidate, (Option<ViewDependence>, Option<Reflection>));
+
+/// Builds and judges the view part of each of `choices` and, with `reflect`, the
+/// reflection part of each exponent, from `fit` (whose [`ViewFit::entries`] index
+/// `lt_voxels`) on top of `asset`; `base_psnr_db` is the view-independent asset's.
+#[allow(clippy::too_many_arguments)] // the asset, the fit and its band, what to judge and where
+fn judge_candidates(
+    asset: &nelf_format::Asset,
+    fit: &ViewFit,
+    lt_voxels: &[usize],
+    choices: &[(ViewChoice, usize)],
+    reflect: Option<&ReflectionTarget>,
+    views: &crate::eval::HeldAside,
+    base_psnr_db: Option<f64>,
+    step_voxels: f32,
+) -> Result<Vec<JudgedPart>> {
+    let encoding = asset.coefficients.encoding();
+    let voxels = asset.voxel_count();
+    let judge = |with: &nelf_format::Asset| -> Result<Option<f64>> {
+        if views.is_empty() {
+            Ok(None)
+        } else {
+            Ok(Some(judge_psnr(with, views, step_voxels)?))
+        }
+    };
+    let mut out = Vec::new();
+    for &(choice, rank) in choices {
+        let lobes = fit.lobes(choice);
+        let part = if fit.skipped {
+            // A field without view dependence asked for one explicitly: an all-zero part.
+            ViewDependence {
+                lobes: lobes.iter().map(|&x| x as f32).collect(),
+                basis: fit.basis[..LT_DIM].to_vec(),
+                coefficients: Coefficients::quantize(
+                    &vec![0.0; voxels * lobes.len() / VIEW_HARMONICS],
+                    lobes.len() / VIEW_HARMONICS,
+                    encoding,
+                )?,
+            }
+        } else {
+            fit.view_part(&lobes, rank, voxels, lt_voxels, encoding)?
+        };
+        let mut with = asset.clone();
+        with.view = Some(part);
+        let psnr_db = judge(&with)?;
+        let candidate = ViewCandidate {
+            choice,
+            lobes: with.view.as_ref().map_or(0, ViewDependence::lobe_count),
+            rank: with.view.as_ref().map_or(0, ViewDependence::rank),
+            exponent: None,
+            psnr_db,
+            gain_db: psnr_db.zip(base_psnr_db).map(|(a, b)| a - b),
+            bytes: crate::eval::encoded_bytes(&with)?,
+        };
+        out.push((candidate, (with.view, None)));
+    }
+    // The reflection part, one candidate per exponent (only the middle one without
+    // judging views).
+    if let Some(target) = reflect {
+        let exponents: Vec<usize> = if views.is_empty() {
+            vec![REFLECT_EXPONENTS.len() / 2]
+        } else {
+            (0..REFLECT_EXPONENTS.len()).collect()
+        };
+        let eyes_m: Vec<[f32; 3]> = target.eyes.iter().map(Vec3::to_array).collect();
+        for k in exponents {
+            let mut normals = vec![[0.0f32, 0.0, 1.0]; voxels];
+            let mut scales = vec![0.0f32; voxels];
+            for ((n, s), &e) in fit.reflection.iter().zip(&fit.entries) {
+                if let Some(&v) = lt_voxels.get(e) {
+                    normals[v] = *n;
+                    scales[v] = s[k];
+                }
+            }
+            let part = Reflection::new(REFLECT_EXPONENTS[k], eyes_m.clone(), &normals, &scales)?;
+            let mut with = asset.clone();
+            with.view = None;
+            with.reflection = Some(part);
+            let psnr_db = judge(&with)?;
+            let candidate = ViewCandidate {
+                choice: ViewChoice::Reflect,
+                lobes: 1,
+                rank: 0,
+                exponent: Some(REFLECT_EXPONENTS[k]),
+                psnr_db,
+                gain_db: psnr_db.zip(base_psnr_db).map(|(a, b)| a - b),
+                bytes: crate::eval::encoded_bytes(&with)?,
+            };
+            out.push((candidate, (None, with.reflection)));
+        }
+    }
+    Ok(out)
+}
+
 /// Fits, judges and attaches the view part to `asset` (the bake's view-independent
 /// asset) per `settings`; `judge` are the judging views (empty: none, then `auto` keeps
 /// nothing and an explicit choice is kept unjudged).
+///
+/// `auto` first probes ([`ViewProbe`]): the candidates fitted on [`PROBE_SAMPLE`] band
+/// voxels alone and judged. Only where one of them, extrapolated to the whole band, could
+/// gain `--view-min-gain-db` is the band fitted (most of the stage's cost: every band
+/// voxel's transport toward [`VIEW_DIRECTIONS`] directions).
 #[allow(clippy::too_many_arguments)]
 pub fn choose_view(
     asset: &mut nelf_format::Asset,
@@ -1006,7 +1215,11 @@ pub fn choose_view(
         ViewChoice::Reflect | ViewChoice::Auto => reflect,
         _ => None,
     };
-    let fit = fit_view(
+    let explicit = !matches!(settings.choice, ViewChoice::Auto | ViewChoice::Off);
+    // `auto` with judging views probes first where the band is larger than the sample.
+    let probing = settings.choice == ViewChoice::Auto && !views.is_empty() && lt_voxels.len() > PROBE_SAMPLE;
+    let scope = if probing { FitScope::Sample } else { FitScope::Band };
+    let mut fit = fit_view(
         field,
         grid,
         density,
@@ -1016,6 +1229,7 @@ pub fn choose_view(
         eyes,
         settings.max_rank,
         reflect,
+        scope,
         progress,
     )?;
     let base_bytes = crate::eval::encoded_bytes(asset)?;
@@ -1028,9 +1242,9 @@ pub fn choose_view(
         base_bytes,
         candidates: Vec::new(),
         judged_at: judged_at.to_string(),
+        probe: None,
         secs: 0.0,
     };
-    let explicit = !matches!(settings.choice, ViewChoice::Auto | ViewChoice::Off);
     if settings.choice == ViewChoice::Off || (!explicit && (fit.skipped || views.is_empty())) {
         report.secs = start.elapsed().as_secs_f64();
         return Ok(report);
@@ -1063,80 +1277,62 @@ pub fn choose_view(
     if !views.is_empty() {
         report.base_psnr_db = Some(judge_psnr(asset, views, settings.step_voxels)?);
     }
-    let encoding = asset.coefficients.encoding();
-    let voxels = asset.voxel_count();
-    let mut parts: Vec<(Option<ViewDependence>, Option<Reflection>)> = Vec::new();
-    for (choice, rank) in choices {
-        let lobes = fit.lobes(choice);
-        let part = if fit.skipped {
-            // A field without view dependence asked for one explicitly: an all-zero part.
-            ViewDependence {
-                lobes: lobes.iter().map(|&x| x as f32).collect(),
-                basis: fit.basis[..LT_DIM].to_vec(),
-                coefficients: Coefficients::quantize(
-                    &vec![0.0; voxels * lobes.len() / VIEW_HARMONICS],
-                    lobes.len() / VIEW_HARMONICS,
-                    encoding,
-                )?,
-            }
-        } else {
-            fit.view_part(&lobes, rank, voxels, lt_voxels, encoding)?
-        };
-        let mut with = asset.clone();
-        with.view = Some(part);
-        let psnr_db = if views.is_empty() {
-            None
-        } else {
-            Some(judge_psnr(&with, views, settings.step_voxels)?)
-        };
-        report.candidates.push(ViewCandidate {
-            choice,
-            lobes: with.view.as_ref().map_or(0, ViewDependence::lobe_count),
-            rank: with.view.as_ref().map_or(0, ViewDependence::rank),
-            exponent: None,
-            psnr_db,
-            gain_db: psnr_db.zip(report.base_psnr_db).map(|(a, b)| a - b),
-            bytes: crate::eval::encoded_bytes(&with)?,
+    if probing {
+        let probed = judge_candidates(
+            asset,
+            &fit,
+            lt_voxels,
+            &choices,
+            reflect,
+            views,
+            report.base_psnr_db,
+            settings.step_voxels,
+        )?;
+        let fraction = fit.entries.len() as f64 / lt_voxels.len() as f64;
+        let best = probed
+            .iter()
+            .filter_map(|(c, _)| c.gain_db.zip(report.base_psnr_db))
+            .map(|(gain, base)| extrapolated_gain_db(base, gain, fraction))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let band_fitted = best > settings.min_gain_db / PROBE_MARGIN;
+        report.probe = Some(ViewProbe {
+            voxels: fit.entries.len(),
+            band_voxels: lt_voxels.len(),
+            candidates: probed.into_iter().map(|(c, _)| c).collect(),
+            best_extrapolated_gain_db: best,
+            band_fitted,
         });
-        parts.push((with.view, None));
-    }
-    // The reflection part, one candidate per exponent (only the middle one without
-    // judging views).
-    if let Some(target) = reflect {
-        let exponents: Vec<usize> = if views.is_empty() {
-            vec![REFLECT_EXPONENTS.len() / 2]
-        } else {
-            (0..REFLECT_EXPONENTS.len()).collect()
-        };
-        let eyes_m: Vec<[f32; 3]> = target.eyes.iter().map(Vec3::to_array).collect();
-        for k in exponents {
-            let mut normals = vec![[0.0f32, 0.0, 1.0]; voxels];
-            let mut scales = vec![0.0f32; voxels];
-            for ((n, s), &v) in fit.reflection.iter().zip(lt_voxels) {
-                normals[v] = *n;
-                scales[v] = s[k];
-            }
-            let part = Reflection::new(REFLECT_EXPONENTS[k], eyes_m.clone(), &normals, &scales)?;
-            let mut with = asset.clone();
-            with.view = None;
-            with.reflection = Some(part);
-            let psnr_db = if views.is_empty() {
-                None
-            } else {
-                Some(judge_psnr(&with, views, settings.step_voxels)?)
-            };
-            report.candidates.push(ViewCandidate {
-                choice: ViewChoice::Reflect,
-                lobes: 1,
-                rank: 0,
-                exponent: Some(REFLECT_EXPONENTS[k]),
-                psnr_db,
-                gain_db: psnr_db.zip(report.base_psnr_db).map(|(a, b)| a - b),
-                bytes: crate::eval::encoded_bytes(&with)?,
-            });
-            parts.push((None, with.reflection));
+        if !band_fitted {
+            report.secs = start.elapsed().as_secs_f64();
+            return Ok(report);
         }
+        fit = fit_view(
+            field,
+            grid,
+            density,
+            lt_voxels,
+            lt,
+            weights,
+            eyes,
+            settings.max_rank,
+            reflect,
+            FitScope::Band,
+            progress,
+        )?;
     }
+    let (candidates, mut parts): (Vec<ViewCandidate>, Vec<_>) = judge_candidates(
+        asset,
+        &fit,
+        lt_voxels,
+        &choices,
+        reflect,
+        views,
+        report.base_psnr_db,
+        settings.step_voxels,
+    )?
+    .into_iter()
+    .unzip();
+    report.candidates = candidates;
     let best_psnr = |list: &[ViewCandidate]| {
         (0..list.len()).max_by(|&a, &b| {
             let psnr = |i: usize| list[i].psnr_db.unwrap_or(f64::NEG_INFINITY);

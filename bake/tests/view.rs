@@ -424,11 +424,14 @@ fn auto_keeps_nothing_for_a_matte_head() {
     eprintln!("{report:?}");
     assert!(out.asset.view.is_none() && out.asset.reflection.is_none());
     assert_eq!(report.chosen, ViewChoice::Off);
-    assert!(
-        report.residual_ratio < nelf_bake::view::NO_VIEW_DEPENDENCE,
-        "{}",
-        report.residual_ratio
-    );
+    // `auto` probed a strided sample of the band: no candidate gained anything there,
+    // so the band was not fitted and no candidate was built for it.
+    let probe = report
+        .probe
+        .as_ref()
+        .expect("auto probes a band larger than its sample");
+    assert!(!probe.band_fitted);
+    assert!(probe.best_extrapolated_gain_db < 0.01, "{probe:?}");
     assert!(report.candidates.is_empty(), "a matte field needs no candidates");
 }
 
@@ -447,6 +450,25 @@ fn auto_keeps_the_sheen_of_a_glossy_head() {
     }
     let chosen = &report.candidates[report.chosen_index.unwrap()];
     assert!(chosen.gain_db.unwrap() > 0.25, "{chosen:?}");
+    // The band is larger than the probe's sample, so `auto` probed first, and the
+    // probe's extrapolation did not undersell what the whole band gained by more than
+    // the margin the decision leaves.
+    let probe = report
+        .probe
+        .as_ref()
+        .expect("auto probes a band larger than its sample");
+    assert!(probe.band_voxels > probe.voxels && probe.voxels == nelf_bake::view::PROBE_SAMPLE);
+    assert!(probe.band_fitted);
+    let best = report
+        .candidates
+        .iter()
+        .filter_map(|c| c.gain_db)
+        .fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        probe.best_extrapolated_gain_db * nelf_bake::view::PROBE_MARGIN >= best,
+        "extrapolated {} is more than the margin below the fitted {best}",
+        probe.best_extrapolated_gain_db
+    );
 }
 
 #[test]
@@ -456,8 +478,16 @@ fn sheen_gains() {
         let out = bake_tiny(w);
         let r = out.report.view.as_ref().unwrap();
         eprintln!(
-            "weight {w}: base {:?} ratio {:.3} secs {:.1}",
-            r.base_psnr_db, r.residual_ratio, r.secs
+            "weight {w}: base {:?} ratio {:.3} secs {:.1} probe {:?}",
+            r.base_psnr_db,
+            r.residual_ratio,
+            r.secs,
+            r.probe.as_ref().map(|p| (
+                p.voxels,
+                p.band_voxels,
+                p.best_extrapolated_gain_db,
+                p.band_fitted
+            ))
         );
         for c in &r.candidates {
             eprintln!(
