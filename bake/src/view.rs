@@ -263,7 +263,7 @@ pub struct ViewFit {
     /// Per fitted voxel: weight (visibility) for the learned lobes.
     weights: Vec<f64>,
     /// The band entries (indices into the band's voxel list) the per-voxel arrays
-    /// cover, in order: the whole band, or the basis subsample of a probe
+    /// cover, in order: the whole band, or a probe's [`PROBE_SAMPLE`] voxels
     /// ([`FitScope::Sample`]); empty when skipped.
     pub entries: Vec<usize>,
     /// Relative RMS of the residual over the subsample (`|R| / |T̄|`, weighted).
