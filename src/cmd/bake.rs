@@ -533,7 +533,7 @@ fn finish(output: &mut BakeOutput, config: &BakeConfig, args: &OutputArgs) -> an
                 v.requested,
                 if let Some(p) = v.probe.as_ref().filter(|p| !p.band_fitted) {
                     format!(
-                        "fitted on {} of {} band voxels, the best candidate would gain about {:+.3} dB over the whole band at {}, far below the threshold; the band was not fitted",
+                        "fitted on {} of {} band voxels, the best candidate would gain about {:+.3} dB over the whole band at {}, below a quarter of --view-min-gain-db; the band was not fitted",
                         p.voxels, p.band_voxels, p.best_extrapolated_gain_db, v.judged_at
                     )
                 } else if v.candidates.is_empty() {
