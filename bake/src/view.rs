@@ -1014,6 +1014,16 @@ pub struct ViewReport {
 /// ([`extrapolated_gain_db`]).
 pub const PROBE_MARGIN: f64 = 4.0;
 
+impl ViewReport {
+    /// The largest gain of the judged candidates, dB (−∞ when none was judged).
+    pub fn best_gain_db(&self) -> f64 {
+        self.candidates
+            .iter()
+            .filter_map(|c| c.gain_db)
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+}
+
 /// `auto`'s probe: the candidates fitted on [`PROBE_SAMPLE`] band voxels only, basis
 /// included (the rest of the band without a view part), and judged, their gains extrapolated to the whole band
 /// ([`extrapolated_gain_db`]). Where no extrapolated gain reaches
@@ -1218,20 +1228,22 @@ pub fn choose_view(
     let explicit = !matches!(settings.choice, ViewChoice::Auto | ViewChoice::Off);
     // `auto` with judging views probes first where the band is larger than the sample.
     let probing = settings.choice == ViewChoice::Auto && !views.is_empty() && lt_voxels.len() > PROBE_SAMPLE;
-    let scope = if probing { FitScope::Sample } else { FitScope::Band };
-    let mut fit = fit_view(
-        field,
-        grid,
-        density,
-        lt_voxels,
-        lt,
-        weights,
-        eyes,
-        settings.max_rank,
-        reflect,
-        scope,
-        progress,
-    )?;
+    let fit_in = |scope: FitScope| {
+        fit_view(
+            field,
+            grid,
+            density,
+            lt_voxels,
+            lt,
+            weights,
+            eyes,
+            settings.max_rank,
+            reflect,
+            scope,
+            progress,
+        )
+    };
+    let mut fit = fit_in(if probing { FitScope::Sample } else { FitScope::Band })?;
     let base_bytes = crate::eval::encoded_bytes(asset)?;
     let mut report = ViewReport {
         requested: settings.choice,
@@ -1277,17 +1289,21 @@ pub fn choose_view(
     if !views.is_empty() {
         report.base_psnr_db = Some(judge_psnr(asset, views, settings.step_voxels)?);
     }
-    if probing {
-        let probed = judge_candidates(
+    let base_psnr_db = report.base_psnr_db;
+    let judge_fit = |fit: &ViewFit| {
+        judge_candidates(
             asset,
-            &fit,
+            fit,
             lt_voxels,
             &choices,
             reflect,
             views,
-            report.base_psnr_db,
+            base_psnr_db,
             settings.step_voxels,
-        )?;
+        )
+    };
+    if probing {
+        let probed = judge_fit(&fit)?;
         let fraction = fit.entries.len() as f64 / lt_voxels.len() as f64;
         let best = probed
             .iter()
@@ -1306,32 +1322,9 @@ pub fn choose_view(
             report.secs = start.elapsed().as_secs_f64();
             return Ok(report);
         }
-        fit = fit_view(
-            field,
-            grid,
-            density,
-            lt_voxels,
-            lt,
-            weights,
-            eyes,
-            settings.max_rank,
-            reflect,
-            FitScope::Band,
-            progress,
-        )?;
+        fit = fit_in(FitScope::Band)?;
     }
-    let (candidates, mut parts): (Vec<ViewCandidate>, Vec<_>) = judge_candidates(
-        asset,
-        &fit,
-        lt_voxels,
-        &choices,
-        reflect,
-        views,
-        report.base_psnr_db,
-        settings.step_voxels,
-    )?
-    .into_iter()
-    .unzip();
+    let (candidates, mut parts): (Vec<ViewCandidate>, Vec<_>) = judge_fit(&fit)?.into_iter().unzip();
     report.candidates = candidates;
     let best_psnr = |list: &[ViewCandidate]| {
         (0..list.len()).max_by(|&a, &b| {
@@ -1345,11 +1338,7 @@ pub fn choose_view(
         Some(0)
     } else {
         // The best gain; a candidate within AUTO_GAIN_SLACK_DB of it with fewer bytes wins.
-        let best = report
-            .candidates
-            .iter()
-            .filter_map(|c| c.gain_db)
-            .fold(f64::NEG_INFINITY, f64::max);
+        let best = report.best_gain_db();
         if best > settings.min_gain_db {
             report
                 .candidates

@@ -459,11 +459,7 @@ fn auto_keeps_the_sheen_of_a_glossy_head() {
         .expect("auto probes a band larger than its sample");
     assert!(probe.band_voxels > probe.voxels && probe.voxels == nelf_bake::view::PROBE_SAMPLE);
     assert!(probe.band_fitted);
-    let best = report
-        .candidates
-        .iter()
-        .filter_map(|c| c.gain_db)
-        .fold(f64::NEG_INFINITY, f64::max);
+    let best = report.best_gain_db();
     assert!(
         probe.best_extrapolated_gain_db * nelf_bake::view::PROBE_MARGIN >= best,
         "extrapolated {} is more than the margin below the fitted {best}",

@@ -542,11 +542,7 @@ fn finish(output: &mut BakeOutput, config: &BakeConfig, args: &OutputArgs) -> an
                         v.residual_ratio
                     )
                 } else {
-                    let best = v
-                        .candidates
-                        .iter()
-                        .filter_map(|c| c.gain_db)
-                        .fold(f64::NEG_INFINITY, f64::max);
+                    let best = v.best_gain_db();
                     format!(
                         "best candidate {best:+.2} dB at {}, below the threshold",
                         v.judged_at
