@@ -8,8 +8,12 @@
 #   cargo build --release -p nelf --bins
 #   bash scripts/eval_heldout_heads.sh [OUT_DIR] [-- EXTRA nelf eval network ARGS, e.g. --weights W]
 #   SIZE=128 bash scripts/eval_heldout_heads.sh   # the same heads at 128² views
+#   TURN=1 bash scripts/eval_heldout_heads.sh      # source lighting turned 36°, 108°, … 324°
 #
-# OUT_DIR defaults to out/heldout-heads-SIZE; heads already rendered there are reused,
+# With TURN=1 head k's source lighting (`forest`) is turned about +y by 72·k − 36
+# degrees, so the five see its sun from five sides, as the validation heads of `nelf
+# train data` do (their source maps are turned at random); the targets stay as they
+# are. OUT_DIR defaults to out/heldout-heads-SIZE (-turned with TURN=1); heads already rendered there are reused,
 # and a folder holding another size is refused. Prints, per head, foreground PSNR (8-bit
 # sRGB, mean of its two targets) of the network, its bake, the ground-truth bake and the
 # flat colour; the share of the gap between the flat colour and the ground-truth bake
@@ -23,7 +27,9 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 SIZE=${SIZE:-64}
+TURN=${TURN:-0}
 OUT=out/heldout-heads-$SIZE
+if [ "$TURN" = 1 ]; then OUT=$OUT-turned; fi
 if [ $# -gt 0 ] && [ "$1" != "--" ]; then OUT=$1; shift; fi
 if [ "${1:-}" = "--" ]; then shift; fi
 NELF=target/release/nelf
@@ -33,6 +39,8 @@ captures=()
 for k in 1 2 3 4 5; do
   seed=$(( (1 << 62) + k ))
   dir="$OUT/head$k"
+  turn=0
+  if [ "$TURN" = 1 ]; then turn=$(( 72 * k - 36 )); fi
   if [ -f "$dir/cameras.json" ]; then
     width=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["views"][0]["width"])' "$dir/cameras.json")
     if [ "$width" != "$SIZE" ]; then
@@ -41,7 +49,7 @@ for k in 1 2 3 4 5; do
     fi
   else
     "$NELF" capture synth --head-seed "$seed" --width "$SIZE" --height "$SIZE" \
-      --envmap data/envmaps/forest.exr \
+      --envmap data/envmaps/forest.exr --env-rotate-deg "$turn" \
       --target-envmap data/envmaps/interior.exr --target-envmap data/envmaps/forest.exr \
       --target-env-rotate-deg 0 --target-env-rotate-deg 90 -o "$dir" > /dev/null
   fi
