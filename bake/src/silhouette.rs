@@ -13,13 +13,16 @@
 //! [`crate::hull`] has it, value > ½) is padded with one pixel of background on every side (pixels
 //! outside the frame are background) and its exact Euclidean distance transform is
 //! taken both ways (Felzenszwalb & Huttenlocher 2012, the separable lower envelope
-//! of parabolas): a pixel outside gets `+(distance to the nearest foreground
-//! centre − ½)`, one inside `−(distance to the nearest background centre − ½)`, so
-//! the zero level runs midway between the two. A point `x` is projected into each
-//! view in front of whose camera it lies, the signed pixel distance `s_v` is read
-//! bilinearly (with the excess beyond the padded frame added for points that
-//! project outside it) and turned into metres at the point's depth,
-//! `d_v = (s_v − m) · z_v / √(f_x f_y)` with the margin `m` (pixels). The hull is the
+//! of parabolas) in the image plane at unit depth, where a pixel is `1/f_x` wide and
+//! `1/f_y` tall, so that `f_x ≠ f_y` stretches nothing. A pixel outside gets
+//! `+(distance to the nearest foreground centre − ½ p)`, one inside `−(distance to
+//! the nearest background centre − ½ p)`, `p = 1/√(f_x f_y)` the mean pixel size, so
+//! the zero level runs midway between the two (exactly for `f_x = f_y`; else within
+//! `½ |1/f_x − 1/f_y|` of it). A point `x` is projected into each view in front of
+//! whose camera it lies, the signed distance `s_v` is read bilinearly (with the
+//! excess beyond the padded frame added for points that project outside it) and
+//! turned into metres at the point's depth, `d_v = (s_v − m·p) · z_v` with the
+//! margin `m` (pixels). The hull is the
 //! intersection of the views' cones, so `d(x) = max_v d_v`: exact in the
 //! cone's cross-section near each silhouette, a lower bound of the true distance
 //! elsewhere (which only carves less).
@@ -40,17 +43,18 @@ use crate::hull::{check_mask_count, check_mask_size, is_foreground};
 /// Squared-distance stand-in for "no such pixel" in the distance transform.
 const FAR: f64 = 1e20;
 
-/// One view's signed distance to its mask's silhouette, pixels, on the padded grid.
+/// One view's signed distance to its mask's silhouette in the image plane at unit
+/// depth (units of `x/z`), on the padded pixel grid.
 #[derive(Debug, Clone)]
 struct ViewDistance {
     camera: PinholeCamera,
-    /// `f = √(f_x f_y)`, pixels per unit of `x/z`.
-    focal_px: f64,
+    /// A pixel's width and height at unit depth, `(1/f_x, 1/f_y)`.
+    pixel: [f64; 2],
     /// Padded size `(width + 2, height + 2)`.
     width: usize,
     height: usize,
-    /// Signed pixel distance at the padded pixels' centres (positive outside).
-    signed_px: Vec<f32>,
+    /// Signed distance at the padded pixels' centres, units of `x/z` (positive outside).
+    signed: Vec<f32>,
 }
 
 impl ViewDistance {
@@ -64,36 +68,44 @@ impl ViewDistance {
                 (1..=w).contains(&x) && (1..=h).contains(&y) && is_foreground(mask[(y - 1) * w + (x - 1)])
             })
             .collect();
-        let to_inside = distance_transform(&inside, pw, ph);
+        if !(camera.fx.is_finite() && camera.fy.is_finite() && camera.fx > 0.0 && camera.fy > 0.0) {
+            return Err(BakeError::Hull(format!(
+                "a camera's focal lengths ({}, {}) px are not positive",
+                camera.fx, camera.fy
+            )));
+        }
+        let pixel = [1.0 / camera.fx, 1.0 / camera.fy];
+        let half = 0.5 * mean_pixel(camera);
+        let to_inside = distance_transform(&inside, pw, ph, pixel);
         let outside: Vec<bool> = inside.iter().map(|i| !i).collect();
-        let to_outside = distance_transform(&outside, pw, ph);
-        let signed_px = inside
+        let to_outside = distance_transform(&outside, pw, ph, pixel);
+        let signed = inside
             .iter()
             .zip(to_inside.iter().zip(&to_outside))
             .map(|(&is_in, (&d_in, &d_out))| {
                 if is_in {
-                    -(d_out.sqrt() - 0.5) as f32
+                    -(d_out.sqrt() - half) as f32
                 } else if d_in >= FAR {
                     // No foreground anywhere: every point is outside, far.
-                    (pw + ph) as f32
+                    (pw as f64 * pixel[0] + ph as f64 * pixel[1]) as f32
                 } else {
-                    (d_in.sqrt() - 0.5) as f32
+                    (d_in.sqrt() - half) as f32
                 }
             })
             .collect();
         Ok(Self {
             camera: *camera,
-            focal_px: (camera.fx * camera.fy).sqrt(),
+            pixel,
             width: pw,
             height: ph,
-            signed_px,
+            signed,
         })
     }
 
-    /// Signed distance (pixels) at continuous image coordinates `(u, v)` of the
-    /// unpadded image, bilinear between padded pixel centres; beyond the padded
+    /// Signed distance (units of `x/z`) at continuous image coordinates `(u, v)` of
+    /// the unpadded image, bilinear between padded pixel centres; beyond the padded
     /// frame, the value at its edge plus the distance to it.
-    fn signed_px_at(&self, u: f64, v: f64) -> f64 {
+    fn signed_at(&self, u: f64, v: f64) -> f64 {
         // Padded pixel i's centre is at unpadded coordinate i − 0.5.
         let gx = u + 0.5;
         let gy = v + 0.5;
@@ -101,33 +113,40 @@ impl ViewDistance {
         let max_y = (self.height - 1) as f64;
         let cx = gx.clamp(0.0, max_x);
         let cy = gy.clamp(0.0, max_y);
-        let excess = ((gx - cx).powi(2) + (gy - cy).powi(2)).sqrt();
+        let excess = ((gx - cx) * self.pixel[0]).hypot((gy - cy) * self.pixel[1]);
         let x0 = (cx.floor() as usize).min(self.width - 2);
         let y0 = (cy.floor() as usize).min(self.height - 2);
         let (tx, ty) = (cx - x0 as f64, cy - y0 as f64);
-        let at = |x: usize, y: usize| f64::from(self.signed_px[y * self.width + x]);
+        let at = |x: usize, y: usize| f64::from(self.signed[y * self.width + x]);
         let top = at(x0, y0) * (1.0 - tx) + at(x0 + 1, y0) * tx;
         let bottom = at(x0, y0 + 1) * (1.0 - tx) + at(x0 + 1, y0 + 1) * tx;
         top * (1.0 - ty) + bottom * ty + excess
     }
 }
 
+/// The mean size of a camera's pixel at unit depth, `1/√(f_x f_y)`: what the hull's
+/// margin and the half pixel between centres are counted in.
+fn mean_pixel(camera: &PinholeCamera) -> f64 {
+    1.0 / (camera.fx * camera.fy).sqrt()
+}
+
 /// Squared Euclidean distance from every pixel centre to the nearest pixel where
-/// `target` is true (`FAR` where there is none): the separable exact transform.
-fn distance_transform(target: &[bool], width: usize, height: usize) -> Vec<f64> {
+/// `target` is true (`FAR` where there is none), pixels `spacing[0]` wide and
+/// `spacing[1]` tall: the separable exact transform.
+fn distance_transform(target: &[bool], width: usize, height: usize, spacing: [f64; 2]) -> Vec<f64> {
     let mut grid: Vec<f64> = target.iter().map(|&t| if t { 0.0 } else { FAR }).collect();
     let mut line = Vec::new();
     let mut out = Vec::new();
     for y in 0..height {
         line.clear();
         line.extend_from_slice(&grid[y * width..(y + 1) * width]);
-        lower_envelope(&line, &mut out);
+        lower_envelope(&line, spacing[0], &mut out);
         grid[y * width..(y + 1) * width].copy_from_slice(&out);
     }
     for x in 0..width {
         line.clear();
         line.extend((0..height).map(|y| grid[y * width + x]));
-        lower_envelope(&line, &mut out);
+        lower_envelope(&line, spacing[1], &mut out);
         for (y, d) in out.iter().enumerate() {
             grid[y * width + x] = *d;
         }
@@ -135,9 +154,10 @@ fn distance_transform(target: &[bool], width: usize, height: usize) -> Vec<f64> 
     grid
 }
 
-/// `out[q] = min_p (q − p)² + f[p]`: the lower envelope of parabolas rooted at
-/// every `p` (Felzenszwalb & Huttenlocher), in O(n). Sites with `f = FAR` are left out.
-fn lower_envelope(f: &[f64], out: &mut Vec<f64>) {
+/// `out[q] = min_p (s·(q − p))² + f[p]` for sites `spacing = s` apart: the lower
+/// envelope of parabolas rooted at every `p` (Felzenszwalb & Huttenlocher), in O(n).
+/// Sites with `f = FAR` are left out.
+fn lower_envelope(f: &[f64], spacing: f64, out: &mut Vec<f64>) {
     let n = f.len();
     out.clear();
     let sites: Vec<usize> = (0..n).filter(|&p| f[p] < FAR).collect();
@@ -148,9 +168,11 @@ fn lower_envelope(f: &[f64], out: &mut Vec<f64>) {
     // Parabola roots kept (v) and the boundaries between them (z).
     let mut v: Vec<usize> = Vec::with_capacity(sites.len());
     let mut z: Vec<f64> = Vec::with_capacity(sites.len() + 1);
+    // Where the parabolas of sites p < q meet, in units of the index.
+    let s2 = spacing * spacing;
     let meet = |p: usize, q: usize| {
         let (p_f, q_f) = (p as f64, q as f64);
-        ((f[q] + q_f * q_f) - (f[p] + p_f * p_f)) / (2.0 * (q_f - p_f))
+        ((f[q] / s2 + q_f * q_f) - (f[p] / s2 + p_f * p_f)) / (2.0 * (q_f - p_f))
     };
     for &q in &sites {
         while let Some(&last) = v.last() {
@@ -175,7 +197,7 @@ fn lower_envelope(f: &[f64], out: &mut Vec<f64>) {
             k += 1;
         }
         let p = v[k];
-        let d = q as f64 - p as f64;
+        let d = (q as f64 - p as f64) * spacing;
         out.push(d * d + f[p]);
     }
 }
@@ -219,7 +241,7 @@ impl HullDistance {
                 (p.z > 0.0).then(|| {
                     let u = view.camera.fx * p.x / p.z + view.camera.cx;
                     let v = view.camera.fy * p.y / p.z + view.camera.cy;
-                    (view.signed_px_at(u, v) - self.margin_px) * p.z / view.focal_px
+                    (view.signed_at(u, v) - self.margin_px * mean_pixel(&view.camera)) * p.z
                 })
             })
             .fold(f64::NEG_INFINITY, f64::max)
@@ -290,13 +312,16 @@ impl FieldSource for HullCarved<'_> {
 mod tests {
     use super::*;
 
-    fn brute_force(target: &[bool], width: usize, height: usize) -> Vec<f64> {
+    fn brute_force(target: &[bool], width: usize, height: usize, spacing: [f64; 2]) -> Vec<f64> {
         (0..width * height)
             .map(|i| {
                 let (x, y) = ((i % width) as f64, (i / width) as f64);
                 (0..width * height)
                     .filter(|&j| target[j])
-                    .map(|j| ((j % width) as f64 - x).powi(2) + ((j / width) as f64 - y).powi(2))
+                    .map(|j| {
+                        (((j % width) as f64 - x) * spacing[0]).powi(2)
+                            + (((j / width) as f64 - y) * spacing[1]).powi(2)
+                    })
                     .fold(FAR, f64::min)
             })
             .collect()
@@ -310,12 +335,20 @@ mod tests {
             .map(|i| (i * 2_654_435_761_usize) % 97 < 9 && i % w != 4)
             .collect();
         assert!(target.iter().any(|&t| t));
-        let fast = distance_transform(&target, w, h);
-        let slow = brute_force(&target, w, h);
-        for (a, b) in fast.iter().zip(&slow) {
-            assert!((a - b).abs() < 1e-9, "{a} vs {b}");
+        // Square pixels, and pixels at unit depth of a camera with f_x ≠ f_y.
+        for spacing in [[1.0, 1.0], [1.0 / 70.0, 1.0 / 52.0], [0.3, 2.5]] {
+            let fast = distance_transform(&target, w, h, spacing);
+            let slow = brute_force(&target, w, h, spacing);
+            let scale = spacing[0].max(spacing[1]).powi(2);
+            for (a, b) in fast.iter().zip(&slow) {
+                assert!((a - b).abs() < 1e-9 * scale, "{spacing:?}: {a} vs {b}");
+            }
         }
-        assert!(distance_transform(&[false; 6], 3, 2).iter().all(|&d| d >= FAR));
+        assert!(
+            distance_transform(&[false; 6], 3, 2, [1.0, 1.0])
+                .iter()
+                .all(|&d| d >= FAR)
+        );
     }
 
     /// A camera on +z looking at the origin, 40 px square, 30° field of view.
@@ -411,6 +444,32 @@ mod tests {
         Ok(())
     }
 
+    #[test]
+    fn distances_follow_each_axis_focal_length() -> Result<()> {
+        // f_x = 1.5 f_y, principal point off centre. A straight silhouette along a
+        // pixel column (foreground left of u = 40) and one along a row (foreground
+        // above v = 30): k pixels off either edge lie k/f_x resp. k/f_y (× depth) off
+        // the hull, to within the half pixel's ½ |1/f_x − 1/f_y| (0.11 px along x,
+        // 0.17 px along y here). A single focal length √(f_x f_y) for both axes
+        // is 0.22 px off per pixel along x and 0.18 along y: 0.9 px at 4 px out.
+        let mut cam = camera();
+        (cam.width, cam.height) = (64, 48);
+        (cam.fx, cam.fy, cam.cx, cam.cy) = (90.0, 60.0, 31.7, 23.2);
+        let z = 2.0;
+        let at = |u: f64, v: f64| DVec3::new((u - cam.cx) / cam.fx * z, -(v - cam.cy) / cam.fy * z, 0.0);
+        let column_edge: Vec<f32> = (0..64 * 48).map(|i| f32::from(u8::from(i % 64 < 40))).collect();
+        let row_edge: Vec<f32> = (0..64 * 48).map(|i| f32::from(u8::from(i / 64 < 30))).collect();
+        let by_column = HullDistance::new(&[cam], &[column_edge], 0.0)?;
+        let by_row = HullDistance::new(&[cam], &[row_edge], 0.0)?;
+        for k in [-4.0, -2.5, -1.0, 1.0, 2.5, 4.0] {
+            let d = by_column.distance_m(at(40.0 + k, 20.0)) / z * cam.fx;
+            assert!((d - k).abs() < 0.15, "column edge, {k} px: {d} px");
+            let d = by_row.distance_m(at(32.0, 30.0 + k)) / z * cam.fy;
+            assert!((d - k).abs() < 0.2, "row edge, {k} px: {d} px");
+        }
+        Ok(())
+    }
+
     /// A ball of radius `radius_m` about the origin, uniformly dense, with light
     /// transport 1 everywhere: a network's field that spills past the silhouettes.
     struct Ball {
@@ -492,6 +551,13 @@ mod tests {
         assert!(HullDistance::new(&[cam], &[vec![1.0; 10]], 0.0).is_err());
         assert!(HullDistance::new(&[cam], &[], 0.0).is_err());
         assert!(HullDistance::new(&[cam], &[disc_mask(&cam, 0.2)], f64::NAN).is_err());
+        for (fx, fy) in [(0.0, 50.0), (50.0, f64::NAN), (-50.0, 50.0)] {
+            let odd = PinholeCamera { fx, fy, ..cam };
+            assert!(
+                HullDistance::new(&[odd], &[disc_mask(&cam, 0.2)], 0.0).is_err(),
+                "{fx} {fy}"
+            );
+        }
         let empty = HullDistance::new(&[cam], &[vec![0.0; 1600]], 0.0);
         assert!(empty.is_ok_and(|h| h.distance_m(DVec3::ZERO) > 1.0));
     }
