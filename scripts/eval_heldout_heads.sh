@@ -13,8 +13,8 @@
 # With TURN=1 head k's source lighting (`forest`) is turned about +y by 72·k − 36
 # degrees, so the five see its sun from five sides, as the validation heads of `nelf
 # train data` do (their source maps are turned at random); the targets stay as they
-# are. OUT_DIR defaults to out/heldout-heads-SIZE (-turned with TURN=1); heads already rendered there are reused,
-# and a folder holding another size is refused. Prints, per head, foreground PSNR (8-bit
+# are. OUT_DIR defaults to out/heldout-heads-SIZE (-turned with TURN=1); heads already
+# rendered there are reused, and a folder holding another size or turn is refused. Prints, per head, foreground PSNR (8-bit
 # sRGB, mean of its two targets) of the network, its bake, the ground-truth bake and the
 # flat colour; the share of the gap between the flat colour and the ground-truth bake
 # that the network and its bake close (foreground and whole-image); then the verdict of
@@ -45,6 +45,11 @@ for k in 1 2 3 4 5; do
     width=$(python3 -c 'import json, sys; print(json.load(open(sys.argv[1]))["views"][0]["width"])' "$dir/cameras.json")
     if [ "$width" != "$SIZE" ]; then
       echo "$dir holds ${width}² views, not ${SIZE}²: choose another OUT_DIR" >&2
+      exit 2
+    fi
+    held=$(python3 -c 'import json, sys; print(round(float(json.load(open(sys.argv[1])).get("env_rotate_deg", 0))))' "$dir/synth_config.json")
+    if [ "$held" != "$turn" ]; then
+      echo "$dir was lit turned ${held}°, not ${turn}°: choose another OUT_DIR (or TURN)" >&2
       exit 2
     fi
   else
