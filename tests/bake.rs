@@ -235,6 +235,11 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
         serde_json::json!({"step_mm": nelf_bake::DEFAULT_SHADING_PRIOR_MM, "weight": nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT}),
         "{source}"
     );
+    // The shipped weights' last steps trained through that same prior, and say so.
+    assert_eq!(
+        source["trained_shading_prior"], source["shading_prior"],
+        "{source}"
+    );
     assert!(asset.voxel_count() > 0);
     // A network's density is stored signed (`--network-skin-mm`, field/README.md).
     assert!(nelf_format::asset::has_negative_density(&asset.density));
@@ -256,6 +261,8 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
     let source = &gain.metadata["source"]["source"];
     assert_eq!(source["source_normalised"], false, "{source}");
     assert!(source["shading_prior"].is_null(), "{source}");
+    // What the weights were trained through stays on record.
+    assert_eq!(source["trained_shading_prior"]["weight"], 0.5, "{source}");
     let scale = source["light_transport_scale"].as_f64().unwrap();
     assert!(scale.is_finite() && scale > 0.0 && scale != 1.0, "{source}");
 

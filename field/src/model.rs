@@ -205,6 +205,9 @@ pub struct Model {
     /// The Lambertian shading prior mixed into the normalised light transport
     /// ([`Model::with_shading_prior`]).
     shading_prior: Option<ShadingPrior>,
+    /// The shading prior the weights' last training steps went through, as their
+    /// file says ([`SHADING_PRIOR_MM_KEY`], [`SHADING_PRIOR_WEIGHT_KEY`]).
+    trained_shading_prior: Option<ShadingPrior>,
 }
 
 /// The key of the optional one-element tensor in a weights file that holds the image
@@ -220,6 +223,16 @@ pub const WORKING_IMAGE_SIZE_KEY: &str = "nelf.working_image_size";
 /// transport times the source lighting's mean radiance `p_S`, which the images alone
 /// cannot tell. Absent: lightings in absolute units.
 pub const SOURCE_RELATIVE_LIGHT_KEY: &str = "nelf.source_relative_light";
+
+/// The keys of the optional one-element tensors in a weights file that give the
+/// shading prior ([`crate::prior`]) the network's last training steps rendered through
+/// (`nelf train run --shading-prior-mm`): its gradient step, mm, and its weight. Both
+/// or neither. Such weights learned to complement that prior; used without it (or
+/// with another) they are off the distribution they were last fitted to.
+pub const SHADING_PRIOR_MM_KEY: &str = "nelf.shading_prior_mm";
+
+/// See [`SHADING_PRIOR_MM_KEY`].
+pub const SHADING_PRIOR_WEIGHT_KEY: &str = "nelf.shading_prior_weight";
 
 /// Per-point outputs of a batch: density and colour or light transport, zero
 /// outside the hull.
@@ -257,6 +270,7 @@ impl Model {
             source_relative_light: false,
             source_irradiance: None,
             shading_prior: None,
+            trained_shading_prior: None,
         })
     }
 
@@ -353,6 +367,21 @@ impl Model {
         self.shading_prior
     }
 
+    /// The shading prior the weights were last trained through, if their file says
+    /// ([`SHADING_PRIOR_MM_KEY`]).
+    pub fn trained_shading_prior(&self) -> Option<ShadingPrior> {
+        self.trained_shading_prior
+    }
+
+    /// The model with [`Model::trained_shading_prior`] set.
+    #[must_use]
+    pub fn with_trained_shading_prior(self, prior: Option<ShadingPrior>) -> Self {
+        Self {
+            trained_shading_prior: prior,
+            ..self
+        }
+    }
+
     /// The per-view transport `lt` `(N, V, 384)` of `points` (mm, seen along
     /// `target_dirc`) with the model's shading prior mixed in ([`crate::prior`]), or
     /// `None` when the model has none. `density` gives σ of a batch of probe points
@@ -442,6 +471,24 @@ impl Model {
                 ));
             }
         };
+        let trained_shading_prior = match (metadata(SHADING_PRIOR_MM_KEY), metadata(SHADING_PRIOR_WEIGHT_KEY))
+        {
+            (None, None) => None,
+            (Some(Some(step_mm)), Some(Some(weight)))
+                if (ShadingPrior { step_mm, weight }).validate().is_ok() =>
+            {
+                Some(ShadingPrior { step_mm, weight })
+            }
+            _ => {
+                return Err(NetError::file(
+                    origin,
+                    format!(
+                        "`{SHADING_PRIOR_MM_KEY}` and `{SHADING_PRIOR_WEIGHT_KEY}` must both be given, a \
+                         positive step in mm and a weight in [0, 1], or neither"
+                    ),
+                ));
+            }
+        };
         let architecture = Architecture::from_tensors(&tensors)
             .map_err(|e| NetError::file(origin, format!("not NeLF weights: {e}")))?;
         let vb = VarBuilder::from_tensors(tensors, DType::F32, device);
@@ -455,6 +502,7 @@ impl Model {
         .map(|m| {
             m.with_working_image_size(working_image_size)
                 .with_source_relative_light(source_relative_light)
+                .with_trained_shading_prior(trained_shading_prior)
         })
         .map_err(|e| NetError::file(origin, format!("not NeLF weights: {e}")))
     }

@@ -48,5 +48,10 @@ mod tests {
         assert!((16..=512).contains(&size), "{size}");
         // Smaller than the official network (the card's `small` configuration).
         assert!(model.config().architecture != crate::Architecture::OFFICIAL);
+        // Its last steps trained through the default shading prior (the card).
+        assert_eq!(
+            model.trained_shading_prior(),
+            Some(crate::prior::ShadingPrior::default())
+        );
     }
 }

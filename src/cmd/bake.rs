@@ -278,6 +278,9 @@ pub fn network_provenance(field: &NelfField, weights_name: &str) -> serde_json::
             .shading_prior()
             .map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
         "source_relative_light": model.source_relative_light(),
+        "trained_shading_prior": model
+            .trained_shading_prior()
+            .map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
     })
 }
 
@@ -354,6 +357,24 @@ pub fn in_capture_light_units(
     };
     let field = field.with_source_light_power(map.mean_radiance())?;
     let light = nelf_format::conventions::project_envmap(&map, field.world_from_light())?;
+    let used = match fit {
+        SourceFit::Normalised(prior) => prior,
+        SourceFit::None | SourceFit::Gain => None,
+    };
+    if let Some(trained) = field.model().trained_shading_prior()
+        && used != Some(trained)
+    {
+        eprintln!(
+            "note: these weights were last trained through a shading prior of weight {} with normals over {} mm; \
+             this fit uses {} (the weights' accuracy figures hold with theirs)",
+            trained.weight,
+            trained.step_mm,
+            used.map_or("none".to_string(), |p| format!(
+                "weight {} over {} mm",
+                p.weight, p.step_mm
+            ))
+        );
+    }
     match fit {
         SourceFit::None => Ok(field),
         SourceFit::Gain => {

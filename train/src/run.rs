@@ -290,7 +290,9 @@ fn validate_and_log(
 }
 
 /// Writes the network alone (official key names) for `Model::load`, with the image
-/// side it was trained at (`nelf_field::model::WORKING_IMAGE_SIZE_KEY`).
+/// side it was trained at (`nelf_field::model::WORKING_IMAGE_SIZE_KEY`), whether its
+/// lightings were source-relative and the shading prior it rendered through
+/// (`nelf_field::model::SHADING_PRIOR_MM_KEY`).
 pub fn export_weights(trainable: &Trainable, config: &TrainConfig, path: &Path) -> Result<(), TrainError> {
     export_named_weights(trainable.weights()?, config, path)
 }
@@ -320,6 +322,14 @@ pub fn export_named_weights(
             nelf_field::model::SOURCE_RELATIVE_LIGHT_KEY.into(),
             Tensor::new(&[1.0f32], &Device::Cpu)?,
         );
+    }
+    if let Some(prior) = config.shading_prior() {
+        for (key, value) in [
+            (nelf_field::model::SHADING_PRIOR_MM_KEY, prior.step_mm),
+            (nelf_field::model::SHADING_PRIOR_WEIGHT_KEY, prior.weight),
+        ] {
+            tensors.insert(key.into(), Tensor::new(&[value], &Device::Cpu)?);
+        }
     }
     let tmp = path.with_extension("tmp");
     candle_core::safetensors::save(&tensors, &tmp)?;

@@ -703,6 +703,64 @@ fn check_training_matches_inference(prior: Option<nelf_field::prior::ShadingPrio
     assert!(opaque > 0, "no ray hit anything: the comparison says nothing");
 }
 
+/// Weights trained through the shading prior say which one, and weights trained
+/// without it say nothing; a file that gives half of it, or a prior out of range,
+/// is refused, naming the file and the keys.
+#[test]
+fn weights_record_the_shading_prior_they_trained_through() {
+    use nelf_field::prior::ShadingPrior;
+    use nelf_field::{Model, NelfConfig};
+
+    let dir = tempfile::tempdir().unwrap();
+    let prior = ShadingPrior {
+        step_mm: 6.0,
+        weight: 0.25,
+    };
+    for trained in [None, Some(prior)] {
+        let config = TrainConfig {
+            shading_prior_mm: trained.map_or(0.0, |p| p.step_mm),
+            shading_prior_weight: trained.map_or(0.5, |p| p.weight),
+            ..tiny_config()
+        };
+        let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+        let path = dir.path().join("weights.safetensors");
+        nelf_train::run::export_weights(&trainable, &config, &path).unwrap();
+        let model = Model::load(&path, NelfConfig::default(), &Device::Cpu).unwrap();
+        assert_eq!(model.trained_shading_prior(), trained);
+    }
+    let good = dir.path().join("weights.safetensors");
+    let tensors = candle_core::safetensors::load(&good, &Device::Cpu).unwrap();
+    let step_key = nelf_field::model::SHADING_PRIOR_MM_KEY;
+    let weight_key = nelf_field::model::SHADING_PRIOR_WEIGHT_KEY;
+    let damages: [&[(&str, f32)]; 3] = [&[(weight_key, 2.0)], &[(step_key, -1.0)], &[(step_key, f32::NAN)]];
+    for damage in damages {
+        let mut damaged = tensors.clone();
+        for (key, value) in damage {
+            damaged.insert((*key).to_string(), Tensor::new(&[*value], &Device::Cpu).unwrap());
+        }
+        let bad = dir.path().join("damaged.safetensors");
+        candle_core::safetensors::save(&damaged, &bad).unwrap();
+        let err = Model::load(&bad, NelfConfig::default(), &Device::Cpu)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            err.contains(step_key) && err.contains("damaged.safetensors"),
+            "{damage:?}: {err}"
+        );
+    }
+    let mut half = tensors.clone();
+    half.remove(weight_key);
+    let bad = dir.path().join("half.safetensors");
+    candle_core::safetensors::save(&half, &bad).unwrap();
+    let err = Model::load(&bad, NelfConfig::default(), &Device::Cpu)
+        .unwrap_err()
+        .to_string();
+    assert!(
+        err.contains(weight_key) && err.contains("half.safetensors"),
+        "{err}"
+    );
+}
+
 /// Weights trained with source-relative lighting say so, and a field over them
 /// divides its light transport by the capture's source power when told it; weights in
 /// absolute units ignore the power; a power that is no positive number is refused.
