@@ -54,6 +54,87 @@ fn normals_of_a_ball_point_outward_and_vanish_where_density_is_flat() {
     );
 }
 
+/// A density of the signed distance `d` (mm, positive outside) to a solid: a
+/// logistic step 3 mm soft, as the network's density is soft.
+fn soft(d: f32) -> f32 {
+    1.0 / (1.0 + (d / 3.0).exp())
+}
+
+/// Asserts each normal is within 2.6° of its expected direction.
+fn assert_normals(normals: &[Option<[f32; 3]>], expected: &[[f32; 3]], what: &str) {
+    for (n, e) in normals.iter().zip(expected) {
+        let n = n.unwrap_or_else(|| panic!("{what}: no normal where {e:?} is expected"));
+        let dot: f32 = n.iter().zip(e).map(|(a, b)| a * b).sum();
+        assert!(dot > 0.999, "{what}: normal {n:?}, expected {e:?}");
+    }
+}
+
+#[test]
+fn normals_of_open_holed_and_thin_surfaces_point_out_of_the_material() {
+    // The defects of real scans, at the default step (8 mm). A 20 mm slab (|z| < 10
+    // mm) holed by a cylinder of radius 30 mm about z and open at x = 100 mm: its
+    // faces, the wall of its hole and its open edge.
+    let step = nelf_field::prior::DEFAULT_STEP_MM;
+    let holed = |points: &[[f32; 3]]| -> Result<Vec<f32>, nelf_field::NetError> {
+        Ok(points
+            .iter()
+            .map(|p| {
+                let faces = p[2].abs() - 10.0;
+                let hole = 30.0 - p[0].hypot(p[1]);
+                let edge = p[0] - 100.0;
+                soft(faces.max(hole).max(edge))
+            })
+            .collect())
+    };
+    let points = [
+        [60.0, 0.0, 10.0],
+        [60.0, 0.0, -10.0],
+        [30.0, 0.0, 0.0],
+        [0.0, -30.0, 0.0],
+        [100.0, 50.0, 0.0],
+    ];
+    let expected = [
+        [0.0, 0.0, 1.0],
+        [0.0, 0.0, -1.0],
+        // Into the hole, toward its axis.
+        [-1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        // Out of the open edge.
+        [1.0, 0.0, 0.0],
+    ];
+    assert_normals(
+        &density_normals(&points, step, holed).unwrap(),
+        &expected,
+        "holed slab",
+    );
+
+    // A sheet 2 mm thick, a quarter of the step: the differences straddle it, yet on
+    // each side the normal points to that side; on its mid-plane there is none, and
+    // the prior is uniform there (the ratio of total irradiances), never a wrong
+    // direction.
+    let thin = |points: &[[f32; 3]]| -> Result<Vec<f32>, nelf_field::NetError> {
+        Ok(points.iter().map(|p| soft(p[2].abs() - 1.0)).collect())
+    };
+    let points = [
+        [5.0, 7.0, 1.0],
+        [5.0, 7.0, -1.0],
+        [5.0, 7.0, 4.0],
+        [5.0, 7.0, 0.0],
+    ];
+    let normals = density_normals(&points, step, thin).unwrap();
+    assert_normals(
+        &normals[..3],
+        &[[0.0, 0.0, 1.0], [0.0, 0.0, -1.0], [0.0, 0.0, 1.0]],
+        "thin sheet",
+    );
+    assert!(normals[3].is_none(), "mid-plane: {:?}", normals[3]);
+    assert!(
+        lambert_transport(&normals[3..], IDENTITY)
+            .iter()
+            .all(|&x| x == 1.0)
+    );
+}
+
 #[test]
 fn the_lobe_peaks_at_the_normal_is_clamped_behind_it_and_uniform_without_a_normal() {
     let (row, col) = (3, 5);
