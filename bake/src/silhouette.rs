@@ -59,6 +59,9 @@ struct ViewDistance {
 
 impl ViewDistance {
     fn new(camera: &PinholeCamera, mask: &[f32]) -> Result<Self> {
+        camera
+            .validate()
+            .map_err(|e| BakeError::Hull(format!("a view's camera: {e}")))?;
         let (w, h) = (camera.width as usize, camera.height as usize);
         check_mask_size(mask, w, h)?;
         let (pw, ph) = (w + 2, h + 2);
@@ -68,12 +71,6 @@ impl ViewDistance {
                 (1..=w).contains(&x) && (1..=h).contains(&y) && is_foreground(mask[(y - 1) * w + (x - 1)])
             })
             .collect();
-        if !(camera.fx.is_finite() && camera.fy.is_finite() && camera.fx > 0.0 && camera.fy > 0.0) {
-            return Err(BakeError::Hull(format!(
-                "a camera's focal lengths ({}, {}) px are not positive",
-                camera.fx, camera.fy
-            )));
-        }
         let pixel = [1.0 / camera.fx, 1.0 / camera.fy];
         let half = 0.5 * mean_pixel(camera);
         let to_inside = distance_transform(&inside, pw, ph, pixel);
@@ -450,7 +447,7 @@ mod tests {
         // pixel column (foreground left of u = 40) and one along a row (foreground
         // above v = 30): k pixels off either edge lie k/f_x resp. k/f_y (× depth) off
         // the hull, to within the half pixel's ½ |1/f_x − 1/f_y| (0.11 px along x,
-        // 0.17 px along y here). A single focal length √(f_x f_y) for both axes
+        // 0.09 px along y here). A single focal length √(f_x f_y) for both axes
         // is 0.22 px off per pixel along x and 0.18 along y: 0.9 px at 4 px out.
         let mut cam = camera();
         (cam.width, cam.height) = (64, 48);

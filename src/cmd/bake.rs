@@ -274,14 +274,15 @@ pub fn network_provenance(field: &NelfField, weights_name: &str) -> serde_json::
         "light_transport_scale": field.light_transport_scale(),
         "source_gain": field.source_gain(),
         "source_normalised": model.source_normalised(),
-        "shading_prior": model
-            .shading_prior()
-            .map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
+        "shading_prior": model.shading_prior().map(prior_json),
         "source_relative_light": model.source_relative_light(),
-        "trained_shading_prior": model
-            .trained_shading_prior()
-            .map(|p| serde_json::json!({"step_mm": p.step_mm, "weight": p.weight})),
+        "trained_shading_prior": model.trained_shading_prior().map(prior_json),
     })
+}
+
+/// A shading prior as the provenance records it.
+fn prior_json(prior: nelf_field::prior::ShadingPrior) -> serde_json::Value {
+    serde_json::json!({"step_mm": prior.step_mm, "weight": prior.weight})
 }
 
 /// How a network field is fitted to the capture's source views when the capture

@@ -703,6 +703,14 @@ fn check_training_matches_inference(prior: Option<nelf_field::prior::ShadingPrio
     assert!(opaque > 0, "no ray hit anything: the comparison says nothing");
 }
 
+/// Saves `tensors` as a weights file at `path` and returns the error loading it gives.
+fn load_error(tensors: &std::collections::HashMap<String, Tensor>, path: &std::path::Path) -> String {
+    candle_core::safetensors::save(tensors, path).unwrap();
+    nelf_field::Model::load(path, nelf_field::NelfConfig::default(), &Device::Cpu)
+        .unwrap_err()
+        .to_string()
+}
+
 /// Weights trained through the shading prior say which one, and weights trained
 /// without it say nothing; a file that gives half of it, or a prior out of range,
 /// is refused, naming the file and the keys.
@@ -738,11 +746,7 @@ fn weights_record_the_shading_prior_they_trained_through() {
         for (key, value) in damage {
             damaged.insert((*key).to_string(), Tensor::new(&[*value], &Device::Cpu).unwrap());
         }
-        let bad = dir.path().join("damaged.safetensors");
-        candle_core::safetensors::save(&damaged, &bad).unwrap();
-        let err = Model::load(&bad, NelfConfig::default(), &Device::Cpu)
-            .unwrap_err()
-            .to_string();
+        let err = load_error(&damaged, &dir.path().join("damaged.safetensors"));
         assert!(
             err.contains(step_key) && err.contains("damaged.safetensors"),
             "{damage:?}: {err}"
@@ -750,11 +754,7 @@ fn weights_record_the_shading_prior_they_trained_through() {
     }
     let mut half = tensors.clone();
     half.remove(weight_key);
-    let bad = dir.path().join("half.safetensors");
-    candle_core::safetensors::save(&half, &bad).unwrap();
-    let err = Model::load(&bad, NelfConfig::default(), &Device::Cpu)
-        .unwrap_err()
-        .to_string();
+    let err = load_error(&half, &dir.path().join("half.safetensors"));
     assert!(
         err.contains(weight_key) && err.contains("half.safetensors"),
         "{err}"
@@ -793,11 +793,7 @@ fn source_relative_weights_say_so_and_their_bake_takes_the_source_power() {
         (nelf_field::model::WORKING_IMAGE_SIZE_KEY, 7.0),
     ] {
         let original = tensors.insert(key.to_string(), Tensor::new(&[value], &Device::Cpu).unwrap());
-        let bad = dir.path().join("damaged.safetensors");
-        candle_core::safetensors::save(&tensors, &bad).unwrap();
-        let err = Model::load(&bad, NelfConfig::default(), &Device::Cpu)
-            .unwrap_err()
-            .to_string();
+        let err = load_error(&tensors, &dir.path().join("damaged.safetensors"));
         assert!(err.contains(key) && err.contains("damaged.safetensors"), "{err}");
         tensors.insert(key.to_string(), original.unwrap());
     }
