@@ -10,6 +10,8 @@
 #   SIZE=128 bash scripts/eval_heldout_heads.sh   # the same heads at 128² views
 #   TURN=1 bash scripts/eval_heldout_heads.sh      # source lighting turned 36°, 108°, … 324°
 #   FIRST=6 COUNT=8 bash scripts/eval_heldout_heads.sh   # eight more heads, 2^62 + 6 ... 13
+#   HEADS_FROM=out/heldout-heads-64 bash scripts/eval_heldout_heads.sh OUT -- --weights W
+#                                                  # score other weights on heads already rendered
 #
 # With TURN=1 head k's source lighting (`forest`) is turned about +y by 72·k − 36
 # degrees, so the five see its sun from five sides, as the validation heads of `nelf
@@ -18,7 +20,9 @@
 # 2^62 + FIRST ... FIRST + COUNT − 1, a fresh check that the five are not a lucky draw (the
 # verdict below is then on at least 4/5 of them). OUT_DIR defaults to
 # out/heldout-heads-SIZE (-turned with TURN=1, -FIRST-COUNT for other heads); heads already
-# rendered there are reused, and a folder holding another size or turn is refused. Prints, per head, foreground PSNR (8-bit
+# rendered there are reused (HEADS_FROM=DIR links DIR's heads into OUT_DIR first, so that
+# scores of other weights or options go to their own folder without rendering the heads
+# again), and a folder holding another size or turn is refused. Prints, per head, foreground PSNR (8-bit
 # sRGB, mean of its two targets) of the network, its bake, the ground-truth bake and the
 # flat colour; the share of the gap between the flat colour and the ground-truth bake
 # that the network and its bake close (foreground and whole-image); then the verdict of
@@ -46,6 +50,9 @@ captures=()
 for k in $(seq "$FIRST" $(( FIRST + COUNT - 1 ))); do
   seed=$(( (1 << 62) + k ))
   dir="$OUT/head$k"
+  if [ -n "${HEADS_FROM:-}" ] && [ ! -e "$dir" ] && [ -d "$HEADS_FROM/head$k" ]; then
+    ln -s "$(cd "$HEADS_FROM/head$k" && pwd)" "$dir"
+  fi
   turn=0
   if [ "$TURN" = 1 ]; then turn=$(( 72 * k - 36 )); fi
   if [ -f "$dir/cameras.json" ]; then
