@@ -16,6 +16,24 @@ import numpy as np
 from safetensors.numpy import load_file, save_file
 
 
+def check_agrees(first, other):
+    """What keeps `other` from being averaged with `first`, or None: the same tensor
+    names and shapes (the `nelf.*` records may be missing from either, but where both
+    have one it must be equal)."""
+    names = sorted(k for k in set(first) ^ set(other) if not k.startswith("nelf."))
+    if names:
+        return f"tensors differ: {names[:5]}"
+    for name, tensor in first.items():
+        if name not in other:
+            continue
+        if name.startswith("nelf."):
+            if not np.array_equal(other[name], tensor):
+                return f"{name} is {other[name]}, not {tensor}"
+        elif other[name].shape != tensor.shape:
+            return f"{name} has shape {other[name].shape}, not {tensor.shape}"
+    return None
+
+
 def main() -> int:
     if len(sys.argv) < 4:
         print(__doc__.strip(), file=sys.stderr)
@@ -24,26 +42,16 @@ def main() -> int:
     files = [load_file(p) for p in paths]
     first = files[0]
     for path, f in zip(paths[1:], files[1:]):
-        missing = sorted(k for k in set(first) ^ set(f) if not k.startswith("nelf."))
-        if missing:
-            print(f"{path}: tensors differ from {paths[0]}'s: {missing[:5]}", file=sys.stderr)
+        problem = check_agrees(first, f)
+        if problem:
+            print(f"{path}: {problem} (against {paths[0]})", file=sys.stderr)
             return 1
-    averaged = {}
-    for name, tensor in first.items():
-        if name.startswith("nelf."):
-            for path, f in zip(paths[1:], files[1:]):
-                if name in f and not np.array_equal(f[name], tensor):
-                    print(f"{path}: {name} is {f[name]}, {paths[0]} says {tensor}", file=sys.stderr)
-                    return 1
-            averaged[name] = tensor
-        elif tensor.dtype.kind == "f":
-            for path, f in zip(paths[1:], files[1:]):
-                if f[name].shape != tensor.shape:
-                    print(f"{path}: {name} has shape {f[name].shape}, not {tensor.shape}", file=sys.stderr)
-                    return 1
-            averaged[name] = np.mean([f[name] for f in files], axis=0).astype(tensor.dtype)
-        else:
-            averaged[name] = tensor
+    averaged = {
+        name: np.mean([f[name] for f in files], axis=0).astype(tensor.dtype)
+        if tensor.dtype.kind == "f" and not name.startswith("nelf.")
+        else tensor
+        for name, tensor in first.items()
+    }
     save_file(averaged, out)
     print(f"{out}: the mean of {len(paths)} weight files, {len(averaged)} tensors")
     return 0

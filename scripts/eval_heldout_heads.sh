@@ -27,7 +27,7 @@
 # flat colour; the share of the gap between the flat colour and the ground-truth bake
 # that the network and its bake close (foreground and whole-image); then the verdict of
 # the rule set before the weights that meet it were trained: the bake beats the flat
-# colour on at least 4 of the 5 heads and by at least 0.5 dB on their mean. The shipped
+# colour on at least 4 in 5 of the heads and by at least 0.5 dB on their mean. The shipped
 # weights meet it with the defaults (normalised to the source lighting, with the shading
 # prior; `-- --no-source-calibration` scores the raw network). CI tests the first head
 # alone (tests/network_accuracy.rs); the five take ~7 minutes at 64², ~40 at 128² (beside CI)
