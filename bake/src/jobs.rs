@@ -182,6 +182,18 @@ pub fn with_capture_job<R>(
     run(&job, prior)
 }
 
+/// The ground-truth mesh field of `truth` at voxel size `voxel_size_m`, as a
+/// capture's ground-truth bake samples it (`config`'s shell placement and trace).
+pub fn truth_field(
+    truth: &GroundTruth,
+    config: &BakeConfig,
+    voxel_size_m: f64,
+) -> Result<Box<dyn FieldSource>> {
+    let mesh = truth.mesh()?;
+    let trace = config.trace.apply_to_field(truth.trace_settings());
+    mesh_field(&mesh, trace, voxel_size_m, config.shell_placement, config)
+}
+
 /// Bakes a capture's ground-truth field: visual hull of its masks, the mesh of
 /// `truth` as the field, the capture's cameras as the views.
 pub fn bake_capture(

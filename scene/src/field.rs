@@ -837,3 +837,150 @@ impl FieldSource for SignedLogDensity<'_> {
         Ok(())
     }
 }
+
+/// A field with the density of one source and the light transport of another, at
+/// the same points: the ablation that tells a learned field's geometry error from its
+/// shading error (`nelf eval network --split`: the ground truth's density with the
+/// network's transport, and the reverse). Bounds are the density source's (the
+/// density is zero outside them); the light frame is the transport source's.
+pub struct DensityAndTransport<'a> {
+    density: &'a dyn FieldSource,
+    transport: &'a dyn FieldSource,
+}
+
+impl std::fmt::Debug for DensityAndTransport<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DensityAndTransport").finish_non_exhaustive()
+    }
+}
+
+impl<'a> DensityAndTransport<'a> {
+    /// σ from `density`, `T` from `transport`.
+    pub fn new(density: &'a dyn FieldSource, transport: &'a dyn FieldSource) -> Self {
+        Self { density, transport }
+    }
+}
+
+impl FieldSource for DensityAndTransport<'_> {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        self.transport.evaluate(points, view, density, lt)?;
+        self.density.evaluate_density(points, density)
+    }
+
+    fn evaluate_directions(
+        &self,
+        points: &[Vec3],
+        directions: &[Vec3],
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        self.transport
+            .evaluate_directions(points, directions, density, lt)?;
+        self.density.evaluate_density(points, density)
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        self.density.bounds()
+    }
+
+    fn world_from_light(&self) -> DMat3 {
+        self.transport.world_from_light()
+    }
+
+    fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
+        self.density.evaluate_density(points, density)
+    }
+}
+
+/// A field with the density of `colour` and, at each point, the light transport of
+/// `shape` scaled per channel so that under `lighting` it shades to what `colour`'s
+/// transport shades to: `T_c = T^shape_c · (T^colour_c·L)/(T^shape_c·L)`. With a
+/// learned field as `colour` and the ground truth as `shape`, it keeps what the
+/// network reproduces of the source photos and replaces only how that colour changes
+/// with the lighting (`nelf eval network --split`). Where `shape` shades a channel to
+/// almost nothing under `lighting`, `colour`'s own transport is kept.
+pub struct TransportShapeFrom<'a> {
+    shape: &'a dyn FieldSource,
+    colour: &'a dyn FieldSource,
+    shape_light: nelf_format::conventions::LatLong,
+    colour_light: nelf_format::conventions::LatLong,
+}
+
+impl std::fmt::Debug for TransportShapeFrom<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TransportShapeFrom").finish_non_exhaustive()
+    }
+}
+
+impl<'a> TransportShapeFrom<'a> {
+    /// `shape`'s transport at `colour`'s brightness under `lighting` (an environment
+    /// map in the world frame), `colour`'s density.
+    pub fn new(
+        shape: &'a dyn FieldSource,
+        colour: &'a dyn FieldSource,
+        lighting: &nelf_format::conventions::LatLong,
+    ) -> Result<Self, FieldError> {
+        let project = |source: &dyn FieldSource| {
+            nelf_format::conventions::project_envmap(lighting, source.world_from_light())
+                .map_err(|e| FieldError::Settings(format!("the lighting: {e}")))
+        };
+        Ok(Self {
+            shape_light: project(shape)?,
+            colour_light: project(colour)?,
+            shape,
+            colour,
+        })
+    }
+
+    fn rescale(&self, lt: &mut [f32], colour_lt: &[f32]) {
+        use nelf_format::conventions::{ENV_TEXELS, shade};
+        for (t, own) in lt.chunks_exact_mut(LT_DIM).zip(colour_lt.chunks_exact(LT_DIM)) {
+            let want = shade(own, &self.colour_light);
+            let have = shade(t, &self.shape_light);
+            for c in 0..3 {
+                let channel = c * ENV_TEXELS..(c + 1) * ENV_TEXELS;
+                if have[c] > 1e-6 {
+                    let scale = want[c] / have[c];
+                    t[channel].iter_mut().for_each(|v| *v *= scale);
+                } else {
+                    t[channel.clone()].copy_from_slice(&own[channel]);
+                }
+            }
+        }
+    }
+}
+
+impl FieldSource for TransportShapeFrom<'_> {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        let mut colour_lt = vec![0.0f32; lt.len()];
+        self.colour.evaluate(points, view, density, &mut colour_lt)?;
+        let mut unused = vec![0.0f32; points.len()];
+        self.shape.evaluate(points, view, &mut unused, lt)?;
+        self.rescale(lt, &colour_lt);
+        Ok(())
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        self.colour.bounds()
+    }
+
+    fn world_from_light(&self) -> DMat3 {
+        self.shape.world_from_light()
+    }
+
+    fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> Result<(), FieldError> {
+        self.colour.evaluate_density(points, density)
+    }
+}

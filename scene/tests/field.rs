@@ -584,6 +584,126 @@ fn voxel_filter_keeps_a_thin_shells_optical_depth() {
     assert!(VoxelFiltered::new(&ThinSlab, voxel, 0).is_err());
 }
 
+/// The split field takes σ (everywhere, and for the density-only path) and the
+/// bounds from one source, `T` from the other, whichever the view policy or batch.
+#[test]
+fn density_and_transport_takes_each_from_its_source() {
+    use nelf_scene::field::DensityAndTransport;
+    let sphere_field = MeshField::new(&sphere(), fast_settings(), DensityProfile::default()).unwrap();
+    let split = DensityAndTransport::new(&sphere_field, &ThinSlab);
+    let points = [Vec3::ZERO, Vec3::new(0.0007, 0.0, 0.0), Vec3::new(0.9, 0.0, 0.0)];
+    let mut expected = [0.0f32; 3];
+    sphere_field.evaluate_density(&points, &mut expected).unwrap();
+    assert!(expected[0] > 0.0 && expected[2] == 0.0, "{expected:?}");
+    let (mut density, mut lt) = ([0.0f32; 3], vec![0.0f32; 3 * LT_DIM]);
+    split
+        .evaluate(&points, &ViewPolicy::Direction(Vec3::Z), &mut density, &mut lt)
+        .unwrap();
+    assert_eq!(density, expected);
+    // The slab's transport: 1 inside it (the second point), 7 elsewhere.
+    for (t, want) in lt.chunks_exact(LT_DIM).zip([7.0f32, 1.0, 7.0]) {
+        assert!(t.iter().all(|v| *v == want), "T {} against {want}", t[0]);
+    }
+    let mut many = vec![0.0f32; 3 * 2 * LT_DIM];
+    density.fill(-1.0);
+    split
+        .evaluate_directions(&points, &[Vec3::Z, Vec3::X], &mut density, &mut many)
+        .unwrap();
+    assert_eq!(density, expected);
+    assert_eq!(many[2 * LT_DIM], 1.0);
+    density.fill(-1.0);
+    split.evaluate_density(&points, &mut density).unwrap();
+    assert_eq!(density, expected);
+    assert_eq!(split.bounds(), sphere_field.bounds());
+}
+
+/// `T` = (texel index + 1) · (channel + 1) everywhere, σ = 1; channel 2 is zero at
+/// points with x < 0 (a channel the lighting cannot light).
+struct TexelRamp;
+
+impl FieldSource for TexelRamp {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        _view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        for ((p, d), t) in points
+            .iter()
+            .zip(density.iter_mut())
+            .zip(lt.chunks_exact_mut(LT_DIM))
+        {
+            *d = 1.0;
+            for (i, v) in t.iter_mut().enumerate() {
+                let (c, k) = (i / ENV_TEXELS, i % ENV_TEXELS);
+                *v = if c == 2 && p.x < 0.0 {
+                    0.0
+                } else {
+                    (k + 1) as f32 * (c + 1) as f32
+                };
+            }
+        }
+        Ok(())
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        (Vec3::splat(-2.0), Vec3::splat(2.0))
+    }
+}
+
+/// The shape-swapped field keeps the colour source's density and its shading under
+/// the given lighting, with the shape source's transport up to one factor per
+/// channel; a channel the shape source leaves dark keeps the colour source's `T`.
+#[test]
+fn transport_shape_from_keeps_the_colour_under_the_lighting() {
+    use nelf_format::conventions::{LatLong, project_envmap};
+    use nelf_scene::field::TransportShapeFrom;
+    let texels: Vec<[f32; 3]> = (0..ENV_TEXELS)
+        .map(|k| [0.1 + (k % 7) as f32 * 0.05, 0.2, 0.05 + (k % 3) as f32 * 0.1])
+        .collect();
+    let lighting = LatLong::new(ENV_W, ENV_H, texels).unwrap();
+    let swapped = TransportShapeFrom::new(&TexelRamp, &ThinSlab, &lighting).unwrap();
+    let points = [Vec3::new(0.0007, 0.0, 0.0), Vec3::new(-0.5, 0.0, 0.0)];
+    let (mut density, mut lt) = ([0.0f32; 2], vec![0.0f32; 2 * LT_DIM]);
+    swapped
+        .evaluate(&points, &ViewPolicy::Direction(Vec3::Z), &mut density, &mut lt)
+        .unwrap();
+    assert_eq!(density, [5000.0, 0.0]);
+    let light = project_envmap(&lighting, ThinSlab.world_from_light()).unwrap();
+    for (i, (t, slab_t)) in lt.chunks_exact(LT_DIM).zip([1.0f32, 7.0]).enumerate() {
+        let want = shade(&vec![slab_t; LT_DIM], &light);
+        let got = shade(t, &light);
+        for c in 0..3 {
+            assert!(
+                (got[c] - want[c]).abs() < 1e-4 * want[c],
+                "point {i} channel {c}: {got:?} against {want:?}"
+            );
+        }
+        // The ramp's shape: T ∝ texel index + 1 in channels 0 and 1 at both points,
+        // and in channel 2 where the ramp lights it.
+        for c in 0..3 {
+            let row = &t[c * ENV_TEXELS..(c + 1) * ENV_TEXELS];
+            if c == 2 && i == 1 {
+                assert!(
+                    row.iter().all(|v| *v == slab_t),
+                    "the dark channel keeps the colour's T"
+                );
+            } else {
+                for (k, v) in row.iter().enumerate() {
+                    assert!(
+                        (v / row[0] - (k + 1) as f32).abs() < 1e-3,
+                        "point {i} channel {c} texel {k}"
+                    );
+                }
+            }
+        }
+    }
+    let mut only = [0.0f32; 2];
+    swapped.evaluate_density(&points, &mut only).unwrap();
+    assert_eq!(only, density);
+}
+
 /// A trained network's skin across the plane `x = surface`: σ grows by `e` every
 /// `1/k` metres into `+x` and equals `k·ln 2` on the plane, where a ray coming from
 /// `−x` reaches optical depth ln 2 (`τ(x) = σ(x)/k`).

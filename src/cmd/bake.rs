@@ -12,13 +12,15 @@ use anyhow::Context;
 use nelf_bake::{
     BakeConfig, BakeOutput, CaptureFormat, CaptureLoadOptions, ChoiceArgs, ChoiceReport, GroundTruth,
     HullCarved, HullDistance, LoadedCapture, Progress, bake_capture, bake_capture_field, bake_mesh,
-    load_capture, plan_capture, sidecar_path, write_bake,
+    load_capture, plan_capture, sidecar_path, truth_field, write_bake,
 };
 use nelf_field::capture::default_net_from_world;
 use nelf_field::shipped::load_or_shipped;
 use nelf_field::{Model, NelfConfig, NelfField, NetCapture};
 use nelf_format::conventions::LatLong;
-use nelf_scene::field::{FieldSource as _, SignedLogDensity, VoxelFiltered};
+use nelf_scene::field::{
+    DensityAndTransport, FieldSource as _, SignedLogDensity, TransportShapeFrom, VoxelFiltered,
+};
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
 
 /// Options of `nelf bake`.
@@ -259,8 +261,7 @@ pub fn bake_network(
         &provenance,
         config,
         progress,
-        NETWORK_VOXEL_FILTER,
-        None,
+        &NetworkSampling::default(),
     )
 }
 
@@ -432,19 +433,61 @@ pub fn capture_source_lighting(
 /// network` on held-out heads (docs/measurements/2026-11-26-network-bake.md).
 pub const NETWORK_VOXEL_FILTER: usize = 2;
 
-/// Bakes `field` (the network over `capture`'s views) with `view_policy` (default:
-/// the network's recommended one), box-filtered over voxels ([`NETWORK_VOXEL_FILTER`]),
-/// its density stored as a signed function of `ln σ` ([`SignedLogDensity`]) unless
-/// `config.network_skin_mm` is 0; `provenance` goes into the asset's metadata.
+/// The part of a network bake the ground truth stands in for (`nelf eval network
+/// --split`), to tell the network's geometry error from its shading error.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FromTruth {
+    /// The ground truth's density with the network's light transport.
+    Density,
+    /// The network's density (signed and carved as in its bake) with the ground
+    /// truth's light transport.
+    Transport,
+    /// The network's density and its colour under the capture's source lighting, with
+    /// the ground truth's transport scaled to that colour: how the colour changes
+    /// with the lighting is the truth's ([`TransportShapeFrom`]).
+    Shading,
+}
+
+/// How one network bake is sampled, where it departs from `nelf bake capture`'s.
+#[derive(Debug, Clone)]
+pub struct NetworkSampling<'a> {
+    /// Sub-points per voxel edge ([`NETWORK_VOXEL_FILTER`] by default).
+    pub voxel_filter: usize,
+    /// The outgoing direction of the light transport (`None`: the network's
+    /// recommended policy).
+    pub view_policy: Option<nelf_scene::field::ViewPolicy>,
+    /// A part of the field taken from this ground truth (`nelf eval network --split`).
+    pub from_truth: Option<(&'a GroundTruth, FromTruth)>,
+}
+
+impl Default for NetworkSampling<'_> {
+    fn default() -> Self {
+        Self {
+            voxel_filter: NETWORK_VOXEL_FILTER,
+            view_policy: None,
+            from_truth: None,
+        }
+    }
+}
+
+/// Bakes `field` (the network over `capture`'s views) as `sampling` says (by
+/// default toward the network's recommended view policy, box-filtered over voxels by
+/// [`NETWORK_VOXEL_FILTER`]), its density stored as a signed function of `ln σ`
+/// ([`SignedLogDensity`]) unless `config.network_skin_mm` is 0; `provenance` goes
+/// into the asset's metadata.
 pub fn bake_network_field(
     capture: &LoadedCapture,
     field: &NelfField,
     provenance: &serde_json::Value,
     config: &BakeConfig,
     progress: Progress,
-    voxel_filter: usize,
-    view_policy: Option<nelf_scene::field::ViewPolicy>,
+    sampling: &NetworkSampling<'_>,
 ) -> anyhow::Result<BakeOutput> {
+    let NetworkSampling {
+        voxel_filter,
+        view_policy,
+        from_truth,
+    } = sampling.clone();
     let planned = plan_capture(capture, config, field, &progress)?;
     let view_policy = view_policy.unwrap_or_else(|| field.recommended_view_policy());
     let voxel_m = planned.voxel_size_m as f32;
@@ -471,6 +514,30 @@ pub fn bake_network_field(
         }
     } else {
         &filtered
+    };
+    let (truth, split, shaped);
+    let source: &dyn nelf_scene::field::FieldSource = match from_truth {
+        None => source,
+        Some((ground_truth, part)) => {
+            truth = truth_field(ground_truth, config, planned.voxel_size_m)
+                .with_context(|| format!("the ground truth of {}", capture.dir.display()))?;
+            match part {
+                FromTruth::Density => {
+                    split = DensityAndTransport::new(truth.as_ref(), source);
+                    &split
+                }
+                FromTruth::Transport => {
+                    split = DensityAndTransport::new(source, truth.as_ref());
+                    &split
+                }
+                FromTruth::Shading => {
+                    let lighting = capture_source_lighting(capture.description(), &capture.dir)?
+                        .with_context(|| format!("{} names no source lighting", capture.dir.display()))?;
+                    shaped = TransportShapeFrom::new(truth.as_ref(), source, &lighting)?;
+                    &shaped
+                }
+            }
+        }
     };
     Ok(bake_capture_field(
         capture,

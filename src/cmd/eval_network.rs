@@ -6,6 +6,9 @@
 //! (`nelf_scene::metrics::srgb8_scores`). Every capture must carry its ground truth
 //! (a synthetic capture's `synth_config.json`, e.g. the held-out heads of a
 //! `nelf train data` folder). `network.json` in `--out` records every score.
+//! `--split` swaps parts of the network's field for the ground truth's
+//! (`nelf_scene::field::{DensityAndTransport, TransportShapeFrom}`) to tell where its
+//! error lies.
 
 use std::path::PathBuf;
 
@@ -25,6 +28,7 @@ use serde::Serialize;
 
 /// Options of `nelf eval network`.
 #[derive(Debug, clap::Args)]
+#[allow(clippy::struct_excessive_bools, reason = "independent command-line switches")]
 pub struct NetworkEvalArgs {
     /// Capture folders with their ground truth and held-aside targets.
     #[arg(required = true)]
@@ -72,6 +76,14 @@ pub struct NetworkEvalArgs {
     /// losses.
     #[arg(long)]
     pub oracle_view: bool,
+    /// Also bake each capture three times more with one part of the network's field
+    /// taken from the ground truth (`truth_density_bake`: the truth's density with the
+    /// network's light transport; `truth_transport_bake`: the network's density with
+    /// the truth's transport; `truth_shading_bake`: the network's density and its
+    /// colour under the source lighting, relit by the truth's transport), to tell its
+    /// geometry error from its colour and shading errors.
+    #[arg(long)]
+    pub split: bool,
     /// Output folder: the bakes and `network.json`.
     #[arg(short, long, default_value = "out/eval-network")]
     pub out: PathBuf,
@@ -86,6 +98,9 @@ struct TargetScores {
     network_bake: Srgb8Scores,
     truth_bake: Srgb8Scores,
     oracle_view_bake: Option<Srgb8Scores>,
+    truth_density_bake: Option<Srgb8Scores>,
+    truth_transport_bake: Option<Srgb8Scores>,
+    truth_shading_bake: Option<Srgb8Scores>,
 }
 
 pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
@@ -133,22 +148,47 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         let provenance = super::bake::network_provenance(&field, &weights_name);
         // The network's bake with a view policy (`None`: its recommended one), written to
         // `name` and read back as a viewer would.
-        let network_bake = |view_policy, name: String| -> anyhow::Result<nelf_format::Asset> {
+        let network_bake = |view_policy, from_truth, name: String| -> anyhow::Result<nelf_format::Asset> {
             let mut output = super::bake::bake_network_field(
                 &capture,
                 &field,
                 &provenance,
                 &config,
                 progress,
-                args.voxel_filter,
-                view_policy,
+                &super::bake::NetworkSampling {
+                    voxel_filter: args.voxel_filter,
+                    view_policy,
+                    from_truth,
+                },
             )
             .with_context(|| format!("baking {} with the network", dir.display()))?;
             let path = args.out.join(name);
             write_bake(&mut output, &config, &path)?;
             Ok(read_asset(&path)?)
         };
-        let network_asset = network_bake(None, format!("capture{index}_network.nelf"))?;
+        let network_asset = network_bake(None, None, format!("capture{index}_network.nelf"))?;
+        let split_assets = if args.split {
+            use super::bake::FromTruth;
+            Some((
+                network_bake(
+                    None,
+                    Some((&truth, FromTruth::Density)),
+                    format!("capture{index}_truth_density.nelf"),
+                )?,
+                network_bake(
+                    None,
+                    Some((&truth, FromTruth::Transport)),
+                    format!("capture{index}_truth_transport.nelf"),
+                )?,
+                network_bake(
+                    None,
+                    Some((&truth, FromTruth::Shading)),
+                    format!("capture{index}_truth_shading.nelf"),
+                )?,
+            ))
+        } else {
+            None
+        };
         let mut truth_bake = bake_capture(&capture, &truth, &config, &progress)
             .with_context(|| format!("baking {} from its ground truth", dir.display()))?;
         let truth_path = args.out.join(format!("capture{index}_truth.nelf"));
@@ -180,6 +220,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                 let policy = nelf_scene::field::ViewPolicy::TowardPoint(camera.centre().as_vec3());
                 let asset = network_bake(
                     Some(policy),
+                    None,
                     format!("capture{index}_network_{}.nelf", held.names[t]),
                 )?;
                 Some(score(&baked(&asset)?.rgb)?)
@@ -193,6 +234,18 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                 network_bake: score(&baked(&network_asset)?.rgb)?,
                 truth_bake: score(&baked(&truth_asset)?.rgb)?,
                 oracle_view_bake,
+                truth_density_bake: split_assets
+                    .as_ref()
+                    .map(|(density, _, _)| anyhow::Ok(score(&baked(density)?.rgb)?))
+                    .transpose()?,
+                truth_transport_bake: split_assets
+                    .as_ref()
+                    .map(|(_, transport, _)| anyhow::Ok(score(&baked(transport)?.rgb)?))
+                    .transpose()?,
+                truth_shading_bake: split_assets
+                    .as_ref()
+                    .map(|(_, _, shading)| anyhow::Ok(score(&baked(shading)?.rgb)?))
+                    .transpose()?,
             };
             println!(
                 "{} {}: foreground PSNR network {:.2}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB \
@@ -235,6 +288,20 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             "flat_colour": mean(&|r| r.network.flat_foreground_psnr),
         },
         "mean_foreground_psnr_oracle_view_bake": args.oracle_view.then(|| mean(&|r| r.oracle_view_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
+        "mean_split": args.split.then(|| serde_json::json!({
+            "truth_density_bake": {
+                "foreground_psnr": mean(&|r| r.truth_density_bake.map_or(f64::NAN, |s| s.foreground_psnr)),
+                "psnr": mean(&|r| r.truth_density_bake.map_or(f64::NAN, |s| s.psnr)),
+            },
+            "truth_transport_bake": {
+                "foreground_psnr": mean(&|r| r.truth_transport_bake.map_or(f64::NAN, |s| s.foreground_psnr)),
+                "psnr": mean(&|r| r.truth_transport_bake.map_or(f64::NAN, |s| s.psnr)),
+            },
+            "truth_shading_bake": {
+                "foreground_psnr": mean(&|r| r.truth_shading_bake.map_or(f64::NAN, |s| s.foreground_psnr)),
+                "psnr": mean(&|r| r.truth_shading_bake.map_or(f64::NAN, |s| s.psnr)),
+            },
+        })),
         "mean_psnr": {
             "network": mean(&|r| r.network.psnr),
             "network_bake": mean(&|r| r.network_bake.psnr),
@@ -274,6 +341,21 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             summary["mean_foreground_psnr_oracle_view_bake"]
                 .as_f64()
                 .unwrap_or(f64::NAN)
+        );
+    }
+    if args.split {
+        let split = &summary["mean_split"];
+        let value = |part: &str, key: &str| split[part][key].as_f64().unwrap_or(f64::NAN);
+        println!(
+            "  foreground (whole image) PSNR with the ground truth's density and the network's transport {:.2} ({:.2}) dB, \
+             with the network's density and the ground truth's transport {:.2} ({:.2}) dB, \
+             with the network's density and source colour and the ground truth's shading {:.2} ({:.2}) dB",
+            value("truth_density_bake", "foreground_psnr"),
+            value("truth_density_bake", "psnr"),
+            value("truth_transport_bake", "foreground_psnr"),
+            value("truth_transport_bake", "psnr"),
+            value("truth_shading_bake", "foreground_psnr"),
+            value("truth_shading_bake", "psnr"),
         );
     }
     println!("scores     {}", path.display());
