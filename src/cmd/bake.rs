@@ -446,6 +446,37 @@ pub enum FromTruth {
     /// the ground truth's transport scaled to that colour: how the colour changes
     /// with the lighting is the truth's ([`TransportShapeFrom`]).
     Shading,
+    /// The network's density and its transport scaled to the ground truth's colour
+    /// under the capture's source lighting: how the colour changes with the lighting
+    /// is the network's.
+    Colour,
+}
+
+impl FromTruth {
+    /// Every split, in the order `nelf eval network --split` bakes and reports them.
+    pub const ALL: [Self; 4] = [Self::Density, Self::Transport, Self::Shading, Self::Colour];
+
+    /// The name of its scores (`truth_density_bake`, …) and `what` its bake swaps.
+    pub fn describe(self) -> (&'static str, &'static str) {
+        match self {
+            Self::Density => (
+                "truth_density_bake",
+                "the ground truth's density, the network's transport",
+            ),
+            Self::Transport => (
+                "truth_transport_bake",
+                "the network's density, the ground truth's transport",
+            ),
+            Self::Shading => (
+                "truth_shading_bake",
+                "the network's colour under the source lighting, the ground truth's shading",
+            ),
+            Self::Colour => (
+                "truth_colour_bake",
+                "the ground truth's colour under the source lighting, the network's shading",
+            ),
+        }
+    }
 }
 
 /// How one network bake is sampled, where it departs from `nelf bake capture`'s.
@@ -515,7 +546,7 @@ pub fn bake_network_field(
     } else {
         &filtered
     };
-    let (truth, split, shaped);
+    let (truth, split, shaped, recoloured);
     let source: &dyn nelf_scene::field::FieldSource = match from_truth {
         None => source,
         Some((ground_truth, part)) => {
@@ -530,11 +561,18 @@ pub fn bake_network_field(
                     split = DensityAndTransport::new(source, truth.as_ref());
                     &split
                 }
-                FromTruth::Shading => {
+                FromTruth::Shading | FromTruth::Colour => {
                     let lighting = capture_source_lighting(capture.description(), &capture.dir)?
                         .with_context(|| format!("{} names no source lighting", capture.dir.display()))?;
-                    shaped = TransportShapeFrom::new(truth.as_ref(), source, &lighting)?;
-                    &shaped
+                    if part == FromTruth::Shading {
+                        shaped = TransportShapeFrom::new(truth.as_ref(), source, &lighting)?;
+                        &shaped
+                    } else {
+                        // The network's transport at the truth's colour: its density kept.
+                        recoloured = TransportShapeFrom::new(source, truth.as_ref(), &lighting)?;
+                        split = DensityAndTransport::new(source, &recoloured);
+                        &split
+                    }
                 }
             }
         }

@@ -76,12 +76,13 @@ pub struct NetworkEvalArgs {
     /// losses.
     #[arg(long)]
     pub oracle_view: bool,
-    /// Also bake each capture three times more with one part of the network's field
+    /// Also bake each capture four times more with one part of the network's field
     /// taken from the ground truth (`truth_density_bake`: the truth's density with the
     /// network's light transport; `truth_transport_bake`: the network's density with
-    /// the truth's transport; `truth_shading_bake`: the network's density and its
-    /// colour under the source lighting, relit by the truth's transport), to tell its
-    /// geometry error from its colour and shading errors.
+    /// the truth's transport; `truth_shading_bake`: the network's colour under the
+    /// source lighting, relit by the truth's transport; `truth_colour_bake`: the
+    /// truth's colour under the source lighting, relit by the network's transport), to
+    /// tell its geometry error from its colour and shading errors.
     #[arg(long)]
     pub split: bool,
     /// Output folder: the bakes and `network.json`.
@@ -98,9 +99,9 @@ struct TargetScores {
     network_bake: Srgb8Scores,
     truth_bake: Srgb8Scores,
     oracle_view_bake: Option<Srgb8Scores>,
-    truth_density_bake: Option<Srgb8Scores>,
-    truth_transport_bake: Option<Srgb8Scores>,
-    truth_shading_bake: Option<Srgb8Scores>,
+    /// `--split`: the scores of each part swapped for the ground truth's, by name.
+    #[serde(skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    split: std::collections::BTreeMap<&'static str, Srgb8Scores>,
 }
 
 pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
@@ -168,26 +169,17 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         };
         let network_asset = network_bake(None, None, format!("capture{index}_network.nelf"))?;
         let split_assets = if args.split {
-            use super::bake::FromTruth;
-            Some((
-                network_bake(
-                    None,
-                    Some((&truth, FromTruth::Density)),
-                    format!("capture{index}_truth_density.nelf"),
-                )?,
-                network_bake(
-                    None,
-                    Some((&truth, FromTruth::Transport)),
-                    format!("capture{index}_truth_transport.nelf"),
-                )?,
-                network_bake(
-                    None,
-                    Some((&truth, FromTruth::Shading)),
-                    format!("capture{index}_truth_shading.nelf"),
-                )?,
-            ))
+            super::bake::FromTruth::ALL
+                .iter()
+                .map(|part| {
+                    let (name, _) = part.describe();
+                    let asset =
+                        network_bake(None, Some((&truth, *part)), format!("capture{index}_{name}.nelf"))?;
+                    anyhow::Ok((name, asset))
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?
         } else {
-            None
+            Vec::new()
         };
         let mut truth_bake = bake_capture(&capture, &truth, &config, &progress)
             .with_context(|| format!("baking {} from its ground truth", dir.display()))?;
@@ -234,18 +226,10 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                 network_bake: score(&baked(&network_asset)?.rgb)?,
                 truth_bake: score(&baked(&truth_asset)?.rgb)?,
                 oracle_view_bake,
-                truth_density_bake: split_assets
-                    .as_ref()
-                    .map(|(density, _, _)| anyhow::Ok(score(&baked(density)?.rgb)?))
-                    .transpose()?,
-                truth_transport_bake: split_assets
-                    .as_ref()
-                    .map(|(_, transport, _)| anyhow::Ok(score(&baked(transport)?.rgb)?))
-                    .transpose()?,
-                truth_shading_bake: split_assets
-                    .as_ref()
-                    .map(|(_, _, shading)| anyhow::Ok(score(&baked(shading)?.rgb)?))
-                    .transpose()?,
+                split: split_assets
+                    .iter()
+                    .map(|(name, asset)| anyhow::Ok((*name, score(&baked(asset)?.rgb)?)))
+                    .collect::<anyhow::Result<_>>()?,
             };
             println!(
                 "{} {}: foreground PSNR network {:.2}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB \
@@ -288,20 +272,14 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             "flat_colour": mean(&|r| r.network.flat_foreground_psnr),
         },
         "mean_foreground_psnr_oracle_view_bake": args.oracle_view.then(|| mean(&|r| r.oracle_view_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
-        "mean_split": args.split.then(|| serde_json::json!({
-            "truth_density_bake": {
-                "foreground_psnr": mean(&|r| r.truth_density_bake.map_or(f64::NAN, |s| s.foreground_psnr)),
-                "psnr": mean(&|r| r.truth_density_bake.map_or(f64::NAN, |s| s.psnr)),
-            },
-            "truth_transport_bake": {
-                "foreground_psnr": mean(&|r| r.truth_transport_bake.map_or(f64::NAN, |s| s.foreground_psnr)),
-                "psnr": mean(&|r| r.truth_transport_bake.map_or(f64::NAN, |s| s.psnr)),
-            },
-            "truth_shading_bake": {
-                "foreground_psnr": mean(&|r| r.truth_shading_bake.map_or(f64::NAN, |s| s.foreground_psnr)),
-                "psnr": mean(&|r| r.truth_shading_bake.map_or(f64::NAN, |s| s.psnr)),
-            },
-        })),
+        "mean_split": args.split.then(|| super::bake::FromTruth::ALL.iter().map(|part| {
+            let (name, _) = part.describe();
+            let of = |key: fn(&Srgb8Scores) -> f64| mean(&|r| r.split.get(name).map_or(f64::NAN, key));
+            (name.to_string(), serde_json::json!({
+                "foreground_psnr": of(|s| s.foreground_psnr),
+                "psnr": of(|s| s.psnr),
+            }))
+        }).collect::<serde_json::Map<_, _>>()),
         "mean_psnr": {
             "network": mean(&|r| r.network.psnr),
             "network_bake": mean(&|r| r.network_bake.psnr),
@@ -344,19 +322,16 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         );
     }
     if args.split {
-        let split = &summary["mean_split"];
-        let value = |part: &str, key: &str| split[part][key].as_f64().unwrap_or(f64::NAN);
-        println!(
-            "  foreground (whole image) PSNR with the ground truth's density and the network's transport {:.2} ({:.2}) dB, \
-             with the network's density and the ground truth's transport {:.2} ({:.2}) dB, \
-             with the network's density and source colour and the ground truth's shading {:.2} ({:.2}) dB",
-            value("truth_density_bake", "foreground_psnr"),
-            value("truth_density_bake", "psnr"),
-            value("truth_transport_bake", "foreground_psnr"),
-            value("truth_transport_bake", "psnr"),
-            value("truth_shading_bake", "foreground_psnr"),
-            value("truth_shading_bake", "psnr"),
-        );
+        println!("  foreground (whole image) PSNR of the bake with");
+        for part in super::bake::FromTruth::ALL {
+            let (name, what) = part.describe();
+            let value = |key: &str| summary["mean_split"][name][key].as_f64().unwrap_or(f64::NAN);
+            println!(
+                "    {what}: {:.2} ({:.2}) dB",
+                value("foreground_psnr"),
+                value("psnr")
+            );
+        }
     }
     println!("scores     {}", path.display());
     Ok(())
