@@ -63,6 +63,7 @@ fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
         "--resolution",
         "32",
         "--split",
+        "density,transport,shading,colour",
         "-o",
         scores.to_str().unwrap(),
     ]);

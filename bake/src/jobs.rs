@@ -189,8 +189,20 @@ pub fn truth_field(
     config: &BakeConfig,
     voxel_size_m: f64,
 ) -> Result<Box<dyn FieldSource>> {
+    truth_field_traced(truth, config, voxel_size_m, |_| {})
+}
+
+/// [`truth_field`] with its trace settings changed by `adjust` (e.g. direct light
+/// only, no glossy lobe: the ground truth's Lambertian shading with its shadows).
+pub fn truth_field_traced(
+    truth: &GroundTruth,
+    config: &BakeConfig,
+    voxel_size_m: f64,
+    adjust: impl FnOnce(&mut TraceSettings),
+) -> Result<Box<dyn FieldSource>> {
     let mesh = truth.mesh()?;
-    let trace = config.trace.apply_to_field(truth.trace_settings());
+    let mut trace = config.trace.apply_to_field(truth.trace_settings());
+    adjust(&mut trace);
     mesh_field(&mesh, trace, voxel_size_m, config.shell_placement, config)
 }
 

@@ -50,7 +50,7 @@ pub use config::{
 pub use error::BakeError;
 pub use jobs::{
     CapturePlan, bake_capture, bake_capture_field, bake_mesh, capture_field_job, mesh_cameras, plan_capture,
-    truth_field, with_capture_job,
+    truth_field, truth_field_traced, with_capture_job,
 };
 pub use pipeline::{
     BakeOutput, BakeReport, FieldBake, Reference, SampledField, StageTimings, bake_field, finish_bake,

@@ -984,3 +984,74 @@ impl FieldSource for TransportShapeFrom<'_> {
         self.colour.evaluate_density(points, density)
     }
 }
+
+/// The light transport of an unshadowed Lambertian surface with the normals of a
+/// mesh: at each point, `T_c(ω_k) = max(0, n·ω_k)·Ω_k` for every channel, `n` the
+/// closest surface point's shading normal (as seen from the point). No density
+/// (σ = 0): a shape for [`TransportShapeFrom`], the shading prior of
+/// `nelf_field::prior` with the true normals in place of the network's.
+pub struct TrueNormalsLambert<'a> {
+    mesh: &'a MeshField,
+    /// `(ω_k in the world frame, Ω_k)` of the 128 texels.
+    texels: Vec<(Vec3, f32)>,
+}
+
+impl std::fmt::Debug for TrueNormalsLambert<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("TrueNormalsLambert").finish_non_exhaustive()
+    }
+}
+
+impl<'a> TrueNormalsLambert<'a> {
+    /// The clamped cosine about `mesh`'s normals, in `mesh`'s light frame.
+    pub fn new(mesh: &'a MeshField) -> Self {
+        use nelf_format::conventions::{ENV_H, ENV_W, texel_center_direction, texel_solid_angle};
+        let world_from_light = mesh.world_from_light();
+        let texels = (0..ENV_H * ENV_W)
+            .map(|k| {
+                let (row, col) = (k / ENV_W, k % ENV_W);
+                let dir = world_from_light * texel_center_direction(row, col, ENV_H, ENV_W);
+                (dir.as_vec3(), texel_solid_angle(row, ENV_H, ENV_W) as f32)
+            })
+            .collect();
+        Self { mesh, texels }
+    }
+}
+
+impl FieldSource for TrueNormalsLambert<'_> {
+    fn evaluate(
+        &self,
+        points: &[Vec3],
+        _view: &ViewPolicy,
+        density: &mut [f32],
+        lt: &mut [f32],
+    ) -> Result<(), FieldError> {
+        check_batch(points, density, lt)?;
+        density.fill(0.0);
+        points
+            .par_iter()
+            .zip(lt.par_chunks_exact_mut(LT_DIM))
+            .for_each(|(x, t)| {
+                let n = self
+                    .mesh
+                    .surface_point_seen_from(*x)
+                    .map_or(Vec3::ZERO, |(sp, _)| sp.shading_normal);
+                let texels = self.texels.len();
+                for (k, (dir, solid_angle)) in self.texels.iter().enumerate() {
+                    let value = n.dot(*dir).max(0.0) * solid_angle;
+                    for c in 0..3 {
+                        t[c * texels + k] = value;
+                    }
+                }
+            });
+        Ok(())
+    }
+
+    fn bounds(&self) -> (Vec3, Vec3) {
+        self.mesh.bounds()
+    }
+
+    fn world_from_light(&self) -> DMat3 {
+        self.mesh.world_from_light()
+    }
+}

@@ -704,6 +704,54 @@ fn transport_shape_from_keeps_the_colour_under_the_lighting() {
     assert_eq!(only, density);
 }
 
+/// The clamped cosine about a sphere's true normal: the same in every channel,
+/// largest toward the normal, zero below the horizon, and integrating to π over
+/// the sphere of directions (the cosine's integral; midpoint rule on 8 × 16 texels).
+#[test]
+fn true_normals_lambert_is_the_clamped_cosine_about_the_normal() {
+    use nelf_format::conventions::{texel_center_direction, texel_solid_angle};
+    use nelf_scene::field::TrueNormalsLambert;
+    let sphere_field = MeshField::new(&sphere(), fast_settings(), DensityProfile::default()).unwrap();
+    let lambert = TrueNormalsLambert::new(&sphere_field);
+    for normal in [Vec3::X, Vec3::Y, Vec3::new(0.0, -0.6, 0.8)] {
+        // Just outside the surface and just inside it: the same outward normal.
+        let points = [normal * (RADIUS + 0.01), normal * (RADIUS - 0.01)];
+        let (mut density, mut lt) = ([1.0f32; 2], vec![0.0f32; 2 * LT_DIM]);
+        lambert
+            .evaluate(&points, &ViewPolicy::Direction(Vec3::Z), &mut density, &mut lt)
+            .unwrap();
+        assert_eq!(density, [0.0, 0.0]);
+        for t in lt.chunks_exact(LT_DIM) {
+            let (red, rest) = t.split_at(ENV_TEXELS);
+            assert_eq!(&rest[..ENV_TEXELS], red);
+            assert_eq!(&rest[ENV_TEXELS..], red);
+            let total: f32 = red.iter().sum();
+            assert!(
+                (total - std::f32::consts::PI).abs() < 0.05 * std::f32::consts::PI,
+                "∫ = {total}"
+            );
+            for (k, v) in red.iter().enumerate() {
+                let dir = texel_center_direction(k / ENV_W, k % ENV_W, ENV_H, ENV_W).as_vec3();
+                let cos = dir.dot(normal);
+                assert!(
+                    if cos <= 0.0 { *v == 0.0 } else { *v > 0.0 },
+                    "texel {k}: cos {cos}, T {v}"
+                );
+            }
+            // Per steradian, the brightest texel is the one the normal points into.
+            let per_sr = |k: usize| red[k] / texel_solid_angle(k / ENV_W, ENV_H, ENV_W) as f32;
+            let top = (0..ENV_TEXELS)
+                .max_by(|a, b| per_sr(*a).total_cmp(&per_sr(*b)))
+                .unwrap();
+            let dir = texel_center_direction(top / ENV_W, top % ENV_W, ENV_H, ENV_W).as_vec3();
+            assert!(
+                dir.dot(normal) > 0.9,
+                "brightest texel {top} points {dir:?}, normal {normal:?}"
+            );
+        }
+    }
+}
+
 /// A trained network's skin across the plane `x = surface`: σ grows by `e` every
 /// `1/k` metres into `+x` and equals `k·ln 2` on the plane, where a ray coming from
 /// `−x` reaches optical depth ln 2 (`τ(x) = σ(x)/k`).

@@ -12,7 +12,7 @@ use anyhow::Context;
 use nelf_bake::{
     BakeConfig, BakeOutput, CaptureFormat, CaptureLoadOptions, ChoiceArgs, ChoiceReport, GroundTruth,
     HullCarved, HullDistance, LoadedCapture, Progress, bake_capture, bake_capture_field, bake_mesh,
-    load_capture, plan_capture, sidecar_path, truth_field, write_bake,
+    load_capture, plan_capture, sidecar_path, truth_field, truth_field_traced, write_bake,
 };
 use nelf_field::capture::default_net_from_world;
 use nelf_field::shipped::load_or_shipped;
@@ -435,7 +435,7 @@ pub const NETWORK_VOXEL_FILTER: usize = 2;
 
 /// The part of a network bake the ground truth stands in for (`nelf eval network
 /// --split`), to tell the network's geometry error from its shading error.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum FromTruth {
     /// The ground truth's density with the network's light transport.
     Density,
@@ -450,11 +450,24 @@ pub enum FromTruth {
     /// under the capture's source lighting: how the colour changes with the lighting
     /// is the network's.
     Colour,
+    /// The network's density and colour, relit by the clamped cosine about the
+    /// truth's normals (the shading prior with true normals, alone).
+    Normals,
+    /// The network's density and colour, relit by the truth's direct Lambertian
+    /// transport: its normals and shadows, without interreflection or gloss.
+    Shadows,
 }
 
 impl FromTruth {
     /// Every split, in the order `nelf eval network --split` bakes and reports them.
-    pub const ALL: [Self; 4] = [Self::Density, Self::Transport, Self::Shading, Self::Colour];
+    pub const ALL: [Self; 6] = [
+        Self::Density,
+        Self::Transport,
+        Self::Shading,
+        Self::Colour,
+        Self::Normals,
+        Self::Shadows,
+    ];
 
     /// The name of its scores (`truth_density_bake`, …) and `what` its bake swaps.
     pub fn describe(self) -> (&'static str, &'static str) {
@@ -474,6 +487,14 @@ impl FromTruth {
             Self::Colour => (
                 "truth_colour_bake",
                 "the ground truth's colour under the source lighting, the network's shading",
+            ),
+            Self::Normals => (
+                "truth_normals_bake",
+                "the network's colour, a Lambertian shading about the ground truth's normals",
+            ),
+            Self::Shadows => (
+                "truth_shadows_bake",
+                "the network's colour, the ground truth's direct Lambertian shading with its shadows",
             ),
         }
     }
@@ -546,7 +567,7 @@ pub fn bake_network_field(
     } else {
         &filtered
     };
-    let (truth, split, shaped, recoloured);
+    let (truth, split, shaped, recoloured, mesh, lambert, direct);
     let source: &dyn nelf_scene::field::FieldSource = match from_truth {
         None => source,
         Some((ground_truth, part)) => {
@@ -561,10 +582,26 @@ pub fn bake_network_field(
                     split = DensityAndTransport::new(source, truth.as_ref());
                     &split
                 }
-                FromTruth::Shading | FromTruth::Colour => {
+                FromTruth::Shading | FromTruth::Colour | FromTruth::Normals | FromTruth::Shadows => {
                     let lighting = capture_source_lighting(capture.description(), &capture.dir)?
                         .with_context(|| format!("{} names no source lighting", capture.dir.display()))?;
-                    if part == FromTruth::Shading {
+                    if part == FromTruth::Normals {
+                        mesh = nelf_scene::field::MeshField::new(
+                            &ground_truth.mesh()?,
+                            nelf_scene::tracer::TraceSettings::default(),
+                            nelf_scene::field::DensityProfile::default(),
+                        )?;
+                        lambert = nelf_scene::field::TrueNormalsLambert::new(&mesh);
+                        shaped = TransportShapeFrom::new(&lambert, source, &lighting)?;
+                        &shaped
+                    } else if part == FromTruth::Shadows {
+                        direct = truth_field_traced(ground_truth, config, planned.voxel_size_m, |trace| {
+                            trace.bounces = 0;
+                            trace.specular = None;
+                        })?;
+                        shaped = TransportShapeFrom::new(direct.as_ref(), source, &lighting)?;
+                        &shaped
+                    } else if part == FromTruth::Shading {
                         shaped = TransportShapeFrom::new(truth.as_ref(), source, &lighting)?;
                         &shaped
                     } else {

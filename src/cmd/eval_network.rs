@@ -76,15 +76,18 @@ pub struct NetworkEvalArgs {
     /// losses.
     #[arg(long)]
     pub oracle_view: bool,
-    /// Also bake each capture four times more with one part of the network's field
-    /// taken from the ground truth (`truth_density_bake`: the truth's density with the
-    /// network's light transport; `truth_transport_bake`: the network's density with
-    /// the truth's transport; `truth_shading_bake`: the network's colour under the
-    /// source lighting, relit by the truth's transport; `truth_colour_bake`: the
-    /// truth's colour under the source lighting, relit by the network's transport), to
-    /// tell its geometry error from its colour and shading errors.
-    #[arg(long)]
-    pub split: bool,
+    /// Also bake each capture with parts of the network's field taken from the
+    /// ground truth, to tell its geometry error from its colour and shading errors
+    /// (all of them without a value, or a comma-separated list): `density` (the truth's
+    /// density, the network's light transport), `transport` (the network's density,
+    /// the truth's transport), `shading` (the network's colour under the source
+    /// lighting relit by the truth's transport), `colour` (the truth's colour relit by
+    /// the network's transport), `normals` (the network's colour relit by a clamped
+    /// cosine about the truth's normals), `shadows` (the network's colour relit by the
+    /// truth's direct Lambertian transport, with its shadows). Scores
+    /// `truth_<part>_bake`.
+    #[arg(long, value_enum, value_delimiter = ',', num_args = 0..)]
+    pub split: Option<Vec<super::bake::FromTruth>>,
     /// Output folder: the bakes and `network.json`.
     #[arg(short, long, default_value = "out/eval-network")]
     pub out: PathBuf,
@@ -123,6 +126,11 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         ..BakeConfig::default()
     };
     let progress = Progress::hidden();
+    let split_parts = match &args.split {
+        None => Vec::new(),
+        Some(parts) if parts.is_empty() => super::bake::FromTruth::ALL.to_vec(),
+        Some(parts) => parts.clone(),
+    };
     let mut rows = Vec::new();
     for (index, dir) in args.captures.iter().enumerate() {
         let capture = load_capture(dir, &CaptureLoadOptions::default())
@@ -168,8 +176,8 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             Ok(read_asset(&path)?)
         };
         let network_asset = network_bake(None, None, format!("capture{index}_network.nelf"))?;
-        let split_assets = if args.split {
-            super::bake::FromTruth::ALL
+        let split_assets = {
+            split_parts
                 .iter()
                 .map(|part| {
                     let (name, _) = part.describe();
@@ -178,8 +186,6 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                     anyhow::Ok((name, asset))
                 })
                 .collect::<anyhow::Result<Vec<_>>>()?
-        } else {
-            Vec::new()
         };
         let mut truth_bake = bake_capture(&capture, &truth, &config, &progress)
             .with_context(|| format!("baking {} from its ground truth", dir.display()))?;
@@ -272,7 +278,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             "flat_colour": mean(&|r| r.network.flat_foreground_psnr),
         },
         "mean_foreground_psnr_oracle_view_bake": args.oracle_view.then(|| mean(&|r| r.oracle_view_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
-        "mean_split": args.split.then(|| super::bake::FromTruth::ALL.iter().map(|part| {
+        "mean_split": (!split_parts.is_empty()).then(|| split_parts.iter().map(|part| {
             let (name, _) = part.describe();
             let of = |key: fn(&Srgb8Scores) -> f64| mean(&|r| r.split.get(name).map_or(f64::NAN, key));
             (name.to_string(), serde_json::json!({
@@ -321,9 +327,9 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                 .unwrap_or(f64::NAN)
         );
     }
-    if args.split {
+    if !split_parts.is_empty() {
         println!("  foreground (whole image) PSNR of the bake with");
-        for part in super::bake::FromTruth::ALL {
+        for part in &split_parts {
             let (name, what) = part.describe();
             let value = |key: &str| summary["mean_split"][name][key].as_f64().unwrap_or(f64::NAN);
             println!(
