@@ -19,9 +19,11 @@ use nelf_field::shipped::load_or_shipped;
 use nelf_field::{Model, NelfConfig, NelfField, NetCapture};
 use nelf_format::conventions::LatLong;
 use nelf_scene::field::{
-    DensityAndTransport, FieldSource as _, SignedLogDensity, TransportShapeFrom, VoxelFiltered,
+    DensityAndTransport, DensityProfile, FieldSource as _, MeshField, SignedLogDensity, TransportShapeFrom,
+    TrueNormalsLambert, VoxelFiltered,
 };
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
+use nelf_scene::tracer::TraceSettings;
 
 /// Options of `nelf bake`.
 #[derive(Debug, clap::Args)]
@@ -567,49 +569,59 @@ pub fn bake_network_field(
     } else {
         &filtered
     };
-    let (truth, split, shaped, recoloured, mesh, lambert, direct);
+    let (truth, split, shaped, recoloured, mesh, lambert);
     let source: &dyn nelf_scene::field::FieldSource = match from_truth {
         None => source,
         Some((ground_truth, part)) => {
-            truth = truth_field(ground_truth, config, planned.voxel_size_m)
-                .with_context(|| format!("the ground truth of {}", capture.dir.display()))?;
+            let voxel_size_m = planned.voxel_size_m;
+            let of_truth = |what: &str| format!("the ground truth's {what} of {}", capture.dir.display());
+            let source_lighting = || -> anyhow::Result<LatLong> {
+                capture_source_lighting(capture.description(), &capture.dir)?
+                    .with_context(|| format!("{} names no source lighting", capture.dir.display()))
+            };
             match part {
                 FromTruth::Density => {
+                    truth =
+                        truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"))?;
                     split = DensityAndTransport::new(truth.as_ref(), source);
                     &split
                 }
                 FromTruth::Transport => {
+                    truth =
+                        truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"))?;
                     split = DensityAndTransport::new(source, truth.as_ref());
                     &split
                 }
-                FromTruth::Shading | FromTruth::Colour | FromTruth::Normals | FromTruth::Shadows => {
-                    let lighting = capture_source_lighting(capture.description(), &capture.dir)?
-                        .with_context(|| format!("{} names no source lighting", capture.dir.display()))?;
-                    if part == FromTruth::Normals {
-                        mesh = nelf_scene::field::MeshField::new(
-                            &ground_truth.mesh()?,
-                            nelf_scene::tracer::TraceSettings::default(),
-                            nelf_scene::field::DensityProfile::default(),
-                        )?;
-                        lambert = nelf_scene::field::TrueNormalsLambert::new(&mesh);
-                        shaped = TransportShapeFrom::new(&lambert, source, &lighting)?;
-                        &shaped
-                    } else if part == FromTruth::Shadows {
-                        direct = truth_field_traced(ground_truth, config, planned.voxel_size_m, |trace| {
-                            trace.bounces = 0;
-                            trace.specular = None;
-                        })?;
-                        shaped = TransportShapeFrom::new(direct.as_ref(), source, &lighting)?;
-                        &shaped
-                    } else if part == FromTruth::Shading {
-                        shaped = TransportShapeFrom::new(truth.as_ref(), source, &lighting)?;
-                        &shaped
-                    } else {
-                        // The network's transport at the truth's colour: its density kept.
-                        recoloured = TransportShapeFrom::new(source, truth.as_ref(), &lighting)?;
-                        split = DensityAndTransport::new(source, &recoloured);
-                        &split
-                    }
+                FromTruth::Shading => {
+                    truth =
+                        truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"))?;
+                    shaped = TransportShapeFrom::new(truth.as_ref(), source, &source_lighting()?)?;
+                    &shaped
+                }
+                FromTruth::Colour => {
+                    truth =
+                        truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"))?;
+                    // The network's transport at the truth's colour, the network's density kept.
+                    recoloured = TransportShapeFrom::new(source, truth.as_ref(), &source_lighting()?)?;
+                    split = DensityAndTransport::new(source, &recoloured);
+                    &split
+                }
+                FromTruth::Normals => {
+                    let surface = ground_truth.mesh().with_context(|| of_truth("mesh"))?;
+                    mesh = MeshField::new(&surface, TraceSettings::default(), DensityProfile::default())
+                        .with_context(|| of_truth("mesh"))?;
+                    lambert = TrueNormalsLambert::new(&mesh);
+                    shaped = TransportShapeFrom::new(&lambert, source, &source_lighting()?)?;
+                    &shaped
+                }
+                FromTruth::Shadows => {
+                    truth = truth_field_traced(ground_truth, config, voxel_size_m, |trace| {
+                        trace.bounces = 0;
+                        trace.specular = None;
+                    })
+                    .with_context(|| of_truth("direct field"))?;
+                    shaped = TransportShapeFrom::new(truth.as_ref(), source, &source_lighting()?)?;
+                    &shaped
                 }
             }
         }

@@ -7,8 +7,8 @@
 //! (a synthetic capture's `synth_config.json`, e.g. the held-out heads of a
 //! `nelf train data` folder). `network.json` in `--out` records every score.
 //! `--split` swaps parts of the network's field for the ground truth's
-//! (`nelf_scene::field::{DensityAndTransport, TransportShapeFrom}`) to tell where its
-//! error lies.
+//! (`nelf_scene::field::{DensityAndTransport, TransportShapeFrom, TrueNormalsLambert}`)
+//! to tell where its error lies (field/README.md, "Where the network's error lies").
 
 use std::path::PathBuf;
 
@@ -176,17 +176,14 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             Ok(read_asset(&path)?)
         };
         let network_asset = network_bake(None, None, format!("capture{index}_network.nelf"))?;
-        let split_assets = {
-            split_parts
-                .iter()
-                .map(|part| {
-                    let (name, _) = part.describe();
-                    let asset =
-                        network_bake(None, Some((&truth, *part)), format!("capture{index}_{name}.nelf"))?;
-                    anyhow::Ok((name, asset))
-                })
-                .collect::<anyhow::Result<Vec<_>>>()?
-        };
+        let split_assets = split_parts
+            .iter()
+            .map(|part| {
+                let (name, _) = part.describe();
+                let asset = network_bake(None, Some((&truth, *part)), format!("capture{index}_{name}.nelf"))?;
+                anyhow::Ok((name, asset))
+            })
+            .collect::<anyhow::Result<Vec<_>>>()?;
         let mut truth_bake = bake_capture(&capture, &truth, &config, &progress)
             .with_context(|| format!("baking {} from its ground truth", dir.display()))?;
         let truth_path = args.out.join(format!("capture{index}_truth.nelf"));
