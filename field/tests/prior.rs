@@ -71,7 +71,7 @@ fn assert_normals(normals: &[Option<[f32; 3]>], expected: &[[f32; 3]], what: &st
 
 #[test]
 fn normals_of_open_holed_and_thin_surfaces_point_out_of_the_material() {
-    // The defects of real scans, at the default step (8 mm). A 20 mm slab (|z| < 10
+    // The defects of real scans, at the default step (5 mm). A 20 mm slab (|z| < 10
     // mm) holed by a cylinder of radius 30 mm about z and open at x = 100 mm: its
     // faces, the wall of its hole and its open edge.
     let step = nelf_field::prior::DEFAULT_STEP_MM;

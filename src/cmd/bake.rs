@@ -365,12 +365,14 @@ pub fn in_capture_light_units(
         SourceFit::Normalised(prior) => prior,
         SourceFit::None | SourceFit::Gain => None,
     };
+    // The normals' step is chosen for bakes on its own (`nelf_field::prior::DEFAULT_STEP_MM`);
+    // a different weight, or no prior, departs from what the weights were trained with.
     if let Some(trained) = field.model().trained_shading_prior()
-        && used != Some(trained)
+        && used.map(|p| p.weight) != Some(trained.weight)
     {
         eprintln!(
             "note: these weights were last trained through a shading prior of weight {} with normals over {} mm; \
-             this fit uses {} (the weights' accuracy figures hold with theirs)",
+             this fit uses {} (the weights' accuracy figures hold with the default prior)",
             trained.weight,
             trained.step_mm,
             used.map_or("none".to_string(), |p| format!(
