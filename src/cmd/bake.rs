@@ -577,32 +577,30 @@ pub fn bake_network_field(
         Some((ground_truth, part)) => {
             let voxel_size_m = planned.voxel_size_m;
             let of_truth = |what: &str| format!("the ground truth's {what} of {}", capture.dir.display());
+            let full_truth =
+                || truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"));
             let source_lighting = || -> anyhow::Result<LatLong> {
                 capture_source_lighting(capture.description(), &capture.dir)?
                     .with_context(|| format!("{} names no source lighting", capture.dir.display()))
             };
             match part {
                 FromTruth::Density => {
-                    truth =
-                        truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"))?;
+                    truth = full_truth()?;
                     split = DensityAndTransport::new(truth.as_ref(), source);
                     &split
                 }
                 FromTruth::Transport => {
-                    truth =
-                        truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"))?;
+                    truth = full_truth()?;
                     split = DensityAndTransport::new(source, truth.as_ref());
                     &split
                 }
                 FromTruth::Shading => {
-                    truth =
-                        truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"))?;
+                    truth = full_truth()?;
                     shaped = TransportShapeFrom::new(truth.as_ref(), source, &source_lighting()?)?;
                     &shaped
                 }
                 FromTruth::Colour => {
-                    truth =
-                        truth_field(ground_truth, config, voxel_size_m).with_context(|| of_truth("field"))?;
+                    truth = full_truth()?;
                     // The network's transport at the truth's colour, the network's density kept.
                     recoloured = TransportShapeFrom::new(source, truth.as_ref(), &source_lighting()?)?;
                     split = DensityAndTransport::new(source, &recoloured);
