@@ -115,6 +115,19 @@ pub struct TrainConfig {
     #[arg(long)]
     #[serde(default)]
     pub distill_sigma_weight: Option<f64>,
+    /// Weight of the distillation's transport-shape term (0: off). At each
+    /// distillation point it relights the truth's colour under the source lighting
+    /// `L_S` by the network's transport, `(T*·L_S)·(T·L)/(T·L_S)`, and compares that
+    /// with the truth's `T*·L` (the loss kind of `--distill-radiance-loss`) under the
+    /// head's target lightings and [`crate::trainer::SHAPE_PROBES`] fixed procedural
+    /// ones (sun, room and studio maps, scaled to the source's mean radiance). It
+    /// trains only the shape of `T` across lightings, what a bake's source
+    /// normalisation keeps from the network: `nelf eval network --split shading`
+    /// measured the truth's shape at the network's colour 1.0–1.1 dB above the
+    /// network's bake, the truth's colour at the network's shape 0.35–1.5 dB below.
+    #[arg(long, default_value_t = 0.0)]
+    #[serde(default)]
+    pub distill_shape_weight: f64,
     /// Weight of the free-space loss: `log(1 + σ·1 mm)` at the ray samples the truth
     /// knows are empty (every sample of a background ray, and those more than
     /// `FREE_SPACE_MARGIN_MM` in front of the true depth of a foreground one), both
@@ -186,6 +199,7 @@ impl Default for TrainConfig {
             light_weight: 0.1,
             distill_weight: 0.0,
             distill_sigma_weight: None,
+            distill_shape_weight: 0.0,
             distill_radiance_loss: ColourLoss::L1,
             free_space_weight: 0.0,
             ema_decay: 0.0,
@@ -296,6 +310,7 @@ impl TrainConfig {
             self.light_weight,
             self.distill_weight,
             self.distill_sigma_weight(),
+            self.distill_shape_weight,
             self.free_space_weight,
         ];
         if !weights.iter().all(|w| w.is_finite() && *w >= 0.0) {

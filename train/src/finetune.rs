@@ -132,6 +132,7 @@ pub fn fine_tune(
         lr_encoder: tune.lr_encoder,
         distill_weight: 0.0,
         distill_sigma_weight: Some(0.0),
+        distill_shape_weight: 0.0,
         ema_decay: 0.0,
         colour_loss: tune.colour_loss,
         free_space_weight: tune.free_space_weight,

@@ -18,7 +18,10 @@
 //! light transport compared through the radiance it gives, toward the direction the
 //! true `T*` is for, under each of the head's lightings (its source lighting and its
 //! targets'): `T` lives in the network's light frame and `T*` in the world's, and
-//! radiance is what both must agree on. Every random choice of step `k` comes from a generator seeded by
+//! radiance is what both must agree on. With `--distill-shape-weight` the distillation
+//! adds a term on the transport's shape alone, `λ_t·|(T*·L_S)·(T·L)/(T·L_S + ε) − T*·L|`
+//! under the targets' lightings and fixed probe lightings ([`shape_probe_lightings`]):
+//! the truth's colour relit by the network's transport ([`relit_by_shape`]). Every random choice of step `k` comes from a generator seeded by
 //! `(seed, k)`, so the state of a run is its weights, its Adam moments and its step
 //! count: a checkpoint holds exactly those, and a resumed run continues bit for bit.
 
@@ -94,6 +97,48 @@ pub struct PreparedHead {
     pub distill_lights: Vec<Vec<f32>>,
     /// `(N, lights, 3)`: true radiance `Σ_k T[c, k]·L[c, k]` under each lighting.
     pub distill_radiance: Vec<f32>,
+    /// The lightings the transport-shape term relights under, network layout: the
+    /// targets' (as in [`PreparedHead::distill_lights`]) and the
+    /// [`SHAPE_PROBES`] probe lightings ([`shape_probe_lightings`]).
+    pub shape_lights: Vec<Vec<f32>>,
+    /// `(N, shape lights, 3)`: true radiance under each of
+    /// [`PreparedHead::shape_lights`] (the probes at the source's mean radiance).
+    pub shape_radiance: Vec<f32>,
+}
+
+/// Probe lightings of the transport-shape term ([`TrainConfig::distill_shape_weight`]).
+pub const SHAPE_PROBES: usize = 12;
+
+/// Procedural seed of probe lighting 0; probe `k` is `SHAPE_PROBE_SEED + k`. In the
+/// training range (below `data::plan::VAL_SEED_BIT`), so no held-out lighting is a probe.
+const SHAPE_PROBE_SEED: u64 = 0x5348_4150_4500;
+const _: () = assert!(SHAPE_PROBE_SEED + SHAPE_PROBES as u64 <= crate::data::plan::VAL_SEED_BIT);
+
+/// Floor of the network's radiance under the source lighting in the shape term's
+/// ratio `(T·L)/(T·L_S + ε)`, in the images' units (linear radiance ~0.05–1).
+const SHAPE_RATIO_FLOOR: f64 = 0.01;
+
+/// The transport-shape term's fixed probe lightings, world frame, each scaled to mean
+/// radiance `power` (`LatLong::mean_radiance`): [`SHAPE_PROBES`] procedural maps
+/// (`nelf_scene::envgen`: suns, rooms, studios) at 32 × 16, fine enough for the 8 × 16
+/// transport they are projected onto.
+pub fn shape_probe_lightings(power: f64) -> Vec<LatLong> {
+    let params = nelf_scene::envgen::EnvGenParams {
+        width: 32,
+        height: 16,
+        family: None,
+    };
+    (0..SHAPE_PROBES as u64)
+        .map(|k| {
+            let mut map = nelf_scene::envgen::procedural_envmap(SHAPE_PROBE_SEED + k, &params);
+            let mean = map.mean_radiance();
+            let scale = if mean > 0.0 { (power / mean) as f32 } else { 0.0 };
+            for texel in map.texels_mut() {
+                *texel = texel.map(|v| v * scale);
+            }
+            map
+        })
+        .collect()
 }
 
 /// Depth down-sampled as the mean of the block's foreground depths (0 if none).
@@ -221,18 +266,20 @@ pub fn prepare(
     }
     let mut distill_lights = vec![source_light_net.clone()];
     distill_lights.extend(targets.iter().map(|t| t.light_net.clone()));
-    let mut distill_radiance = Vec::with_capacity(sample.distill.len() * world_lights.len() * 3);
-    for i in 0..sample.distill.len() {
-        let t = sample.distill.lt_of(i);
-        for map in &world_lights {
-            for c in 0..3 {
-                let radiance: f32 = (0..ENV_TEXELS)
-                    .map(|k| t[c * ENV_TEXELS + k] * map.get(k / map.width(), k % map.width())[c])
-                    .sum();
-                distill_radiance.push(radiance);
-            }
-        }
+    let distill_radiance = true_radiance(&sample.distill, &world_lights);
+    // The shape term's lightings: the targets' and the probes, these at the source's
+    // mean radiance so that the relit colours are in the images' range.
+    let probes = shape_probe_lightings(sample.source_light.mean_radiance());
+    let mut shape_world = world_lights[1..].to_vec();
+    let mut shape_lights: Vec<Vec<f32>> = distill_lights[1..].to_vec();
+    for probe in &probes {
+        shape_world.push(
+            project_envmap(probe, glam::DMat3::IDENTITY)
+                .map_err(|e| TrainError::Settings(format!("probe lighting: {e}")))?,
+        );
+        shape_lights.push(net_light(probe)?);
     }
+    let shape_radiance = true_radiance(&sample.distill, &shape_world);
     Ok(PreparedHead {
         capture,
         geometry,
@@ -243,7 +290,50 @@ pub fn prepare(
         distill_dirs,
         distill_lights,
         distill_radiance,
+        shape_lights,
+        shape_radiance,
     })
+}
+
+/// The transport-shape term's relit colours (`TrainConfig::distill_shape_weight`):
+/// `(T*·L_S)·(T·L_k)/(T·L_S + ε)` for transports `lt` `(N, 3, 128)`, the source
+/// lighting `source_light` `(3, 128)`, lightings `lights` `(K, 3, 128)` and the
+/// truth's colours under the source lighting `true_source` `(N, 1, 3)`; `(N, K, 3)`.
+/// Up to `ε` ([`SHAPE_RATIO_FLOOR`]) it depends on `lt` only through its shape: the
+/// same for `lt` scaled by any positive factor per point and channel.
+pub fn relit_by_shape(
+    lt: &Tensor,
+    source_light: &Tensor,
+    lights: &Tensor,
+    true_source: &Tensor,
+) -> Result<Tensor, TrainError> {
+    let (n, channels, texels) = lt.dims3()?;
+    let lt = lt.reshape((n, 1, channels, texels))?;
+    let relit = lt.broadcast_mul(&lights.unsqueeze(0)?)?.sum(3)?;
+    let source = (lt
+        .broadcast_mul(&source_light.unsqueeze(0)?.unsqueeze(0)?)?
+        .sum(3)?
+        + SHAPE_RATIO_FLOOR)?;
+    Ok(relit.broadcast_div(&source)?.broadcast_mul(true_source)?)
+}
+
+/// `(N, lights, 3)`: the true radiance `Σ_k T*[c, k]·L[c, k]` of each of `distill`'s
+/// points under each of `world_lights` (8 × 16, world frame, as `T*`).
+fn true_radiance(distill: &crate::data::Distill, world_lights: &[LatLong]) -> Vec<f32> {
+    let mut radiance = Vec::with_capacity(distill.len() * world_lights.len() * 3);
+    for i in 0..distill.len() {
+        let t = distill.lt_of(i);
+        for map in world_lights {
+            for c in 0..3 {
+                radiance.push(
+                    (0..ENV_TEXELS)
+                        .map(|k| t[c * ENV_TEXELS + k] * map.get(k / map.width(), k % map.width())[c])
+                        .sum(),
+                );
+            }
+        }
+    }
+    radiance
 }
 
 /// The parts of a step's loss (plain numbers, for logs).
@@ -552,7 +642,9 @@ pub fn step_loss_on(
         total = (total + (&free_space * config.free_space_weight)?)?;
     }
     let mut distill_value = 0.0;
-    if (config.distill_weight > 0.0 || config.distill_sigma_weight() > 0.0) && !head.distill_points.is_empty()
+    let shape_on = config.distill_shape_weight > 0.0 && !head.shape_lights.is_empty();
+    if (config.distill_weight > 0.0 || config.distill_sigma_weight() > 0.0 || shape_on)
+        && !head.distill_points.is_empty()
     {
         let n = config.distill_points.min(head.distill_points.len());
         let chosen: Vec<usize> = (0..n)
@@ -594,9 +686,45 @@ pub fn step_loss_on(
             let want_radiance = Tensor::from_vec(want_radiance, (n_in, lights, 3), device)?;
             let radiance_loss =
                 forward::colour_loss(config.distill_radiance_loss, &predicted, &want_radiance)?;
-            distill_value = f64::from((&sigma_loss + &radiance_loss)?.to_scalar::<f32>()?);
-            let weighted =
+            let mut distill_sum = (&sigma_loss + &radiance_loss)?;
+            let mut weighted =
                 ((sigma_loss * config.distill_sigma_weight())? + (radiance_loss * config.distill_weight)?)?;
+            if shape_on {
+                // The truth's colour under the source lighting, relit by the network's
+                // transport: `(T*·L_S)·(T·L)/(T·L_S + ε)` against `T*·L`.
+                let probes = head.shape_lights.len();
+                let probe_matrix: Vec<f32> = head.shape_lights.iter().flatten().copied().collect();
+                let probe_matrix = Tensor::from_vec(probe_matrix, (probes, 3, ENV_TEXELS), device)?;
+                let source_light = Tensor::from_slice(&head.source_light_net, (3, ENV_TEXELS), device)?;
+                let true_source: Vec<f32> = pass
+                    .inside
+                    .iter()
+                    .flat_map(|&i| {
+                        let k = chosen[i as usize] * lights * 3;
+                        head.distill_radiance[k..k + 3].to_vec()
+                    })
+                    .collect();
+                let true_source = Tensor::from_vec(true_source, (n_in, 1, 3), device)?;
+                let shaped = relit_by_shape(
+                    &lt.reshape((n_in, 3, ENV_TEXELS))?,
+                    &source_light,
+                    &probe_matrix,
+                    &true_source,
+                )?;
+                let want_shaped: Vec<f32> = pass
+                    .inside
+                    .iter()
+                    .flat_map(|&i| {
+                        let k = chosen[i as usize] * probes * 3;
+                        head.shape_radiance[k..k + probes * 3].to_vec()
+                    })
+                    .collect();
+                let want_shaped = Tensor::from_vec(want_shaped, (n_in, probes, 3), device)?;
+                let shape_loss = forward::colour_loss(config.distill_radiance_loss, &shaped, &want_shaped)?;
+                distill_sum = (distill_sum + &shape_loss)?;
+                weighted = (weighted + (shape_loss * config.distill_shape_weight)?)?;
+            }
+            distill_value = f64::from(distill_sum.to_scalar::<f32>()?);
             total = (total + weighted)?;
         }
     }
