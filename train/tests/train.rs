@@ -17,6 +17,7 @@ use nelf_train::trainer::{
     CheckpointInfo, LossParts, PreparedHead, PreparedTarget, Trainable, load_checkpoint, relit_by_shape,
     save_checkpoint, step_loss, step_rng, train_step,
 };
+use rand::Rng;
 
 const SIZE: u32 = 32;
 
@@ -1008,7 +1009,6 @@ fn the_transport_shape_term_is_linear_in_its_own_weight() {
 fn relit_by_shape_gives_the_truth_for_its_shape_at_any_colour() {
     let (n, k) = (5usize, 4usize);
     let mut rng = step_rng(11, 3);
-    use rand::Rng;
     let mut draw = |count: usize, lo: f32, hi: f32| -> Vec<f32> {
         (0..count).map(|_| rng.random_range(lo..hi)).collect()
     };
