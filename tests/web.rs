@@ -254,7 +254,7 @@ fn the_exported_page_draws_the_scan_like_nelf_render_on_webgpu_and_webgl2() {
         &format!("{base}/index.html?continuous=1"),
         "webgpu",
         &dir.path().join("dropped"),
-        &["--drop", &damaged],
+        &["--drop", &damaged, "--expect-error"],
     );
     assert!(
         report["dropped"] == "damaged.nelf" && page_error(&report).contains("damaged.nelf"),

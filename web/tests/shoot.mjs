@@ -2,13 +2,15 @@
 // error) and writes what it saw: `<out>/report.json` (the page's data-nelf-* report, the
 // backend, timings) and `<out>/view.png` (a screenshot of the 3D view's rectangle).
 //
-//   node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS] [--drop FILE] [--touch]
+//   node shoot.mjs URL OUT_DIR webgpu|webgl2 [--fps SECONDS] [--drop FILE [--expect-error]] [--touch]
 //
 // webgpu: Chromium's WebGPU on SwiftShader (Vulkan); webgl2: WebGPU off, so the page
 // gets WebGL2 only. --fps: after the screenshot, count frames for SECONDS of real time
 // (the URL should say continuous=1). --drop: after the first frames, drop FILE on the
 // canvas as a person would (a DragEvent carrying the file) and wait for the page to show
-// an error or draw three more frames; the report is written after that. --touch: after the
+// an error or draw three more frames; the report is written after that. With
+// --expect-error it waits for the error alone: a continuous page draws three frames
+// sooner than a damaged file's error may show, so "three frames" would race it. --touch: after the
 // first frames, three gestures on the 3D view by touch (Chromium's touch events, as a
 // phone sends them): a finger held still for a second, then dragged to the right; a
 // two-finger pinch apart; a two-finger drag down. The report's `touch` lists the page's
@@ -25,6 +27,7 @@ if (!url || !outDir || !["webgpu", "webgl2"].includes(backend)) {
 const option = (name) => { const i = rest.indexOf(name); return i >= 0 ? rest[i + 1] : undefined; };
 const fpsSeconds = Number(option("--fps") || 0);
 const dropFile = option("--drop");
+const expectError = rest.includes("--expect-error");
 const touch = rest.includes("--touch");
 const base = [
   "--headless", "--no-sandbox", "--disable-quic", "--no-first-run",
@@ -66,8 +69,10 @@ try {
       return Number(document.body.dataset.nelfFrames || 0);
     }, [bytes, name]);
     await page.waitForFunction(
-      (before) => Number(document.body.dataset.nelfFrames || 0) >= before + 3 || (document.body.dataset.nelfError || "") !== "",
-      frames,
+      ([before, errorOnly]) =>
+        (document.body.dataset.nelfError || "") !== "" ||
+        (!errorOnly && Number(document.body.dataset.nelfFrames || 0) >= before + 3),
+      [frames, expectError],
       { timeout: 120000, polling: 100 },
     );
     report.dropped = name;
