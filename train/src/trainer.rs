@@ -317,6 +317,14 @@ pub fn relit_by_shape(
     Ok(relit.broadcast_div(&source)?.broadcast_mul(true_source)?)
 }
 
+/// The first `take` values of each of `rows`, in order, of a row-major `table` of
+/// `width` values per row (a distillation table's rows at the points a pass kept).
+fn leading_of_rows(table: &[f32], width: usize, take: usize, rows: impl Iterator<Item = usize>) -> Vec<f32> {
+    rows.flat_map(|row| &table[row * width..row * width + take])
+        .copied()
+        .collect()
+}
+
 /// `(N, lights, 3)`: the true radiance `Σ_k T*[c, k]·L[c, k]` of each of `distill`'s
 /// points under each of `world_lights` (8 × 16, world frame, as `T*`).
 fn true_radiance(distill: &crate::data::Distill, world_lights: &[LatLong]) -> Vec<f32> {
@@ -642,7 +650,13 @@ pub fn step_loss_on(
         total = (total + (&free_space * config.free_space_weight)?)?;
     }
     let mut distill_value = 0.0;
-    let shape_on = config.distill_shape_weight > 0.0 && !head.shape_lights.is_empty();
+    let shape_on = config.distill_shape_weight > 0.0;
+    if shape_on && head.shape_lights.is_empty() {
+        return Err(TrainError::Settings(
+            "--distill-shape-weight is on but the head has no lightings for it (shape_lights is empty)"
+                .into(),
+        ));
+    }
     if (config.distill_weight > 0.0 || config.distill_sigma_weight() > 0.0 || shape_on)
         && !head.distill_points.is_empty()
     {
@@ -655,12 +669,13 @@ pub fn step_loss_on(
         if let Some(pass) = forward::run_points(model, &encoded, &head.geometry, &points, &dirs, Stage::Fine)?
         {
             let n_in = pass.inside.len();
-            let want: Vec<f32> = pass
-                .inside
-                .iter()
-                .map(|&i| head.distill_sigma[chosen[i as usize]])
-                .collect();
-            let want = Tensor::from_vec(want, (n_in, 1), device)?;
+            // The distillation point of each point the pass kept (inside the hull).
+            let kept = || pass.inside.iter().map(|&i| chosen[i as usize]);
+            let want = Tensor::from_vec(
+                leading_of_rows(&head.distill_sigma, 1, 1, kept()),
+                (n_in, 1),
+                device,
+            )?;
             // σ (1/mm) compared as `log(1 + σ)`, whose gradient `1/(1 + σ)` never
             // vanishes. An opacity `1 − e^{−σ·δ}` saturates: run `nelf-small-run` sat at
             // σ ≈ 17/mm everywhere inside the hull for 3,000 steps with no gradient
@@ -675,15 +690,11 @@ pub fn step_loss_on(
                 .reshape((n_in, 1, 3, ENV_TEXELS))?
                 .broadcast_mul(&light_matrix.unsqueeze(0)?)?
                 .sum(3)?;
-            let want_radiance: Vec<f32> = pass
-                .inside
-                .iter()
-                .flat_map(|&i| {
-                    let k = chosen[i as usize] * lights * 3;
-                    head.distill_radiance[k..k + lights * 3].to_vec()
-                })
-                .collect();
-            let want_radiance = Tensor::from_vec(want_radiance, (n_in, lights, 3), device)?;
+            let want_radiance = Tensor::from_vec(
+                leading_of_rows(&head.distill_radiance, lights * 3, lights * 3, kept()),
+                (n_in, lights, 3),
+                device,
+            )?;
             let radiance_loss =
                 forward::colour_loss(config.distill_radiance_loss, &predicted, &want_radiance)?;
             let mut distill_sum = (&sigma_loss + &radiance_loss)?;
@@ -696,30 +707,23 @@ pub fn step_loss_on(
                 let probe_matrix: Vec<f32> = head.shape_lights.iter().flatten().copied().collect();
                 let probe_matrix = Tensor::from_vec(probe_matrix, (probes, 3, ENV_TEXELS), device)?;
                 let source_light = Tensor::from_slice(&head.source_light_net, (3, ENV_TEXELS), device)?;
-                let true_source: Vec<f32> = pass
-                    .inside
-                    .iter()
-                    .flat_map(|&i| {
-                        let k = chosen[i as usize] * lights * 3;
-                        head.distill_radiance[k..k + 3].to_vec()
-                    })
-                    .collect();
-                let true_source = Tensor::from_vec(true_source, (n_in, 1, 3), device)?;
+                // Lighting 0 of the distillation's is the source lighting.
+                let true_source = Tensor::from_vec(
+                    leading_of_rows(&head.distill_radiance, lights * 3, 3, kept()),
+                    (n_in, 1, 3),
+                    device,
+                )?;
                 let shaped = relit_by_shape(
                     &lt.reshape((n_in, 3, ENV_TEXELS))?,
                     &source_light,
                     &probe_matrix,
                     &true_source,
                 )?;
-                let want_shaped: Vec<f32> = pass
-                    .inside
-                    .iter()
-                    .flat_map(|&i| {
-                        let k = chosen[i as usize] * probes * 3;
-                        head.shape_radiance[k..k + probes * 3].to_vec()
-                    })
-                    .collect();
-                let want_shaped = Tensor::from_vec(want_shaped, (n_in, probes, 3), device)?;
+                let want_shaped = Tensor::from_vec(
+                    leading_of_rows(&head.shape_radiance, probes * 3, probes * 3, kept()),
+                    (n_in, probes, 3),
+                    device,
+                )?;
                 let shape_loss = forward::colour_loss(config.distill_radiance_loss, &shaped, &want_shaped)?;
                 distill_sum = (distill_sum + &shape_loss)?;
                 weighted = (weighted + (shape_loss * config.distill_shape_weight)?)?;

@@ -968,32 +968,42 @@ fn the_distillation_radiance_loss_can_be_srgb_l2() {
 }
 
 /// The transport-shape term has its own weight, adds to the loss and is linear in
-/// its weight; at zero the loss is the one without it, bit for bit.
+/// its weight. Off, the loss (with the σ term on, so the distillation pass runs) is
+/// that of the head without the term's lightings and radiances, bit for bit; on, such
+/// a head is an error, not a term silently skipped.
 #[test]
 fn the_transport_shape_term_is_linear_in_its_own_weight() {
     let trainable = Trainable::init(&tiny_config(), &Device::Cpu).unwrap();
     let head = synthetic_head();
-    let total = |shape: f64| {
-        let config = TrainConfig {
-            distill_weight: 0.0,
-            distill_sigma_weight: Some(0.0),
-            distill_shape_weight: shape,
-            ..tiny_config()
-        };
-        loss_value(&trainable, &head, &config, 5)
+    let config = |shape: f64| TrainConfig {
+        distill_weight: 0.0,
+        distill_sigma_weight: Some(0.0),
+        distill_shape_weight: shape,
+        ..tiny_config()
     };
-    let without = loss_value(
-        &trainable,
-        &head,
-        &TrainConfig {
-            distill_weight: 0.0,
-            distill_sigma_weight: Some(0.0),
-            ..tiny_config()
-        },
-        5,
+    let total = |shape: f64| loss_value(&trainable, &head, &config(shape), 5);
+    let bare = PreparedHead {
+        shape_lights: Vec::new(),
+        shape_radiance: Vec::new(),
+        ..synthetic_head()
+    };
+    let with_sigma = TrainConfig {
+        distill_sigma_weight: Some(0.1),
+        ..config(0.0)
+    };
+    assert_eq!(
+        loss_value(&trainable, &head, &with_sigma, 5).to_bits(),
+        loss_value(&trainable, &bare, &with_sigma, 5).to_bits()
+    );
+    let refused = step_loss(&trainable.model, &bare, &config(1.0), &mut step_rng(5, 0));
+    assert!(
+        refused
+            .as_ref()
+            .is_err_and(|e| e.to_string().contains("distill-shape-weight")),
+        "a head without shape lightings: {:?}",
+        refused.map(|(_, parts)| parts)
     );
     let images = total(0.0);
-    assert_eq!(images.to_bits(), without.to_bits());
     let (half, one) = (total(0.5) - images, total(1.0) - images);
     assert!(half > 1e-6, "the shape term adds to the loss ({half})");
     assert!(
