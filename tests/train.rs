@@ -39,8 +39,8 @@ fn train_data_run_resume_and_bake_with_the_weights() {
         "1",
     ]);
     assert!(out.contains("3 heads written"), "{out}");
-    let train = |steps: &str| {
-        succeed(&[
+    let train = |steps: &str, extra: &[&str]| {
+        let mut args = vec![
             "train",
             "run",
             "--data",
@@ -65,9 +65,11 @@ fn train_data_run_resume_and_bake_with_the_weights() {
             "1",
             "--distill-weight",
             "0.1",
-        ])
+        ];
+        args.extend_from_slice(extra);
+        succeed(&args)
     };
-    let first = train("2");
+    let first = train("2", &[]);
     assert!(first.contains("step 2 (2 now"), "{first}");
     assert!(run.join("curve.svg").is_file() && run.join("validation.csv").is_file());
     // Validation stands beside the flat-colour baseline of the same views.
@@ -81,7 +83,7 @@ fn train_data_run_resume_and_bake_with_the_weights() {
         .collect();
     assert_eq!(last.len(), 8, "{log}");
     assert!(last[4..].iter().all(|db| db.is_finite() && *db > 3.0), "{log}");
-    let resumed = train("3");
+    let resumed = train("3", &[]);
     assert!(resumed.contains("step 3 (1 now"), "{resumed}");
     // The network as a run ends is validated even off the --val-every grid.
     let log = std::fs::read_to_string(run.join("validation.csv")).unwrap();
@@ -104,7 +106,41 @@ fn train_data_run_resume_and_bake_with_the_weights() {
     assert!(!refused.status.success());
     assert!(String::from_utf8_lossy(&refused.stderr).contains("checkpoint.json"));
 
-    // The exported weights bake the held-out head (id 2).
+    // The domain-adaptation hook continues the checkpoint with a folder of real
+    // portraits (its decoder head starts afresh); a missing folder is named.
+    let portraits = dir.path().join("portraits");
+    std::fs::create_dir(&portraits).unwrap();
+    let photo = concat!(env!("CARGO_MANIFEST_DIR"), "/data/metrics/astronaut.png");
+    std::fs::copy(photo, portraits.join("astronaut.png")).unwrap_or_else(|e| panic!("{photo}: {e}"));
+    let hooked = train("4", &["--real-images", portraits.to_str().unwrap()]);
+    assert!(hooked.contains("step 4 (1 now"), "{hooked}");
+    let saved = std::fs::read_to_string(run.join("train_config.json")).unwrap();
+    assert!(
+        saved.contains("\"real_images\"") && saved.contains("portraits"),
+        "{saved}"
+    );
+    let nowhere = dir.path().join("nowhere");
+    let refused = nelf(&[
+        "train",
+        "run",
+        "--data",
+        d,
+        "-o",
+        r,
+        "--arch",
+        "tiny",
+        "--image-size",
+        "32",
+        "--steps",
+        "5",
+        "--real-images",
+        nowhere.to_str().unwrap(),
+    ]);
+    assert!(!refused.status.success());
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("nowhere"));
+
+    // The exported weights (with the hook's head, which inference ignores) bake the
+    // held-out head (id 2).
     let asset = dir.path().join("net.nelf");
     let head = data.join("heads").join("h00002");
     succeed(&[

@@ -178,6 +178,11 @@ impl Adam {
                 (format!("adam_m.{name}"), &mut slot.m),
                 (format!("adam_v.{name}"), &mut slot.v),
             ] {
+                // The domain-adaptation head of a run that turns the hook on from a
+                // checkpoint saved without it starts with zero moments.
+                if crate::domain::is_head_variable(name) && !tensors.contains_key(&key) {
+                    continue;
+                }
                 let t = checkpoint_tensor(tensors, &key, target.dims())?;
                 *target = t.to_device(target.device())?;
             }

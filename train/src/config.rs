@@ -160,6 +160,19 @@ pub struct TrainConfig {
     #[arg(long, default_value_t = nelf_field::prior::DEFAULT_WEIGHT)]
     #[serde(default = "default_shading_prior_weight")]
     pub shading_prior_weight: f32,
+    /// Folder of real portraits (PNG, JPEG or EXR; background black) for the
+    /// domain-adaptation hook (`crate::domain`): each step also reproduces one of them
+    /// through the image encoder and a decoder head, an L1 loss inside its
+    /// foreground, so that the encoder's features stay faithful to photographs. The
+    /// paper's real-portrait set cannot be fetched here; none of the shipped weights
+    /// was trained with it. Off when not given.
+    #[arg(long)]
+    #[serde(default)]
+    pub real_images: Option<PathBuf>,
+    /// Weight of the domain-adaptation loss (the official implementation's 1).
+    #[arg(long, default_value_t = 1.0)]
+    #[serde(default = "default_real_weight")]
+    pub real_weight: f64,
     /// Distillation points per step.
     #[arg(long, default_value_t = 256)]
     pub distill_points: usize,
@@ -205,6 +218,8 @@ impl Default for TrainConfig {
             ema_decay: 0.0,
             shading_prior_mm: 0.0,
             shading_prior_weight: nelf_field::prior::DEFAULT_WEIGHT,
+            real_images: None,
+            real_weight: 1.0,
             distill_points: 256,
             seed: 0,
             checkpoint_secs: 300.0,
@@ -212,6 +227,10 @@ impl Default for TrainConfig {
             val_heads: 4,
         }
     }
+}
+
+fn default_real_weight() -> f64 {
+    1.0
 }
 
 fn default_shading_prior_weight() -> f32 {
@@ -268,6 +287,11 @@ impl TrainConfig {
         Ok(arch)
     }
 
+    /// Whether the domain-adaptation hook is on (a real-portrait folder is given).
+    pub fn domain_adaptation(&self) -> bool {
+        self.real_images.is_some()
+    }
+
     /// The model configuration of this run.
     pub fn nelf_config(&self) -> Result<NelfConfig, TrainError> {
         Ok(NelfConfig {
@@ -312,6 +336,7 @@ impl TrainConfig {
             self.distill_sigma_weight(),
             self.distill_shape_weight,
             self.free_space_weight,
+            self.real_weight,
         ];
         if !weights.iter().all(|w| w.is_finite() && *w >= 0.0) {
             return bad(format!("loss weights {weights:?} must be non-negative"));

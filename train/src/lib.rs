@@ -11,6 +11,7 @@
 //! * [`forward`]: the network's forward pass with gradients (encoder, light
 //!   estimate, differentiable feature gather, volume rendering);
 //! * [`adam`]: Adam with a state that saves and restores exactly;
+//! * [`domain`]: the domain-adaptation hook (an auto-encoding loss on real portraits);
 //! * [`trainer`]: the paper's losses and modes, steps, checkpoints;
 //! * [`run`]: the resumable loop with validation on held-out heads;
 //! * [`eval`]: a network on held-out heads with 2–5 source views (the view-count table);
@@ -22,6 +23,7 @@ pub mod adam;
 pub mod cli;
 pub mod config;
 pub mod data;
+pub mod domain;
 pub mod error;
 pub mod eval;
 pub mod finetune;

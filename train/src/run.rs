@@ -400,6 +400,13 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
         config.source_relative_light,
     )?;
 
+    let real = match &config.real_images {
+        Some(dir) => {
+            progress.set_message(format!("loading real portraits from {}", dir.display()));
+            Some(crate::domain::RealImages::load(dir, config.image_size)?)
+        }
+        None => None,
+    };
     let trainable = Trainable::init(config, device)?;
     let mut adam = trainable.optimizer(config)?;
     let mut train_secs = 0.0;
@@ -429,7 +436,7 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
             break;
         }
         let step_start = Instant::now();
-        last_loss = train_step(&trainable, &mut adam, &heads, config)?;
+        last_loss = train_step(&trainable, &mut adam, &heads, real.as_ref(), config)?;
         train_secs += step_start.elapsed().as_secs_f64();
         let step = adam.steps();
         progress.set_position(step);
@@ -439,6 +446,13 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
         ));
         if step % LOSS_LOG_EVERY == 0 {
             log_loss(&paths.dir.join("loss.csv"), step, train_secs, &last_loss)?;
+            if real.is_some() {
+                append_csv(
+                    &paths.dir.join("real.csv"),
+                    "step,real_loss",
+                    &[step.to_string(), format!("{:.5}", last_loss.real)],
+                )?;
+            }
             if progress.is_hidden() {
                 let p = last_loss.phase_secs;
                 eprintln!(

@@ -47,6 +47,7 @@ use serde::{Deserialize, Serialize};
 use crate::adam::Adam;
 use crate::config::TrainConfig;
 use crate::data::{Dataset, TargetMode, TrainingSample};
+use crate::domain::{RealImages, ReproduceHead, is_head_variable, reproduction_loss};
 use crate::error::TrainError;
 use crate::forward::{self, Encoded, RayPass, encode, irradiance, l1, log_l1, render_rays};
 
@@ -361,6 +362,10 @@ pub struct LossParts {
     pub light: f64,
     /// Distillation loss on σ (1/mm).
     pub distill: f64,
+    /// The domain-adaptation hook's reproduction loss (0 without the hook;
+    /// [`crate::domain`]).
+    #[serde(default)]
+    pub real: f64,
     /// Seconds of the step's phases: encoder, rendering (coarse and fine passes),
     /// losses (with distillation), backward, Adam (what limits a step).
     #[serde(default)]
@@ -743,6 +748,7 @@ pub fn step_loss_on(
         alpha: scalar(&alpha)?,
         light: scalar(&light)?,
         distill: distill_value,
+        real: 0.0,
         phase_secs: [
             encode_secs,
             render_secs,
@@ -760,6 +766,9 @@ pub struct Trainable {
     pub varmap: VarMap,
     /// The model over [`Trainable::varmap`].
     pub model: Model,
+    /// The domain-adaptation hook's decoder head, when the run has one (its
+    /// variables are in [`Trainable::varmap`] under [`crate::domain::HEAD_PREFIX`]).
+    pub reproduce: Option<ReproduceHead>,
 }
 
 impl std::fmt::Debug for Trainable {
@@ -779,40 +788,26 @@ impl Trainable {
         let vb = VarBuilder::from_varmap(&varmap, DType::F32, device);
         let model = Model::new(&vb, config.nelf_config()?)?;
         let mut rng = Pcg64::seed_from_u64(config.seed ^ 0x5EED_1417);
-        let vars = sorted_vars(&varmap)?;
-        // Fan-in of each bias: its sibling weight's.
-        let fans: HashMap<String, usize> = vars
-            .iter()
-            .filter(|(n, v)| n.ends_with(".weight") && v.dims().len() >= 2)
-            .map(|(n, v)| {
-                (
-                    n.trim_end_matches(".weight").to_string(),
-                    v.dims()[1..].iter().product(),
-                )
-            })
-            .collect();
-        for (name, var) in &vars {
-            let dims = var.dims().to_vec();
-            let count: usize = dims.iter().product();
-            let (stem, leaf) = name.rsplit_once('.').unwrap_or(("", name.as_str()));
-            let norm = stem.ends_with("norm");
-            let values: Vec<f32> = if dims.len() >= 2 {
-                let fan: usize = dims[1..].iter().product();
-                let bound = 1.0 / (fan.max(1) as f32).sqrt();
-                (0..count).map(|_| rng.random_range(-bound..bound)).collect()
-            } else if norm && leaf == "weight" {
-                vec![1.0; count]
-            } else if norm && leaf == "bias" {
-                vec![0.0; count]
-            } else if leaf == "bias" {
-                let bound = 1.0 / (fans.get(stem).copied().unwrap_or(1).max(1) as f32).sqrt();
-                (0..count).map(|_| rng.random_range(-bound..bound)).collect()
-            } else {
-                vec![0.25; count]
-            };
-            var.set(&Tensor::from_vec(values, dims, device)?)?;
-        }
-        Ok(Self { varmap, model })
+        init_variables(&sorted_vars(&varmap)?, &mut rng, device)?;
+        // The hook's head is made after the network's variables are drawn, from a
+        // stream of its own, so the network starts as it does without the hook.
+        let reproduce = if config.domain_adaptation() {
+            let head = ReproduceHead::new(&vb, &config.architecture()?)?;
+            let vars: Vec<_> = sorted_vars(&varmap)?
+                .into_iter()
+                .filter(|(n, _)| is_head_variable(n))
+                .collect();
+            let mut rng = Pcg64::seed_from_u64(config.seed ^ 0x5245_5052_4F44);
+            init_variables(&vars, &mut rng, device)?;
+            Some(head)
+        } else {
+            None
+        };
+        Ok(Self {
+            varmap,
+            model,
+            reproduce,
+        })
     }
 
     /// A network to go on training from the weights in `bytes` (a safetensors file,
@@ -833,7 +828,11 @@ impl Trainable {
         let model = Model::new(&vb, *read.config())?
             .with_working_image_size(read.working_image_size())
             .with_source_relative_light(read.source_relative_light());
-        let trainable = Self { varmap, model };
+        let trainable = Self {
+            varmap,
+            model,
+            reproduce: None,
+        };
         trainable.load_weights(&tensors, "")?;
         Ok(trainable)
     }
@@ -882,15 +881,57 @@ impl Trainable {
             .with_source_relative_light(self.model.source_relative_light()))
     }
 
-    /// Sets the weights from named tensors (every variable must be present).
+    /// Sets the weights from named tensors (every variable must be present, but for
+    /// the domain-adaptation head, which keeps its values where a file saved without
+    /// the hook lacks it).
     pub fn load_weights(&self, tensors: &HashMap<String, Tensor>, prefix: &str) -> Result<(), TrainError> {
         for (name, var) in sorted_vars(&self.varmap)? {
             let key = format!("{prefix}{name}");
+            if is_head_variable(&name) && !tensors.contains_key(&key) {
+                continue;
+            }
             let t = crate::adam::checkpoint_tensor(tensors, &key, var.dims())?;
             var.set(&t.to_device(var.device())?)?;
         }
         Ok(())
     }
+}
+
+/// Draws the initial values of `vars` as [`Trainable::init`] describes.
+fn init_variables(vars: &[(String, Var)], rng: &mut Pcg64, device: &Device) -> Result<(), TrainError> {
+    // Fan-in of each bias: its sibling weight's.
+    let fans: HashMap<String, usize> = vars
+        .iter()
+        .filter(|(n, v)| n.ends_with(".weight") && v.dims().len() >= 2)
+        .map(|(n, v)| {
+            (
+                n.trim_end_matches(".weight").to_string(),
+                v.dims()[1..].iter().product(),
+            )
+        })
+        .collect();
+    for (name, var) in vars {
+        let dims = var.dims().to_vec();
+        let count: usize = dims.iter().product();
+        let (stem, leaf) = name.rsplit_once('.').unwrap_or(("", name.as_str()));
+        let norm = stem.ends_with("norm");
+        let values: Vec<f32> = if dims.len() >= 2 {
+            let fan: usize = dims[1..].iter().product();
+            let bound = 1.0 / (fan.max(1) as f32).sqrt();
+            (0..count).map(|_| rng.random_range(-bound..bound)).collect()
+        } else if norm && leaf == "weight" {
+            vec![1.0; count]
+        } else if norm && leaf == "bias" {
+            vec![0.0; count]
+        } else if leaf == "bias" {
+            let bound = 1.0 / (fans.get(stem).copied().unwrap_or(1).max(1) as f32).sqrt();
+            (0..count).map(|_| rng.random_range(-bound..bound)).collect()
+        } else {
+            vec![0.25; count]
+        };
+        var.set(&Tensor::from_vec(values, dims, device)?)?;
+    }
+    Ok(())
 }
 
 /// The variables of `varmap`, sorted by name.
@@ -1115,19 +1156,49 @@ pub fn reset_density_heads(
 }
 
 /// One optimiser step on the head the step's generator draws.
+///
+/// With the domain-adaptation hook (`trainable` made with a real-portrait folder,
+/// `real` its portraits) the step adds the reproduction loss of one portrait
+/// ([`crate::domain`]), drawn from a stream of its own.
 pub fn train_step(
     trainable: &Trainable,
     adam: &mut Adam,
     heads: &[PreparedHead],
+    real: Option<&RealImages>,
     config: &TrainConfig,
 ) -> Result<LossParts, TrainError> {
+    match (&trainable.reproduce, real) {
+        (Some(_), None) => {
+            return Err(TrainError::Settings(
+                "the network has a domain-adaptation head but no real portraits were given".into(),
+            ));
+        }
+        (None, Some(_)) => {
+            return Err(TrainError::Settings(
+                "real portraits were given to a network made without --real-images".into(),
+            ));
+        }
+        _ => {}
+    }
     let mut rng = step_rng(config.seed, adam.steps());
     if heads.is_empty() {
         return Err(TrainError::Settings("no training heads".into()));
     }
     let head = &heads[rng.random_range(0..heads.len())];
     let model = config.model_for_head(&trainable.model, &head.source_light_net)?;
-    let (loss, mut parts) = step_loss(&model, head, config, &mut rng)?;
+    let (mut loss, mut parts) = step_loss(&model, head, config, &mut rng)?;
+    if let (Some(decoder), Some(real)) = (&trainable.reproduce, real)
+        && config.real_weight > 0.0
+    {
+        let pick = real.pick(config.seed, adam.steps());
+        let (_, pixels) = real
+            .get(pick)
+            .ok_or_else(|| TrainError::Settings("no real portraits".into()))?;
+        let term = reproduction_loss(&model, decoder, pixels, real.size())?;
+        parts.real = f64::from(term.to_dtype(DType::F32)?.to_scalar::<f32>()?);
+        parts.total += config.real_weight * parts.real;
+        loss = (loss + (term * config.real_weight)?)?;
+    }
     let clock = Instant::now();
     let grads = loss.backward()?;
     parts.phase_secs[3] = secs_since(clock);

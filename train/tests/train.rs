@@ -387,7 +387,7 @@ fn a_resumed_run_equals_an_unbroken_one_bit_for_bit() {
     let unbroken = Trainable::init(&config, &Device::Cpu).unwrap();
     let mut adam = unbroken.optimizer(&config).unwrap();
     for _ in 0..n + m {
-        train_step(&unbroken, &mut adam, &heads, &config).unwrap();
+        train_step(&unbroken, &mut adam, &heads, None, &config).unwrap();
     }
 
     let dir = tempfile::tempdir().unwrap();
@@ -395,7 +395,7 @@ fn a_resumed_run_equals_an_unbroken_one_bit_for_bit() {
     let mut adam1 = first.optimizer(&config).unwrap();
     let mut last = LossParts::default();
     for _ in 0..n {
-        last = train_step(&first, &mut adam1, &heads, &config).unwrap();
+        last = train_step(&first, &mut adam1, &heads, None, &config).unwrap();
     }
     let info = CheckpointInfo {
         step: adam1.steps(),
@@ -416,7 +416,7 @@ fn a_resumed_run_equals_an_unbroken_one_bit_for_bit() {
     let loaded = load_checkpoint(dir.path(), &resumed, &mut adam2).unwrap();
     assert_eq!(loaded.step, n as u64);
     for _ in 0..m {
-        train_step(&resumed, &mut adam2, &heads, &config).unwrap();
+        train_step(&resumed, &mut adam2, &heads, None, &config).unwrap();
     }
     assert_eq!(adam2.steps(), (n + m) as u64);
     assert!(
@@ -451,7 +451,7 @@ fn the_weight_average_follows_each_step() {
     };
     let mut expected = values(trainable.weights().unwrap());
     for _ in 0..3 {
-        train_step(&trainable, &mut adam, &heads, &config).unwrap();
+        train_step(&trainable, &mut adam, &heads, None, &config).unwrap();
         for (e, w) in expected.iter_mut().zip(values(trainable.weights().unwrap())) {
             for (a, b) in e.iter_mut().zip(w) {
                 *a = beta as f32 * *a + (1.0 - beta as f32) * b;
@@ -476,7 +476,7 @@ fn the_weight_average_follows_each_step() {
     let plain = Trainable::init(&off, &Device::Cpu).unwrap();
     let mut plain_adam = plain.optimizer(&off).unwrap();
     assert!(plain_adam.averaged_weights().is_none());
-    train_step(&plain, &mut plain_adam, &heads, &off).unwrap();
+    train_step(&plain, &mut plain_adam, &heads, None, &off).unwrap();
     let dir = tempfile::tempdir().unwrap();
     let info = CheckpointInfo {
         step: 1,
@@ -517,7 +517,7 @@ fn a_density_reset_changes_only_the_density_output_layers() {
     let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
     let mut adam = trainable.optimizer(&config).unwrap();
     for _ in 0..2 {
-        train_step(&trainable, &mut adam, &heads, &config).unwrap();
+        train_step(&trainable, &mut adam, &heads, None, &config).unwrap();
     }
     let info = CheckpointInfo {
         step: adam.steps(),
@@ -579,7 +579,7 @@ fn a_density_reset_changes_only_the_density_output_layers() {
         );
     }
     // And the run continues.
-    train_step(&resumed, &mut adam2, &heads, &config).unwrap();
+    train_step(&resumed, &mut adam2, &heads, None, &config).unwrap();
     assert!(nelf_train::trainer::reset_density_heads(dir.path(), 0.0, 1.0).is_err());
 }
 
@@ -1148,4 +1148,241 @@ fn fine_tuning_on_the_source_views_lowers_their_colour_loss() {
     );
     assert!(without_view(&head, 0).is_err(), "view 0 holds the light frame");
     assert!(without_view(&two, 1).is_err(), "the network needs 2 views");
+}
+
+// The domain-adaptation hook (`nelf_train::domain`), on a real photograph: the
+// astronaut portrait of `data/metrics` (NASA, public domain), its background blacked
+// out beyond an ellipse about the face, as a matted portrait set would come.
+
+/// A folder holding the matted astronaut portrait (and `extra` more files).
+fn real_portraits(extra: &[(&str, &[u8])]) -> tempfile::TempDir {
+    let source = concat!(env!("CARGO_MANIFEST_DIR"), "/../data/metrics/astronaut.png");
+    let mut photo = image::open(source)
+        .unwrap_or_else(|e| panic!("{source}: {e} (the test's real portrait is missing)"))
+        .to_rgb8();
+    let (w, h) = photo.dimensions();
+    for (x, y, p) in photo.enumerate_pixels_mut() {
+        let dx = (x as f32 - 0.45 * w as f32) / (0.3 * w as f32);
+        let dy = (y as f32 - 0.35 * h as f32) / (0.38 * h as f32);
+        if dx * dx + dy * dy > 1.0 {
+            *p = image::Rgb([0, 0, 0]);
+        }
+    }
+    let dir = tempfile::tempdir().unwrap();
+    photo.save(dir.path().join("astronaut.png")).unwrap();
+    for (name, bytes) in extra {
+        std::fs::write(dir.path().join(name), bytes).unwrap();
+    }
+    dir
+}
+
+fn hook_config(dir: &std::path::Path) -> TrainConfig {
+    TrainConfig {
+        real_images: Some(dir.to_path_buf()),
+        ..tiny_config()
+    }
+}
+
+#[test]
+fn the_domain_head_has_the_official_layout() {
+    let dir = real_portraits(&[]);
+    let trainable = Trainable::init(&hook_config(dir.path()), &Device::Cpu).unwrap();
+    let c0 = hook_config(dir.path()).architecture().unwrap().encoder_channels[0];
+    let head: Vec<(String, Vec<usize>)> = trainable
+        .weights()
+        .unwrap()
+        .into_iter()
+        .filter(|(n, _)| nelf_train::domain::is_head_variable(n))
+        .map(|(n, t)| (n, t.dims().to_vec()))
+        .collect();
+    let p = "image_encoder.reproduces.";
+    let want: Vec<(String, Vec<usize>)> = [
+        ("0.act.weight", vec![2 * c0]),
+        ("0.conv.bias", vec![c0]),
+        ("0.conv.weight", vec![c0, 2 * c0, 3, 3]),
+        ("0.norm.bias", vec![2 * c0]),
+        ("0.norm.weight", vec![2 * c0]),
+        ("1.act.weight", vec![c0]),
+        ("1.conv.bias", vec![c0]),
+        ("1.conv.weight", vec![c0, c0, 3, 3]),
+        ("1.norm.bias", vec![c0]),
+        ("1.norm.weight", vec![c0]),
+        ("2.act.weight", vec![c0]),
+        ("2.conv.bias", vec![3]),
+        ("2.conv.weight", vec![3, c0, 1, 1]),
+        ("2.norm.bias", vec![c0]),
+        ("2.norm.weight", vec![c0]),
+        ("3.norm.bias", vec![3]),
+        ("3.norm.weight", vec![3]),
+    ]
+    .into_iter()
+    .map(|(n, d)| (format!("{p}{n}"), d))
+    .collect();
+    assert_eq!(head, want);
+    // Without the hook there is no head, and the network's own weights are the same.
+    let plain = Trainable::init(&tiny_config(), &Device::Cpu).unwrap();
+    let with_hook: Vec<_> = weights_bits(&trainable)
+        .into_iter()
+        .filter(|(n, _)| !nelf_train::domain::is_head_variable(n))
+        .collect();
+    assert!(
+        with_hook == weights_bits(&plain),
+        "the hook changed the network's initial weights"
+    );
+}
+
+#[test]
+fn real_portraits_load_and_bad_folders_are_refused() {
+    use nelf_train::domain::RealImages;
+    let dir = real_portraits(&[("notes.txt", b"not an image")]);
+    let real = RealImages::load(dir.path(), 32).unwrap();
+    assert_eq!((real.len(), real.size()), (1, 32));
+    let (path, pixels) = real.get(0).unwrap();
+    assert!(path.ends_with("astronaut.png"));
+    assert_eq!(pixels.len(), 32 * 32 * 3);
+    assert!(pixels.iter().all(|v| (0.0..=1.0).contains(v)));
+    let lit = pixels
+        .chunks_exact(3)
+        .filter(|p| p.iter().any(|&v| v > 0.0))
+        .count();
+    assert!((250..800).contains(&lit), "{lit} foreground pixels of 1024");
+    assert!(real.pick(0, 7) < real.len());
+
+    let empty = tempfile::tempdir().unwrap();
+    let err = RealImages::load(empty.path(), 32).unwrap_err().to_string();
+    assert!(
+        err.contains(&empty.path().display().to_string()) && err.contains("no real portraits"),
+        "{err}"
+    );
+    let broken = real_portraits(&[("broken.png", b"\x89PNG\r\n\x1a\n truncated")]);
+    let err = RealImages::load(broken.path(), 32).unwrap_err().to_string();
+    assert!(err.contains("broken.png"), "{err}");
+    let black = tempfile::tempdir().unwrap();
+    image::RgbImage::new(40, 30)
+        .save(black.path().join("night.png"))
+        .unwrap();
+    let err = RealImages::load(black.path(), 32).unwrap_err().to_string();
+    assert!(err.contains("night.png") && err.contains("black"), "{err}");
+    let missing = dir.path().join("absent");
+    let err = RealImages::load(&missing, 32).unwrap_err().to_string();
+    assert!(err.contains("absent"), "{err}");
+}
+
+#[test]
+fn the_domain_term_trains_the_encoder_and_its_head() {
+    use nelf_train::domain::{RealImages, reproduction_loss};
+    let dir = real_portraits(&[]);
+    let config = TrainConfig {
+        lr_encoder: 3e-3,
+        ..hook_config(dir.path())
+    };
+    let real = RealImages::load(dir.path(), 32).unwrap();
+    let (_, pixels) = real.get(0).unwrap();
+    let trainable = Trainable::init(&config, &Device::Cpu).unwrap();
+    let head = trainable.reproduce.as_ref().unwrap();
+    let mut adam = trainable.optimizer(&config).unwrap();
+    let mut losses = Vec::new();
+    for step in 0..8 {
+        let loss = reproduction_loss(&trainable.model, head, pixels, 32).unwrap();
+        losses.push(loss.to_scalar::<f32>().unwrap());
+        let grads = loss.backward().unwrap();
+        if step == 0 {
+            // The gradient reaches the encoder's first stage, not only the head.
+            let first = trainable
+                .varmap
+                .data()
+                .lock()
+                .unwrap()
+                .get("image_encoder.resblocks.0.normactconv0.conv.weight")
+                .unwrap()
+                .clone();
+            let g = grads.get(first.as_tensor()).unwrap();
+            assert!(g.abs().unwrap().sum_all().unwrap().to_scalar::<f32>().unwrap() > 0.0);
+        }
+        adam.step(&grads).unwrap();
+    }
+    assert!(
+        losses[7] < 0.8 * losses[0],
+        "reproduction loss {losses:?} did not fall"
+    );
+}
+
+#[test]
+fn the_domain_term_adds_to_a_step_and_resumes_bit_for_bit() {
+    use nelf_train::domain::RealImages;
+    let dir = real_portraits(&[]);
+    let heads = vec![synthetic_head()];
+    let real = RealImages::load(dir.path(), 32).unwrap();
+    let plain_config = tiny_config();
+    let hook = TrainConfig {
+        real_weight: 0.5,
+        ..hook_config(dir.path())
+    };
+
+    // The step's own loss is the run's without the hook; the term adds λ_r × its value.
+    let plain = Trainable::init(&plain_config, &Device::Cpu).unwrap();
+    let mut plain_adam = plain.optimizer(&plain_config).unwrap();
+    let without = train_step(&plain, &mut plain_adam, &heads, None, &plain_config).unwrap();
+    let unbroken = Trainable::init(&hook, &Device::Cpu).unwrap();
+    let mut adam = unbroken.optimizer(&hook).unwrap();
+    let with = train_step(&unbroken, &mut adam, &heads, Some(&real), &hook).unwrap();
+    assert!(with.real > 0.0);
+    assert_eq!(with.rgb_fine.to_bits(), without.rgb_fine.to_bits());
+    assert!((with.total - (without.total + 0.5 * with.real)).abs() < 1e-9);
+    // A network made with the hook refuses a step without portraits, and the reverse.
+    assert!(train_step(&unbroken, &mut adam, &heads, None, &hook).is_err());
+    assert!(train_step(&plain, &mut plain_adam, &heads, Some(&real), &plain_config).is_err());
+    assert_eq!((adam.steps(), plain_adam.steps()), (1, 1));
+    let last = train_step(&unbroken, &mut adam, &heads, Some(&real), &hook).unwrap();
+
+    // Saved after two steps and resumed for two more: the unbroken four, bit for bit.
+    let ckpt = tempfile::tempdir().unwrap();
+    let info = CheckpointInfo {
+        step: adam.steps(),
+        train_secs: 1.0,
+        config: hook.clone(),
+        last_loss: last,
+    };
+    save_checkpoint(ckpt.path(), &unbroken, &adam, &info).unwrap();
+    let resumed = Trainable::init(
+        &TrainConfig {
+            seed: 5,
+            ..hook.clone()
+        },
+        &Device::Cpu,
+    )
+    .unwrap();
+    let mut adam2 = resumed.optimizer(&hook).unwrap();
+    load_checkpoint(ckpt.path(), &resumed, &mut adam2).unwrap();
+    for _ in 0..2 {
+        train_step(&unbroken, &mut adam, &heads, Some(&real), &hook).unwrap();
+        train_step(&resumed, &mut adam2, &heads, Some(&real), &hook).unwrap();
+    }
+    assert!(
+        weights_bits(&unbroken) == weights_bits(&resumed),
+        "weights differ after resuming"
+    );
+
+    // A checkpoint saved without the hook continues with it: the head starts afresh.
+    let plain_ckpt = tempfile::tempdir().unwrap();
+    let info = CheckpointInfo {
+        step: plain_adam.steps(),
+        train_secs: 1.0,
+        config: plain_config.clone(),
+        last_loss: without,
+    };
+    save_checkpoint(plain_ckpt.path(), &plain, &plain_adam, &info).unwrap();
+    let turned_on = Trainable::init(&hook, &Device::Cpu).unwrap();
+    let mut adam3 = turned_on.optimizer(&hook).unwrap();
+    load_checkpoint(plain_ckpt.path(), &turned_on, &mut adam3).unwrap();
+    train_step(&turned_on, &mut adam3, &heads, Some(&real), &hook).unwrap();
+
+    // Weights exported with the head load as a network (the head is ignored there).
+    let file = ckpt.path().join("weights.safetensors");
+    let named: std::collections::HashMap<String, Tensor> = unbroken.weights().unwrap().into_iter().collect();
+    candle_core::safetensors::save(&named, &file).unwrap();
+    let bytes = std::fs::read(&file).unwrap();
+    let model =
+        nelf_field::Model::from_safetensors_bytes(&bytes, &file, *unbroken.model.config(), &Device::Cpu);
+    assert!(model.is_ok(), "{:?}", model.err());
 }
