@@ -39,7 +39,7 @@ fn train_data_run_resume_and_bake_with_the_weights() {
         "1",
     ]);
     assert!(out.contains("3 heads written"), "{out}");
-    let train = |steps: &str, extra: &[&str]| {
+    let train_args = |steps: &str, extra: &[&str]| -> Vec<String> {
         let mut args = vec![
             "train",
             "run",
@@ -67,7 +67,11 @@ fn train_data_run_resume_and_bake_with_the_weights() {
             "0.1",
         ];
         args.extend_from_slice(extra);
-        succeed(&args)
+        args.into_iter().map(String::from).collect()
+    };
+    let train = |steps: &str, extra: &[&str]| {
+        let args = train_args(steps, extra);
+        succeed(&args.iter().map(String::as_str).collect::<Vec<_>>())
     };
     let first = train("2", &[]);
     assert!(first.contains("step 2 (2 now"), "{first}");
@@ -120,22 +124,8 @@ fn train_data_run_resume_and_bake_with_the_weights() {
         "{saved}"
     );
     let nowhere = dir.path().join("nowhere");
-    let refused = nelf(&[
-        "train",
-        "run",
-        "--data",
-        d,
-        "-o",
-        r,
-        "--arch",
-        "tiny",
-        "--image-size",
-        "32",
-        "--steps",
-        "5",
-        "--real-images",
-        nowhere.to_str().unwrap(),
-    ]);
+    let args = train_args("5", &["--real-images", nowhere.to_str().unwrap()]);
+    let refused = nelf(&args.iter().map(String::as_str).collect::<Vec<_>>());
     assert!(!refused.status.success());
     assert!(String::from_utf8_lossy(&refused.stderr).contains("nowhere"));
 

@@ -1176,6 +1176,24 @@ fn real_portraits(extra: &[(&str, &[u8])]) -> tempfile::TempDir {
     dir
 }
 
+/// A checkpoint of `trainable` and `adam` as they stand, in a fresh folder.
+fn checkpoint_of(
+    trainable: &Trainable,
+    adam: &nelf_train::adam::Adam,
+    config: &TrainConfig,
+    last_loss: LossParts,
+) -> tempfile::TempDir {
+    let dir = tempfile::tempdir().unwrap();
+    let info = CheckpointInfo {
+        step: adam.steps(),
+        train_secs: 1.0,
+        config: config.clone(),
+        last_loss,
+    };
+    save_checkpoint(dir.path(), trainable, adam, &info).unwrap();
+    dir
+}
+
 fn hook_config(dir: &std::path::Path) -> TrainConfig {
     TrainConfig {
         real_images: Some(dir.to_path_buf()),
@@ -1336,14 +1354,7 @@ fn the_domain_term_adds_to_a_step_and_resumes_bit_for_bit() {
     let last = train_step(&unbroken, &mut adam, &heads, Some(&real), &hook).unwrap();
 
     // Saved after two steps and resumed for two more: the unbroken four, bit for bit.
-    let ckpt = tempfile::tempdir().unwrap();
-    let info = CheckpointInfo {
-        step: adam.steps(),
-        train_secs: 1.0,
-        config: hook.clone(),
-        last_loss: last,
-    };
-    save_checkpoint(ckpt.path(), &unbroken, &adam, &info).unwrap();
+    let ckpt = checkpoint_of(&unbroken, &adam, &hook, last);
     let resumed = Trainable::init(
         &TrainConfig {
             seed: 5,
@@ -1364,14 +1375,7 @@ fn the_domain_term_adds_to_a_step_and_resumes_bit_for_bit() {
     );
 
     // A checkpoint saved without the hook continues with it: the head starts afresh.
-    let plain_ckpt = tempfile::tempdir().unwrap();
-    let info = CheckpointInfo {
-        step: plain_adam.steps(),
-        train_secs: 1.0,
-        config: plain_config.clone(),
-        last_loss: without,
-    };
-    save_checkpoint(plain_ckpt.path(), &plain, &plain_adam, &info).unwrap();
+    let plain_ckpt = checkpoint_of(&plain, &plain_adam, &plain_config, without);
     let turned_on = Trainable::init(&hook, &Device::Cpu).unwrap();
     let mut adam3 = turned_on.optimizer(&hook).unwrap();
     load_checkpoint(plain_ckpt.path(), &turned_on, &mut adam3).unwrap();
