@@ -10,6 +10,9 @@
 #   SIZE=128 bash scripts/eval_heldout_heads.sh   # the same heads at 128² views
 #   TURN=1 bash scripts/eval_heldout_heads.sh      # source lighting turned 36°, 108°, … 324°
 #   FIRST=6 COUNT=8 bash scripts/eval_heldout_heads.sh   # eight more heads, 2^62 + 6 ... 13
+#   RES=48 bash scripts/eval_heldout_heads.sh OUT        # bakes at resolution 48 (default 32)
+#   python3 scripts/heads_summary.py OUT1/scores/network.json OUT2/scores/network.json
+#                                                  # the figures below pooled over several runs
 #   HEADS_FROM=out/heldout-heads-64 bash scripts/eval_heldout_heads.sh OUT -- --weights W
 #                                                  # score other weights on heads already rendered
 #
@@ -19,13 +22,14 @@
 # are. FIRST and COUNT (default 1 and 5) choose other heads of the same protocol: seeds
 # 2^62 + FIRST ... FIRST + COUNT − 1, a fresh check that the five are not a lucky draw (the
 # verdict below is then on at least 4/5 of them). OUT_DIR defaults to
-# out/heldout-heads-SIZE (-turned with TURN=1, -FIRST-COUNT for other heads); heads already
+# out/heldout-heads-SIZE (-turned with TURN=1, -FIRST-COUNT for other heads, -rRES for another resolution); heads already
 # rendered there are reused (HEADS_FROM=DIR links DIR's heads into OUT_DIR first, so that
 # scores of other weights or options go to their own folder without rendering the heads
 # again), and a folder holding another size or turn is refused. Prints, per head, foreground PSNR (8-bit
 # sRGB, mean of its two targets) of the network, its bake, the ground-truth bake and the
 # flat colour; the share of the gap between the flat colour and the ground-truth bake
-# that the network and its bake close (foreground and whole-image); then the verdict of
+# that the network and its bake close (foreground and whole-image), with an interval of
+# the bake's share over the heads (`scripts/heads_summary.py`); then the verdict of
 # the rule set before the weights that meet it were trained: the bake beats the flat
 # colour on at least 4 in 5 of the heads and by at least 0.5 dB on their mean. The shipped
 # weights meet it with the defaults (normalised to the source lighting, with the shading
@@ -38,9 +42,11 @@ SIZE=${SIZE:-64}
 TURN=${TURN:-0}
 FIRST=${FIRST:-1}
 COUNT=${COUNT:-5}
+RES=${RES:-32}
 OUT=out/heldout-heads-$SIZE
 if [ "$TURN" = 1 ]; then OUT=$OUT-turned; fi
 if [ "$FIRST" != 1 ] || [ "$COUNT" != 5 ]; then OUT=$OUT-$FIRST-$COUNT; fi
+if [ "$RES" != 32 ]; then OUT=$OUT-r$RES; fi
 if [ $# -gt 0 ] && [ "$1" != "--" ]; then OUT=$1; shift; fi
 if [ "${1:-}" = "--" ]; then shift; fi
 NELF=target/release/nelf
@@ -74,35 +80,6 @@ for k in $(seq "$FIRST" $(( FIRST + COUNT - 1 ))); do
   fi
   captures+=("$dir")
 done
-"$NELF" eval network "${captures[@]}" --resolution 32 -o "$OUT/scores" "$@" > "$OUT/eval.txt"
+"$NELF" eval network "${captures[@]}" --resolution "$RES" -o "$OUT/scores" "$@" > "$OUT/eval.txt"
 
-python3 - "$OUT/scores/network.json" <<'EOF'
-import json, sys
-
-rows = json.load(open(sys.argv[1]))["rows"]
-heads = {}
-for r in rows:
-    heads.setdefault(r["capture"], []).append(r)
-wins, margin = 0, 0.0
-print("head                      network   bake   truth bake   flat colour  (foreground PSNR, dB)")
-for capture, targets in heads.items():
-    mean = lambda kind, key: sum(t[kind][key] for t in targets) / len(targets)
-    net, bake = mean("network", "foreground_psnr"), mean("network_bake", "foreground_psnr")
-    truth, flat = mean("truth_bake", "foreground_psnr"), mean("network_bake", "flat_foreground_psnr")
-    wins += bake > flat
-    margin += (bake - flat) / len(heads)
-    print(f"{capture:<24}  {net:7.2f}  {bake:6.2f}  {truth:10.2f}  {flat:11.2f}")
-ok = 5 * wins >= 4 * len(heads) and margin >= 0.5
-print(f"bake beats the flat colour on {wins} of {len(heads)} heads, by {margin:+.2f} dB on the mean: "
-      + ("met" if ok else "not met"))
-# The issue's aim: the share of the gap between the flat colour and the ground-truth
-# bake that the network (and its bake) close, on the mean over every target.
-mean_all = lambda kind, key: sum(r[kind][key] for r in rows) / len(rows)
-for scope, key, flat_key in (("foreground", "foreground_psnr", "flat_foreground_psnr"), ("whole-image", "psnr", "flat_psnr")):
-    flat, truth = mean_all("network_bake", flat_key), mean_all("truth_bake", key)
-    net, bake = mean_all("network", key), mean_all("network_bake", key)
-    share = lambda v: 100.0 * (v - flat) / (truth - flat)
-    print(f"{scope} PSNR: network {net:.2f} ({share(net):.0f} % of the gap), bake {bake:.2f} ({share(bake):.0f} %), "
-          f"flat colour {flat:.2f}, ground-truth bake {truth:.2f}")
-sys.exit(0 if ok else 1)
-EOF
+python3 scripts/heads_summary.py "$OUT/scores/network.json"
