@@ -160,7 +160,7 @@ pub struct TrainConfig {
     #[arg(long, default_value_t = nelf_field::prior::DEFAULT_WEIGHT)]
     #[serde(default = "default_shading_prior_weight")]
     pub shading_prior_weight: f32,
-    /// Folder of real portraits (PNG, JPEG or EXR; background black) for the
+    /// Folder of real portraits (PNG, JPEG or EXR; background black or transparent) for the
     /// domain-adaptation hook (`crate::domain`): each step also reproduces one of them
     /// through the image encoder and a decoder head, an L1 loss inside its
     /// foreground, so that the encoder's features stay faithful to photographs. The

@@ -6,7 +6,8 @@
 //! The network is trained on rendered heads; its encoder has never seen a photograph.
 //! The hook feeds one real portrait `x` (linear RGB in `[0, 1]`, background black) per
 //! step through the encoder and a small decoder `D` on the encoder's last skip
-//! connection, and adds
+//! connection (a transparent background counts as black: colours are premultiplied
+//! by their alpha), and adds
 //!
 //! `L_real = λ_r · mean over pixels and channels of m·|D(E(x)) − x|`,  `m = [max_c x_c > 0]`,
 //!
@@ -81,8 +82,8 @@ impl ReproduceHead {
     }
 }
 
-/// A folder of real portraits, each centre-cropped to a square, box-filtered to the
-/// network's image size and decoded to linear RGB.
+/// A folder of real portraits, each centre-cropped to a square, decoded to linear RGB
+/// premultiplied by its alpha and box-filtered to the network's image size.
 #[derive(Debug, Clone)]
 pub struct RealImages {
     size: usize,
@@ -91,8 +92,9 @@ pub struct RealImages {
 
 impl RealImages {
     /// Reads every PNG, JPEG or EXR file of `dir` (sorted by name) at `size`² pixels.
-    /// Background pixels must be black (they are left out of the loss); at least one
-    /// pixel of each image must not be.
+    /// The background must be black or transparent (colours are premultiplied by their
+    /// alpha; black pixels are left out of the loss); at least one pixel of each
+    /// image must not be.
     pub fn load(dir: &Path, size: usize) -> Result<Self, TrainError> {
         if size == 0 {
             return Err(TrainError::Settings(
@@ -169,7 +171,8 @@ impl RealImages {
     }
 }
 
-/// One portrait file at `size`²: centre-cropped square, box-filtered, linear RGB.
+/// One portrait file at `size`²: centre-cropped square, linear RGB premultiplied by
+/// its alpha, box-filtered.
 fn read_portrait(path: &Path, size: usize) -> Result<Vec<f32>, TrainError> {
     let decoded = image::open(path).map_err(|e| TrainError::File {
         path: path.to_path_buf(),
@@ -179,8 +182,8 @@ fn read_portrait(path: &Path, size: usize) -> Result<Vec<f32>, TrainError> {
         .extension()
         .and_then(|e| e.to_str())
         .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-    let rgb = decoded.to_rgb32f();
-    let (w, h) = rgb.dimensions();
+    let rgba = decoded.to_rgba32f();
+    let (w, h) = rgba.dimensions();
     let side = w.min(h);
     if side == 0 {
         return Err(TrainError::File {
@@ -188,21 +191,25 @@ fn read_portrait(path: &Path, size: usize) -> Result<Vec<f32>, TrainError> {
             message: "the image is empty".into(),
         });
     }
-    let square = image::imageops::crop_imm(&rgb, (w - side) / 2, (h - side) / 2, side, side).to_image();
+    let square = image::imageops::crop_imm(&rgba, (w - side) / 2, (h - side) / 2, side, side).to_image();
+    // Linear RGB premultiplied by alpha, before filtering: a transparent background
+    // becomes black, and the box filter averages light, not encoded values.
+    let linear = image::Rgb32FImage::from_fn(side, side, |x, y| {
+        let p = square.get_pixel(x, y).0;
+        let alpha = p[3].clamp(0.0, 1.0);
+        image::Rgb([0, 1, 2].map(|c| {
+            alpha
+                * if is_linear {
+                    p[c].clamp(0.0, 1.0)
+                } else {
+                    srgb_to_linear(p[c])
+                }
+        }))
+    });
     let side_px =
         u32::try_from(size).map_err(|_| TrainError::Settings(format!("image size {size} is too large")))?;
-    let small = image::imageops::resize(&square, side_px, side_px, FilterType::Triangle);
-    let pixels: Vec<f32> = small
-        .into_raw()
-        .into_iter()
-        .map(|v| {
-            if is_linear {
-                v.clamp(0.0, 1.0)
-            } else {
-                srgb_to_linear(v)
-            }
-        })
-        .collect();
+    let small = image::imageops::resize(&linear, side_px, side_px, FilterType::Triangle);
+    let pixels: Vec<f32> = small.into_raw().into_iter().map(|v| v.clamp(0.0, 1.0)).collect();
     if !pixels.iter().any(|&v| v > 0.0) {
         return Err(TrainError::File {
             path: path.to_path_buf(),

@@ -1266,6 +1266,22 @@ fn real_portraits_load_and_bad_folders_are_refused() {
     assert!((250..800).contains(&lit), "{lit} foreground pixels of 1024");
     assert!(real.pick(0, 7) < real.len());
 
+    // A soft alpha matte over a white background: transparent comes out black, the
+    // opaque middle white, the soft rim between.
+    let matted = tempfile::tempdir().unwrap();
+    let matte = image::RgbaImage::from_fn(64, 48, |x, y| {
+        let r = ((x as f32 - 32.0).powi(2) + (y as f32 - 24.0).powi(2)).sqrt();
+        image::Rgba([255, 255, 255, (255.0 * (16.0 - r).clamp(0.0, 1.0)) as u8])
+    });
+    matte.save(matted.path().join("matte.png")).unwrap();
+    let soft = RealImages::load(matted.path(), 32).unwrap();
+    let (_, px) = soft.get(0).unwrap();
+    let at = |x: usize, y: usize| px[3 * (y * 32 + x)];
+    assert_eq!(at(0, 0), 0.0);
+    assert_eq!(at(31, 31), 0.0);
+    assert!(at(16, 16) > 0.99, "{}", at(16, 16));
+    assert!(px.iter().any(|&v| v > 0.05 && v < 0.95), "no soft rim");
+
     let empty = tempfile::tempdir().unwrap();
     let err = RealImages::load(empty.path(), 32).unwrap_err().to_string();
     assert!(
