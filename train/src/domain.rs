@@ -83,7 +83,8 @@ impl ReproduceHead {
 }
 
 /// A folder of real portraits, each centre-cropped to a square, decoded to linear RGB
-/// premultiplied by its alpha and box-filtered to the network's image size.
+/// premultiplied by its alpha and resized to the network's image size (a triangle
+/// filter as wide as the reduction).
 #[derive(Debug, Clone)]
 pub struct RealImages {
     size: usize,
@@ -172,12 +173,9 @@ impl RealImages {
 }
 
 /// One portrait file at `size`²: centre-cropped square, linear RGB premultiplied by
-/// its alpha, box-filtered.
+/// its alpha, resized with a triangle filter as wide as the reduction.
 fn read_portrait(path: &Path, size: usize) -> Result<Vec<f32>, TrainError> {
-    let decoded = image::open(path).map_err(|e| TrainError::File {
-        path: path.to_path_buf(),
-        message: format!("not a readable image: {e}"),
-    })?;
+    let decoded = crate::data::read::decode(path)?;
     let is_linear = path
         .extension()
         .and_then(|e| e.to_str())
@@ -193,7 +191,7 @@ fn read_portrait(path: &Path, size: usize) -> Result<Vec<f32>, TrainError> {
     }
     let square = image::imageops::crop_imm(&rgba, (w - side) / 2, (h - side) / 2, side, side).to_image();
     // Linear RGB premultiplied by alpha, before filtering: a transparent background
-    // becomes black, and the box filter averages light, not encoded values.
+    // becomes black, and the filter averages light, not encoded values.
     let linear = image::Rgb32FImage::from_fn(side, side, |x, y| {
         let p = square.get_pixel(x, y).0;
         let alpha = p[3].clamp(0.0, 1.0);

@@ -318,6 +318,11 @@ pub fn relit_by_shape(
     Ok(relit.broadcast_div(&source)?.broadcast_mul(true_source)?)
 }
 
+/// The value of a one-element tensor.
+fn scalar(t: &Tensor) -> Result<f64, TrainError> {
+    Ok(f64::from(t.to_dtype(DType::F32)?.to_scalar::<f32>()?))
+}
+
 /// The first `take` values of each of `rows`, in order, of a row-major `table` of
 /// `width` values per row (a distillation table's rows at the points a pass kept).
 fn leading_of_rows(table: &[f32], width: usize, take: usize, rows: impl Iterator<Item = usize>) -> Vec<f32> {
@@ -733,13 +738,10 @@ pub fn step_loss_on(
                 distill_sum = (distill_sum + &shape_loss)?;
                 weighted = (weighted + (shape_loss * config.distill_shape_weight)?)?;
             }
-            distill_value = f64::from(distill_sum.to_scalar::<f32>()?);
+            distill_value = scalar(&distill_sum)?;
             total = (total + weighted)?;
         }
     }
-    let scalar = |t: &Tensor| -> Result<f64, TrainError> {
-        Ok(f64::from(t.to_dtype(DType::F32)?.to_scalar::<f32>()?))
-    };
     let parts = LossParts {
         total: scalar(&total)?,
         rgb_coarse: scalar(&rgb_coarse)?,
@@ -1195,7 +1197,7 @@ pub fn train_step(
             .get(pick)
             .ok_or_else(|| TrainError::Settings("no real portraits".into()))?;
         let term = reproduction_loss(&model, decoder, pixels, real.size())?;
-        parts.real = f64::from(term.to_dtype(DType::F32)?.to_scalar::<f32>()?);
+        parts.real = scalar(&term)?;
         parts.total += config.real_weight * parts.real;
         loss = (loss + (term * config.real_weight)?)?;
     }

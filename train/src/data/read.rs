@@ -73,7 +73,8 @@ fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T, TrainErro
     serde_json::from_str(&text).map_err(|e| TrainError::file(path, format!("damaged: {e}")))
 }
 
-fn decode(path: &Path) -> Result<image::DynamicImage, TrainError> {
+/// The image in `path`, its format guessed from its content; errors name the file.
+pub(crate) fn decode(path: &Path) -> Result<image::DynamicImage, TrainError> {
     image::ImageReader::open(path)
         .map_err(|e| TrainError::io(path, e))?
         .with_guessed_format()
