@@ -15,6 +15,9 @@
 #                                                  # the figures below pooled over several runs
 #   HEADS_FROM=out/heldout-heads-64 bash scripts/eval_heldout_heads.sh OUT -- --weights W
 #                                                  # score other weights on heads already rendered
+#   SIZE=128 bash scripts/eval_heldout_heads.sh OUT -- --bakes-only
+#                                                  # the bakes alone, without the network's direct
+#                                                  # renders (seconds a head at 128², not minutes)
 #
 # With TURN=1 head k's source lighting (`forest`) is turned about +y by 72·k − 36
 # degrees, so the five see its sun from five sides, as the validation heads of `nelf

@@ -12,7 +12,9 @@ share of the gap between the flat colour and the ground-truth bake that the netw
 its bake close, on the mean over every target (the issue's aim), foreground and whole
 image; and, for the bake's foreground share, the 5-95 % interval over 2,000 bootstrap
 resamples of the heads (seed 0), so that a share near a threshold is read against the
-spread of the heads. Exits 1 when the rule is not met.
+spread of the heads. Runs with `--bakes-only` (no direct renders of the network) show
+the network's column as "-" and leave it out of the shares. Exits 1 when the rule is
+not met.
 """
 import json
 import random
@@ -20,12 +22,19 @@ import sys
 
 
 def mean(rows, kind, key):
+    """Mean of `kind`'s `key` over `rows`; None where a row has no `kind` (--bakes-only)."""
+    if any(r[kind] is None for r in rows):
+        return None
     return sum(r[kind][key] for r in rows) / len(rows)
 
 
+def dB(value, width):
+    return f"{value:{width}.2f}" if value is not None else f"{'-':>{width}}"
+
+
 def share(rows, kind, key, flat_key):
-    flat, truth = mean(rows, "network_bake", flat_key), mean(rows, "truth_bake", key)
-    return 100.0 * (mean(rows, kind, key) - flat) / (truth - flat)
+    flat, truth, value = mean(rows, "network_bake", flat_key), mean(rows, "truth_bake", key), mean(rows, kind, key)
+    return None if value is None else 100.0 * (value - flat) / (truth - flat)
 
 
 def main(paths):
@@ -44,12 +53,14 @@ def main(paths):
         truth, flat = mean(targets, "truth_bake", "foreground_psnr"), mean(targets, "network_bake", "flat_foreground_psnr")
         wins += bake > flat
         margin += (bake - flat) / len(heads)
-        print(f"{capture:<24}  {net:7.2f}  {bake:6.2f}  {truth:10.2f}  {flat:11.2f}")
+        print(f"{capture:<24}  {dB(net, 7)}  {bake:6.2f}  {truth:10.2f}  {flat:11.2f}")
     ok = 5 * wins >= 4 * len(heads) and margin >= 0.5
     print(f"bake beats the flat colour on {wins} of {len(heads)} heads, by {margin:+.2f} dB on the mean: "
           + ("met" if ok else "not met"))
     for scope, key, flat_key in (("foreground", "foreground_psnr", "flat_foreground_psnr"), ("whole-image", "psnr", "flat_psnr")):
-        print(f"{scope} PSNR: network {mean(rows, 'network', key):.2f} ({share(rows, 'network', key, flat_key):.0f} % of the gap), "
+        net, net_share = mean(rows, "network", key), share(rows, "network", key, flat_key)
+        net_text = f"network {net:.2f} ({net_share:.0f} % of the gap), " if net is not None else "network not rendered, "
+        print(f"{scope} PSNR: {net_text}"
               f"bake {mean(rows, 'network_bake', key):.2f} ({share(rows, 'network_bake', key, flat_key):.0f} %), "
               f"flat colour {mean(rows, 'network_bake', flat_key):.2f}, ground-truth bake {mean(rows, 'truth_bake', key):.2f}")
     if len(heads) > 1:

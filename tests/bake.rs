@@ -235,12 +235,12 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
         serde_json::json!({"step_mm": nelf_bake::DEFAULT_SHADING_PRIOR_MM, "weight": nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT}),
         "{source}"
     );
-    // The shipped weights' last steps trained through that prior's weight, with normals
-    // over 8 mm (bakes take them over 5 mm since, `nelf_field::prior::DEFAULT_STEP_MM`),
-    // and say so.
+    // The shipped weights' last steps trained through the prior at the training weight,
+    // with normals over 8 mm (bakes take a step and weight of their own since,
+    // `nelf_field::prior::DEFAULT_STEP_MM` and `DEFAULT_WEIGHT`), and say so.
     assert_eq!(
         source["trained_shading_prior"],
-        serde_json::json!({"step_mm": 8.0, "weight": nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT}),
+        serde_json::json!({"step_mm": 8.0, "weight": nelf_field::prior::TRAINING_WEIGHT}),
         "{source}"
     );
     assert!(asset.voxel_count() > 0);
@@ -249,7 +249,11 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
     let sidecar: serde_json::Value =
         serde_json::from_slice(&std::fs::read(asset_path.with_extension("bake.json")).unwrap()).unwrap();
     assert_eq!(sidecar["config"]["network_skin_mm"], 1.0, "{sidecar}");
-    assert_eq!(sidecar["config"]["shading_prior_weight"], 0.5, "{sidecar}");
+    assert_eq!(
+        sidecar["config"]["shading_prior_weight"].as_f64(),
+        Some(f64::from(nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT)),
+        "{sidecar}"
+    );
     // ... and carved to the visual hull of the masks (`nelf_bake::silhouette`).
     assert_eq!(sidecar["config"]["no_network_hull_carve"], false, "{sidecar}");
     assert_eq!(

@@ -40,11 +40,11 @@ pub const DEFAULT_NETWORK_SKIN_MM: f32 = 1.0;
 /// ([`BakeConfig::shading_prior_mm`]): `nelf_field::prior::DEFAULT_STEP_MM`, where it
 /// was chosen (this crate does not depend on `nelf-field`; `tests/bake.rs` checks the
 /// two agree).
-pub const DEFAULT_SHADING_PRIOR_MM: f32 = 5.0;
+pub const DEFAULT_SHADING_PRIOR_MM: f32 = 3.0;
 
 /// Default weight of that prior ([`BakeConfig::shading_prior_weight`]):
 /// `nelf_field::prior::DEFAULT_WEIGHT`.
-pub const DEFAULT_SHADING_PRIOR_WEIGHT: f32 = 0.5;
+pub const DEFAULT_SHADING_PRIOR_WEIGHT: f32 = 0.7;
 
 fn default_shading_prior_mm() -> f32 {
     DEFAULT_SHADING_PRIOR_MM

@@ -35,12 +35,25 @@ use crate::light::net_texel_direction;
 /// the true normals gain nothing either; then (2026-12-05) on the eight fresh heads of
 /// the sunlit test protocol (`FIRST=6 COUNT=8 scripts/eval_heldout_heads.sh`), where
 /// true normals are worth 0.8 dB: bake 23.15 / 23.50 / 23.70 dB foreground at 12 / 8 / 5
-/// mm (`field/README.md`), and confirmed, not chosen, on the five test heads.
-pub const DEFAULT_STEP_MM: f32 = 5.0;
+/// mm; then with [`DEFAULT_WEIGHT`] at the 128² on the same eight heads (bake
+/// at resolution 32, 2026-12-06): 23.93 / 23.97 / 23.98 / 23.94 dB at 5 / 4 / 3 / 2 mm
+/// with weight 0.7 (`field/README.md`).
+pub const DEFAULT_STEP_MM: f32 = 3.0;
 
-/// Default weight of the prior, chosen with [`DEFAULT_STEP_MM`] (18.47 / 18.69 / 18.71 /
-/// 18.38 dB at 0.3 / 0.5 / 0.7 / 1; 0.5 has the better SSIM of the two best).
-pub const DEFAULT_WEIGHT: f32 = 0.5;
+/// Default weight of the prior in bakes and renders. First 0.5, chosen with the 8 mm
+/// step on the validation heads at 64² (18.47 / 18.69 / 18.71 / 18.38 dB at 0.3 / 0.5 /
+/// 0.7 / 1); re-chosen (2026-12-06) at the 128² on the eight heads of the test
+/// protocol that chose the step, bake at resolution 32 over 5 mm: 23.28 / 23.73 / 23.87 /
+/// 23.93 / 23.90 / 23.68 dB at 0.3 / 0.5 / 0.6 / 0.7 / 0.85 / 1 (over 3 mm: 23.95 /
+/// 23.98 / 23.92 at 0.6 / 0.7 / 0.85), and confirmed on 13 other heads
+/// (`field/README.md`). The shipped weights were trained through
+/// [`TRAINING_WEIGHT`].
+pub const DEFAULT_WEIGHT: f32 = 0.7;
+
+/// Weight of the prior `nelf train run --shading-prior-mm` trains through by default,
+/// the one the shipped weights' last steps used (a run continues with the weight it
+/// began with).
+pub const TRAINING_WEIGHT: f32 = 0.5;
 
 /// How the network's light transport is shaped by the Lambertian prior.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -48,13 +48,13 @@ mod tests {
         assert!((16..=512).contains(&size), "{size}");
         // Smaller than the official network (the card's `small` configuration).
         assert!(model.config().architecture != crate::Architecture::OFFICIAL);
-        // Its last steps trained through the shading prior of the default weight, with
-        // normals over 8 mm (the card; bakes take them over 5 mm since).
+        // Its last steps trained through the shading prior of the training weight, with
+        // normals over 8 mm (the card; bakes take a weight and step of their own since).
         assert_eq!(
             model.trained_shading_prior(),
             Some(crate::prior::ShadingPrior {
                 step_mm: 8.0,
-                weight: crate::prior::DEFAULT_WEIGHT,
+                weight: crate::prior::TRAINING_WEIGHT,
             })
         );
     }

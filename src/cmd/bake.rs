@@ -365,10 +365,11 @@ pub fn in_capture_light_units(
         SourceFit::Normalised(prior) => prior,
         SourceFit::None | SourceFit::Gain => None,
     };
-    // The normals' step is chosen for bakes on its own (`nelf_field::prior::DEFAULT_STEP_MM`);
-    // a different weight, or no prior, departs from what the weights were trained with.
+    // The prior's step and weight are chosen for bakes on their own
+    // (`nelf_field::prior::DEFAULT_STEP_MM`, `DEFAULT_WEIGHT`); no prior at all departs
+    // from what the weights were trained with.
     if let Some(trained) = field.model().trained_shading_prior()
-        && used.map(|p| p.weight) != Some(trained.weight)
+        && used.is_none()
     {
         eprintln!(
             "note: these weights were last trained through a shading prior of weight {} with normals over {} mm; \

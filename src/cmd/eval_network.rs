@@ -88,6 +88,10 @@ pub struct NetworkEvalArgs {
     /// `truth_<part>_bake`.
     #[arg(long, value_enum, value_delimiter = ',', num_args = 0..)]
     pub split: Option<Vec<super::bake::FromTruth>>,
+    /// Score the bakes alone, without rendering the network directly (its renders take
+    /// most of an evaluation's time at 128²; `network` is then null in the scores).
+    #[arg(long)]
+    pub bakes_only: bool,
     /// Output folder: the bakes and `network.json`.
     #[arg(short, long, default_value = "out/eval-network")]
     pub out: PathBuf,
@@ -98,7 +102,8 @@ pub struct NetworkEvalArgs {
 struct TargetScores {
     capture: PathBuf,
     target: String,
-    network: Srgb8Scores,
+    /// `None` with `--bakes-only`.
+    network: Option<Srgb8Scores>,
     network_bake: Srgb8Scores,
     truth_bake: Srgb8Scores,
     oracle_view_bake: Option<Srgb8Scores>,
@@ -195,18 +200,22 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             let (w, h) = (camera.width, camera.height);
             let score = |image: &[[f32; 3]]| srgb8_scores(image, &held.images[t], &held.masks[t], w, h);
             let light = nelf_format::conventions::project_envmap(&held.envs[t], prepared.world_from_light())?;
-            let direct = render_image(
-                field.model(),
-                field.encoded(),
-                &prepared.net_camera(camera),
-                &field.net_light(&light)?,
-                &ImageSettings {
-                    head_centre: prepared.head_centre_net(),
-                    sampling: Sampling::Stratified,
-                    ..ImageSettings::default()
-                },
-                None,
-            )?;
+            let direct = if args.bakes_only {
+                None
+            } else {
+                Some(render_image(
+                    field.model(),
+                    field.encoded(),
+                    &prepared.net_camera(camera),
+                    &field.net_light(&light)?,
+                    &ImageSettings {
+                        head_centre: prepared.head_centre_net(),
+                        sampling: Sampling::Stratified,
+                        ..ImageSettings::default()
+                    },
+                    None,
+                )?)
+            };
             let settings = MarchSettings::default();
             let baked = |asset: &nelf_format::Asset| {
                 render_asset(asset, camera, &held.envs[t], DMat3::IDENTITY, None, &settings)
@@ -225,7 +234,7 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             let row = TargetScores {
                 capture: dir.clone(),
                 target: held.names[t].clone(),
-                network: score(&direct.rgb)?,
+                network: direct.map(|d| score(&d.rgb)).transpose()?,
                 network_bake: score(&baked(&network_asset)?.rgb)?,
                 truth_bake: score(&baked(&truth_asset)?.rgb)?,
                 oracle_view_bake,
@@ -234,28 +243,33 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
                     .map(|(name, asset)| anyhow::Ok((*name, score(&baked(asset)?.rgb)?)))
                     .collect::<anyhow::Result<_>>()?,
             };
+            let network = |f: fn(&Srgb8Scores) -> String| row.network.as_ref().map_or("-".to_string(), f);
             println!(
-                "{} {}: foreground PSNR network {:.2}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB \
-                 (whole image {:.2}, {:.2}, {:.2}, {:.2}; SSIM {:.3}, {:.3}, {:.3}, {:.3})",
+                "{} {}: foreground PSNR network {}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB \
+                 (whole image {}, {:.2}, {:.2}, {:.2}; SSIM {}, {:.3}, {:.3}, {:.3})",
                 dir.display(),
                 row.target,
-                row.network.foreground_psnr,
+                network(|s| format!("{:.2}", s.foreground_psnr)),
                 row.network_bake.foreground_psnr,
                 row.truth_bake.foreground_psnr,
-                row.network.flat_foreground_psnr,
-                row.network.psnr,
+                row.network_bake.flat_foreground_psnr,
+                network(|s| format!("{:.2}", s.psnr)),
                 row.network_bake.psnr,
                 row.truth_bake.psnr,
-                row.network.flat_psnr,
-                row.network.ssim,
+                row.network_bake.flat_psnr,
+                network(|s| format!("{:.3}", s.ssim)),
                 row.network_bake.ssim,
                 row.truth_bake.ssim,
-                row.network.flat_ssim
+                row.network_bake.flat_ssim
             );
             rows.push(row);
         }
     }
     let mean = |f: &dyn Fn(&TargetScores) -> f64| rows.iter().map(f).sum::<f64>() / rows.len().max(1) as f64;
+    // The network's own renders (null with --bakes-only).
+    let mean_network = |key: fn(&Srgb8Scores) -> f64| {
+        (!args.bakes_only).then(|| mean(&|r| r.network.as_ref().map_or(f64::NAN, key)))
+    };
     let summary = serde_json::json!({
         "weights": weights_name,
         "resolution": args.resolution,
@@ -267,12 +281,13 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
         "network_hull_carve": !args.no_network_hull_carve,
         "network_hull_margin_px": args.network_hull_margin_px,
         "rank": args.rank,
+        "bakes_only": args.bakes_only,
         "targets": rows.len(),
         "mean_foreground_psnr": {
-            "network": mean(&|r| r.network.foreground_psnr),
+            "network": mean_network(|s| s.foreground_psnr),
             "network_bake": mean(&|r| r.network_bake.foreground_psnr),
             "truth_bake": mean(&|r| r.truth_bake.foreground_psnr),
-            "flat_colour": mean(&|r| r.network.flat_foreground_psnr),
+            "flat_colour": mean(&|r| r.network_bake.flat_foreground_psnr),
         },
         "mean_foreground_psnr_oracle_view_bake": args.oracle_view.then(|| mean(&|r| r.oracle_view_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
         "mean_split": (!split_parts.is_empty()).then(|| split_parts.iter().map(|part| {
@@ -284,34 +299,27 @@ pub fn run(args: &NetworkEvalArgs) -> anyhow::Result<()> {
             }))
         }).collect::<serde_json::Map<_, _>>()),
         "mean_psnr": {
-            "network": mean(&|r| r.network.psnr),
+            "network": mean_network(|s| s.psnr),
             "network_bake": mean(&|r| r.network_bake.psnr),
             "truth_bake": mean(&|r| r.truth_bake.psnr),
-            "flat_colour": mean(&|r| r.network.flat_psnr),
+            "flat_colour": mean(&|r| r.network_bake.flat_psnr),
         },
         "mean_ssim": {
-            "network": mean(&|r| r.network.ssim),
+            "network": mean_network(|s| s.ssim),
             "network_bake": mean(&|r| r.network_bake.ssim),
             "truth_bake": mean(&|r| r.truth_bake.ssim),
-            "flat_colour": mean(&|r| r.network.flat_ssim),
+            "flat_colour": mean(&|r| r.network_bake.flat_ssim),
         },
         "rows": rows,
     });
+    let mean_of = |kind: &str| summary["mean_foreground_psnr"][kind].as_f64();
     println!(
-        "mean over {} targets, foreground PSNR (8-bit sRGB): network {:.2}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB",
+        "mean over {} targets, foreground PSNR (8-bit sRGB): network {}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB",
         rows.len(),
-        summary["mean_foreground_psnr"]["network"]
-            .as_f64()
-            .unwrap_or(f64::NAN),
-        summary["mean_foreground_psnr"]["network_bake"]
-            .as_f64()
-            .unwrap_or(f64::NAN),
-        summary["mean_foreground_psnr"]["truth_bake"]
-            .as_f64()
-            .unwrap_or(f64::NAN),
-        summary["mean_foreground_psnr"]["flat_colour"]
-            .as_f64()
-            .unwrap_or(f64::NAN),
+        mean_of("network").map_or("not rendered".to_string(), |v| format!("{v:.2}")),
+        mean_of("network_bake").unwrap_or(f64::NAN),
+        mean_of("truth_bake").unwrap_or(f64::NAN),
+        mean_of("flat_colour").unwrap_or(f64::NAN),
     );
     let path = args.out.join("network.json");
     std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n")

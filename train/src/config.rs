@@ -157,7 +157,7 @@ pub struct TrainConfig {
     #[serde(default)]
     pub shading_prior_mm: f32,
     /// Weight of the prior against the network's own transport.
-    #[arg(long, default_value_t = nelf_field::prior::DEFAULT_WEIGHT)]
+    #[arg(long, default_value_t = nelf_field::prior::TRAINING_WEIGHT)]
     #[serde(default = "default_shading_prior_weight")]
     pub shading_prior_weight: f32,
     /// Folder of real portraits (PNG, JPEG or EXR; background black or transparent) for the
@@ -217,7 +217,7 @@ impl Default for TrainConfig {
             free_space_weight: 0.0,
             ema_decay: 0.0,
             shading_prior_mm: 0.0,
-            shading_prior_weight: nelf_field::prior::DEFAULT_WEIGHT,
+            shading_prior_weight: nelf_field::prior::TRAINING_WEIGHT,
             real_images: None,
             real_weight: 1.0,
             distill_points: 256,
@@ -234,7 +234,7 @@ fn default_real_weight() -> f64 {
 }
 
 fn default_shading_prior_weight() -> f32 {
-    nelf_field::prior::DEFAULT_WEIGHT
+    nelf_field::prior::TRAINING_WEIGHT
 }
 
 impl TrainConfig {
