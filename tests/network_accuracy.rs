@@ -56,19 +56,11 @@ fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
         capture.to_str().unwrap(),
     ]);
     let scores = dir.path().join("scores");
-    succeed(&[
-        "eval",
-        "network",
-        capture.to_str().unwrap(),
-        "--resolution",
-        "32",
-        "--split",
-        "density,transport,shading,colour",
-        "-o",
-        scores.to_str().unwrap(),
-    ]);
-    let text = std::fs::read_to_string(scores.join("network.json")).unwrap();
-    let summary: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let (summary, text) = eval_network(
+        &capture,
+        &["--split", "density,transport,shading,colour"],
+        &scores,
+    );
     let rows = summary["rows"].as_array().unwrap();
     assert_eq!(rows.len(), 2, "{text}");
     let mean = |kind: &str, key: &str| {
@@ -131,19 +123,7 @@ fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
         asset.metadata
     );
     // `--bakes-only` skips the network's direct renders and scores the same bakes.
-    let bakes = dir.path().join("bakes");
-    succeed(&[
-        "eval",
-        "network",
-        capture.to_str().unwrap(),
-        "--resolution",
-        "32",
-        "--bakes-only",
-        "-o",
-        bakes.to_str().unwrap(),
-    ]);
-    let text = std::fs::read_to_string(bakes.join("network.json")).unwrap();
-    let only: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let (only, text) = eval_network(&capture, &["--bakes-only"], &dir.path().join("bakes"));
     assert!(only["mean_foreground_psnr"]["network"].is_null(), "{text}");
     let only_rows = only["rows"].as_array().unwrap();
     assert_eq!(only_rows.len(), rows.len(), "{text}");
@@ -159,4 +139,15 @@ fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
             }
         }
     }
+}
+
+/// `nelf eval network CAPTURE --resolution 32 EXTRA… -o OUT`: its `network.json`, parsed
+/// and as text.
+fn eval_network(capture: &Path, extra: &[&str], out: &Path) -> (serde_json::Value, String) {
+    let mut args = vec!["eval", "network", capture.to_str().unwrap(), "--resolution", "32"];
+    args.extend_from_slice(extra);
+    args.extend(["-o", out.to_str().unwrap()]);
+    succeed(&args);
+    let text = std::fs::read_to_string(out.join("network.json")).unwrap();
+    (serde_json::from_str(&text).unwrap(), text)
 }
