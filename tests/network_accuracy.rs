@@ -84,10 +84,10 @@ fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
         "ground-truth bake {truth:.2} vs network bake {bake:.2}"
     );
     // `--split`: the same bake with the ground truth's light transport in place of the
-    // network's closes most of what is left (measured with the prior over 5 mm at 0.5: 27.29 dB; the truth's density
-    // with the network's transport 24.40, the truth's shading with the network's
-    // colour 25.77, the truth's colour with the network's shading 24.45): the
-    // network's error is in its transport, not its geometry.
+    // network's closes most of what is left (measured with the prior over 5 mm at 0.5:
+    // 27.29 dB; the truth's density with the network's transport 24.40, the truth's
+    // shading with the network's colour 25.77, the truth's colour with the network's
+    // shading 24.45): the network's error is in its transport, not its geometry.
     let split = |part: &str| summary["mean_split"][part]["foreground_psnr"].as_f64().unwrap();
     let transport = split("truth_transport_bake");
     assert!(

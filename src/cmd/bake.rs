@@ -361,25 +361,17 @@ pub fn in_capture_light_units(
     };
     let field = field.with_source_light_power(map.mean_radiance())?;
     let light = nelf_format::conventions::project_envmap(&map, field.world_from_light())?;
-    let used = match fit {
-        SourceFit::Normalised(prior) => prior,
-        SourceFit::None | SourceFit::Gain => None,
-    };
     // The prior's step and weight are chosen for bakes on their own
     // (`nelf_field::prior::DEFAULT_STEP_MM`, `DEFAULT_WEIGHT`); no prior at all departs
     // from what the weights were trained with.
+    let without_prior = !matches!(fit, SourceFit::Normalised(Some(_)));
     if let Some(trained) = field.model().trained_shading_prior()
-        && used.is_none()
+        && without_prior
     {
         eprintln!(
             "note: these weights were last trained through a shading prior of weight {} with normals over {} mm; \
-             this fit uses {} (the weights' accuracy figures hold with the default prior)",
-            trained.weight,
-            trained.step_mm,
-            used.map_or("none".to_string(), |p| format!(
-                "weight {} over {} mm",
-                p.weight, p.step_mm
-            ))
+             this fit uses none (the weights' accuracy figures hold with the default prior)",
+            trained.weight, trained.step_mm,
         );
     }
     match fit {
