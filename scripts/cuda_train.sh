@@ -6,6 +6,10 @@
 #
 #   bash scripts/cuda_train.sh            # toolchain (once, ~1.2 GB), build, pack
 #
+# CUDA_DIR: where the toolchain is (installed there if missing; default
+# ~/.cache/nelf/cuda13). CUDA_TARGET_DIR: its own cargo target folder (default
+# target/cuda inside the clone). docs/PLATFORM.md, "candle's CUDA backend".
+#
 # What it takes (measured 2026-11-26): a CUDA 13.0 toolchain from PyPI wheels (nvcc
 # 13.0.x matches the lent machines' driver 580); plain-named .so links beside the
 # wheels' numbered ones; a link-time stub libcuda.so (cudarc 0.19 as candle 0.11 uses
@@ -15,7 +19,7 @@
 # GPU machine (/opt/torch/.venv/.../nvidia/cu13/lib, found through its rpath).
 set -euo pipefail
 ROOT=$(cd "$(dirname "$0")/.." && pwd)
-CUDA_DIR=${CUDA_DIR:-/work/cuda13}
+CUDA_DIR=${CUDA_DIR:-${XDG_CACHE_HOME:-$HOME/.cache}/nelf/cuda13}
 C=$CUDA_DIR/nvidia/cu13
 if [ ! -x "$C/bin/nvcc" ]; then
   pip install --no-deps --target "$CUDA_DIR" nvidia-cuda-nvcc==13.0.88 nvidia-cuda-crt==13.0.88 \
@@ -33,7 +37,7 @@ if [ ! -f "$C/lib/stubs/libcuda.so" ]; then
 fi
 export CUDA_HOME=$C CUDA_ROOT=$C CUDA_PATH=$C PATH=$C/bin:$PATH CUDA_COMPUTE_CAP=90 CUDARC_CUDA_VERSION=13000
 export LIBRARY_PATH=$C/lib:$C/lib/stubs${LIBRARY_PATH:+:$LIBRARY_PATH}
-export CARGO_TARGET_DIR=${CUDA_TARGET_DIR:-/work/target-cuda}
+export CARGO_TARGET_DIR=${CUDA_TARGET_DIR:-$ROOT/target/cuda}
 cd "$ROOT"
 cargo build --release -p nelf-train --features cuda --example nelf_train
 D=$ROOT/.gpu; mkdir -p "$D"

@@ -1,5 +1,5 @@
 // dense_march.wgsl — benchmark baseline, not used for rendering: the bare texture march
-// of PLATFORM.md ("every ray taking all its steps"). One invocation per pixel; the ray
+// of docs/PLATFORM.md ("every ray taking all its steps"). One invocation per pixel; the ray
 // enters a dense 3D texture (unit cube, seen head-on through a pinhole at z = −1) and
 // takes exactly `image.z` trilinear samples (`textureSampleLevel`, linear sampler),
 // front-to-back composited without early termination. It measures the trilinear

@@ -5,7 +5,7 @@
 // coefficient dequantisation folded in: for 8-bit affine codes c_k = o_k + s_k·q_k,
 //   radiance = (P_mean + Σ_k o_k P_k) + Σ_k q_k (s_k P_k) = light_mean + Σ_k q_k light[k],
 // and for f16 coefficients light_mean = P_mean, light[k] = P_k, q_k = c_k. Shading is
-// linear in T = mean + Σ c_k B_k, so this equals shading every sample (DESIGN.md).
+// linear in T = mean + Σ c_k B_k, so this equals shading every sample (docs/CONVENTIONS.md).
 //
 // `relight`: one invocation per stored voxel (brick b, local l ∈ [0, 8)³; `relight_marked`:
 // per voxel of the list a marking march made, viewer/src/gpu/marks.rs): its K-term

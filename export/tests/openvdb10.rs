@@ -18,7 +18,7 @@ use std::process::Command;
 use nelf_export::{Compression, Lighting, VdbOptions, write_vdb};
 use serde_json::Value;
 
-/// Debian's Python, the one that imports Debian's Python packages (PLATFORM.md).
+/// Debian's Python, the one that imports Debian's Python packages (docs/PLATFORM.md).
 const PYTHON: &str = "/usr/bin/python3";
 
 /// Dumps an OpenVDB file as JSON on stdout.

@@ -5,7 +5,7 @@
 //! **Model.** A `.nelf` asset is a density σ (1/m) and a light-transport vector `T`
 //! (SPEC.md §8) on a sparse grid of 8³-voxel bricks. Under a distant environment map
 //! `L` (8 × 16 texels in the asset's light frame, solid angles folded into `T`) a point
-//! emits `radiance_c = Σ_j T[c·128 + j] · L[j][c]` (DESIGN.md). The image is the
+//! emits `radiance_c = Σ_j T[c·128 + j] · L[j][c]` (`docs/CONVENTIONS.md`). The image is the
 //! emission–absorption volume rendering integral (Max 1995)
 //!
 //! `C = ∫ T(t) σ(t) c(t) dt`, `T(t) = exp(−∫₀ᵗ σ)`,

@@ -1,7 +1,7 @@
 //! Relighting: per-voxel radiance of an asset under an environment map.
 //!
 //! A voxel's outgoing radiance is the per-channel dot product of its light-transport
-//! vector with the 8 × 16 lighting (DESIGN.md, SPEC.md §8; solid angles are folded into
+//! vector with the 8 × 16 lighting (`docs/CONVENTIONS.md`, SPEC.md §8; solid angles are folded into
 //! `T`): `radiance_c = Σ_j T[c·128 + j] · L[j][c]`. The asset stores
 //! `T = m + Σ_k c_k B_k` (PCA mean `m`, basis `B_k`), and shading is linear in `T`, so
 //!
