@@ -166,6 +166,21 @@ fn cache_bytes(pixels: u64, rank: usize) -> u64 {
 }
 
 impl GpuRenderer {
+    /// Caps the per-pixel cache of a held camera (`replay.rs`; default
+    /// [`DEFAULT_REPLAY_BUDGET_BYTES`]): frames needing more relight the voxels their march
+    /// reads instead (0 turns the replay off).
+    pub fn set_replay_budget_bytes(&mut self, bytes: u64) {
+        self.replay_budget_bytes = bytes;
+        if self.replay.as_ref().is_none_or(|r| r.bytes() > bytes) {
+            self.replay = None;
+        }
+    }
+
+    /// GPU memory of the per-pixel cache of a held camera, if one is allocated.
+    pub fn replay_bytes(&self) -> u64 {
+        self.replay.as_ref().map_or(0, GpuReplay::bytes)
+    }
+
     /// The cached rectangle of `camera`'s frame if it may be replayed: a device with
     /// storage bindings, an asset loaded, and a cache within the budget and the binding
     /// limit.
