@@ -540,7 +540,7 @@ impl Model {
         width: usize,
         per_batch: &(dyn Fn(&PointInputs, &NelfNetTrace) -> Result<Tensor, NetError> + Sync),
     ) -> Result<PointValues, NetError> {
-        self.batches_in_hull(encoded, points, target_dirc, width, &|p, d| {
+        self.batches_in_hull(encoded, points, target_dirc, width, |p, d| {
             let (inputs, trace) = self.run_points(encoded, p, d, stage)?;
             let sigma = trace.density.flatten_all()?.to_vec1::<f32>()?;
             let values = per_batch(&inputs, &trace)?.flatten_all()?.to_vec1::<f32>()?;
@@ -558,7 +558,7 @@ impl Model {
         points: &[[f32; 3]],
         target_dirc: &[[f32; 3]],
         width: usize,
-        batch: &(dyn Fn(&[[f32; 3]], &[[f32; 3]]) -> Result<(Vec<f32>, Vec<f32>), NetError> + Sync),
+        batch: impl Fn(&[[f32; 3]], &[[f32; 3]]) -> Result<(Vec<f32>, Vec<f32>), NetError> + Sync,
     ) -> Result<PointValues, NetError> {
         if points.len() != target_dirc.len() {
             return Err(NetError::input(format!(
@@ -634,7 +634,7 @@ impl Model {
         target_dirc: &[[f32; 3]],
         stage: Stage,
     ) -> Result<PointValues, NetError> {
-        self.batches_in_hull(encoded, points, target_dirc, 0, &|p, d| {
+        self.batches_in_hull(encoded, points, target_dirc, 0, |p, d| {
             let inputs = encoded.gather(p, d, stage)?.to_tensors(&self.device)?;
             let sigma = self
                 .net(stage)
