@@ -1,5 +1,5 @@
 // common.wgsl — helpers shared by every pass (imported with `#import "common.wgsl"`,
-// see viewer/src/shaders.rs; never copied).
+// see render/src/wgsl.rs; never copied).
 //
 // * Brick atlas addressing: bricks (and halo cells) live in slots of 10³ texels (8³
 //   voxels + a 1-voxel apron on every side), packed with power-of-two slot counts along

@@ -13,9 +13,9 @@
 use candle_core::{Module, Tensor};
 use candle_nn::VarBuilder;
 
+use crate::architecture::Architecture;
 use crate::error::NetError;
 use crate::layers::{GroupNormLayer, NormActConv, ResConvBlock, softplus, upsample2_bilinear};
-use crate::model::Architecture;
 
 /// Channels of the light head: 4 maps × 8 × 16 texels.
 pub const LIGHT_FEATURE_CHANNELS: usize = 512;

@@ -17,6 +17,7 @@
 //!
 //! Runs in `f32` on the CPU; the `cuda` feature enables candle's CUDA backend.
 
+pub mod architecture;
 pub mod calibrate;
 pub mod capture;
 pub mod cpu;
@@ -33,8 +34,9 @@ pub mod shipped;
 pub mod source;
 pub mod views;
 
+pub use architecture::Architecture;
 pub use capture::NetCapture;
 pub use error::NetError;
-pub use model::{Architecture, Model, NelfConfig, default_device, device_name, read_safetensors_bytes};
+pub use model::{Model, NelfConfig, default_device, device_name, read_safetensors_bytes};
 pub use source::NelfField;
 pub use views::{EncodedViews, SourceViews, Stage};

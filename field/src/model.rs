@@ -12,6 +12,7 @@ use candle_nn::VarBuilder;
 use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
 use rayon::prelude::*;
 
+pub use crate::architecture::Architecture;
 use crate::encoder::{EncoderOutput, ImageEncoder};
 use crate::error::NetError;
 use crate::light::{aggregate_light, net_solid_angles};
@@ -49,88 +50,6 @@ pub fn read_safetensors_bytes(path: &Path) -> Result<Vec<u8>, NetError> {
         ));
     }
     Ok(out)
-}
-
-/// The widths of the network: the official ones by default (checkpoint-compatible);
-/// smaller ones train faster. Every other width (the direction MLP's 16, the density
-/// MLP's 32, the blend MLP's 32 and 16, the light head's 512 = 4 maps × 128 texels) is
-/// fixed. Read from a weights file's tensor shapes by [`Architecture::from_tensors`].
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Architecture {
-    /// Channels of the four encoder stages (official 32, 64, 128, 256), each at most
-    /// 32 or a multiple of 32 (`GroupNorm` takes `min(32, C)` groups).
-    pub encoder_channels: [usize; 4],
-    /// Latent channels per stage (official 32): the source feature has twice as many,
-    /// the first half for the coarse network, the second for the fine one.
-    pub latent_channels: usize,
-    /// Width of the geometry feature (official 64).
-    pub geometry_features: usize,
-    /// Hidden width of the light-transport MLP (official 128).
-    pub lt_hidden: usize,
-}
-
-impl Default for Architecture {
-    fn default() -> Self {
-        Self::OFFICIAL
-    }
-}
-
-impl Architecture {
-    /// The official widths.
-    pub const OFFICIAL: Self = Self {
-        encoder_channels: [32, 64, 128, 256],
-        latent_channels: 32,
-        geometry_features: 64,
-        lt_hidden: 128,
-    };
-
-    /// Channels of the source feature map (both stages' latents).
-    pub fn feature_channels(&self) -> usize {
-        2 * self.latent_channels
-    }
-
-    /// Checks that every width is positive and that `GroupNorm` can split the
-    /// encoder's channels (`min(32, C)` groups must divide `C`).
-    pub fn validate(&self) -> Result<(), NetError> {
-        let groups_ok = |c: usize| c > 0 && c % c.min(32) == 0;
-        let widths = [self.latent_channels, self.geometry_features, self.lt_hidden];
-        if !self.encoder_channels.iter().all(|&c| groups_ok(c))
-            || !groups_ok(self.feature_channels())
-            || widths.contains(&0)
-        {
-            return Err(NetError::input(format!("unusable network widths {self:?}")));
-        }
-        Ok(())
-    }
-
-    /// The widths of a set of weights, read from the shapes of the tensors that
-    /// carry them (official key names).
-    pub fn from_tensors(tensors: &std::collections::HashMap<String, Tensor>) -> Result<Self, NetError> {
-        let rows = |key: &str| -> Result<usize, NetError> {
-            let t = tensors
-                .get(key)
-                .ok_or_else(|| NetError::input(format!("no tensor `{key}`")))?;
-            Ok(t.dims().first().copied().unwrap_or(0))
-        };
-        let mut encoder_channels = [0usize; 4];
-        for (i, c) in encoder_channels.iter_mut().enumerate() {
-            *c = rows(&format!("image_encoder.resblocks.{i}.shortcut.weight"))?;
-        }
-        let feature = rows("image_encoder.catconvs.2.conv.weight")?;
-        if feature % 2 != 0 {
-            return Err(NetError::input(format!(
-                "the source feature has {feature} channels, not two equal halves"
-            )));
-        }
-        let arch = Self {
-            encoder_channels,
-            latent_channels: feature / 2,
-            geometry_features: rows("coarse_appearance_encoder.geometry_mlp.input_layer.weight")?,
-            lt_hidden: rows("coarse_appearance_encoder.lt_mlp.input_layer.weight")?,
-        };
-        arch.validate()?;
-        Ok(arch)
-    }
 }
 
 /// Model arguments (official `config_nelf_ft` values by default).
@@ -609,8 +528,9 @@ impl Model {
         Ok((inputs, trace))
     }
 
-    /// Evaluates the points inside the hull in parallel batches; `per_batch` turns
-    /// one batch's network pass into `(σ, values)` rows of `width` floats.
+    /// Evaluates the points inside the hull in parallel batches through `stage`'s
+    /// whole network; `per_batch` turns one batch's network pass into rows of `width`
+    /// values.
     fn evaluate_in_hull(
         &self,
         encoded: &EncodedViews,
@@ -619,6 +539,26 @@ impl Model {
         stage: Stage,
         width: usize,
         per_batch: &(dyn Fn(&PointInputs, &NelfNetTrace) -> Result<Tensor, NetError> + Sync),
+    ) -> Result<PointValues, NetError> {
+        self.batches_in_hull(encoded, points, target_dirc, width, |p, d| {
+            let (inputs, trace) = self.run_points(encoded, p, d, stage)?;
+            let sigma = trace.density.flatten_all()?.to_vec1::<f32>()?;
+            let values = per_batch(&inputs, &trace)?.flatten_all()?.to_vec1::<f32>()?;
+            Ok((sigma, values))
+        })
+    }
+
+    /// The visual-hull filter and batching every per-point evaluation shares: keeps
+    /// the points inside the hull, runs `batch` on them in parallel chunks of
+    /// [`NelfConfig::batch_points`] (points and directions), which returns σ and
+    /// `width` values per point, and scatters the results back (zero outside).
+    fn batches_in_hull(
+        &self,
+        encoded: &EncodedViews,
+        points: &[[f32; 3]],
+        target_dirc: &[[f32; 3]],
+        width: usize,
+        batch: impl Fn(&[[f32; 3]], &[[f32; 3]]) -> Result<(Vec<f32>, Vec<f32>), NetError> + Sync,
     ) -> Result<PointValues, NetError> {
         if points.len() != target_dirc.len() {
             return Err(NetError::input(format!(
@@ -634,10 +574,7 @@ impl Model {
             .map(|chunk| {
                 let p: Vec<[f32; 3]> = chunk.iter().map(|&i| points[i]).collect();
                 let d: Vec<[f32; 3]> = chunk.iter().map(|&i| target_dirc[i]).collect();
-                let (inputs, trace) = self.run_points(encoded, &p, &d, stage)?;
-                let sigma = trace.density.flatten_all()?.to_vec1::<f32>()?;
-                let values = per_batch(&inputs, &trace)?.flatten_all()?.to_vec1::<f32>()?;
-                Ok((sigma, values))
+                batch(&p, &d)
             })
             .collect::<Result<_, NetError>>()?;
         let mut sigma = vec![0.0f32; points.len()];
@@ -697,38 +634,14 @@ impl Model {
         target_dirc: &[[f32; 3]],
         stage: Stage,
     ) -> Result<PointValues, NetError> {
-        if points.len() != target_dirc.len() {
-            return Err(NetError::input(format!(
-                "{} points and {} target directions",
-                points.len(),
-                target_dirc.len()
-            )));
-        }
-        let inside = encoded.hull(points).inside;
-        let index: Vec<usize> = (0..points.len()).filter(|&i| inside[i]).collect();
-        let batches: Vec<Vec<f32>> = index
-            .par_chunks(self.config.batch_points)
-            .map(|chunk| {
-                let p: Vec<[f32; 3]> = chunk.iter().map(|&i| points[i]).collect();
-                let d: Vec<[f32; 3]> = chunk.iter().map(|&i| target_dirc[i]).collect();
-                let inputs = encoded.gather(&p, &d, stage)?.to_tensors(&self.device)?;
-                Ok(self
-                    .net(stage)
-                    .density(&inputs)?
-                    .flatten_all()?
-                    .to_vec1::<f32>()?)
-            })
-            .collect::<Result<_, NetError>>()?;
-        let mut sigma = vec![0.0f32; points.len()];
-        for (chunk, s) in index.chunks(self.config.batch_points).zip(batches) {
-            for (k, &i) in chunk.iter().enumerate() {
-                sigma[i] = s[k];
-            }
-        }
-        Ok(PointValues {
-            sigma,
-            values: Vec::new(),
-            inside,
+        self.batches_in_hull(encoded, points, target_dirc, 0, |p, d| {
+            let inputs = encoded.gather(p, d, stage)?.to_tensors(&self.device)?;
+            let sigma = self
+                .net(stage)
+                .density(&inputs)?
+                .flatten_all()?
+                .to_vec1::<f32>()?;
+            Ok((sigma, Vec::new()))
         })
     }
 

@@ -19,9 +19,9 @@ use candle_core::{D, Module, Tensor};
 use candle_nn::VarBuilder;
 use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
 
+use crate::architecture::Architecture;
 use crate::error::NetError;
 use crate::layers::{Mlp, ResMlp, softplus};
-use crate::model::Architecture;
 
 /// Latent channels per point and view (half of the source feature), official widths;
 /// others: [`Architecture::latent_channels`].

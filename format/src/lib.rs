@@ -10,6 +10,7 @@ pub mod colmap;
 pub mod conventions;
 pub mod envmap_file;
 pub mod error;
+pub mod grid;
 pub mod inspect;
 pub mod orbit;
 pub mod read;

@@ -7,9 +7,11 @@
 
 use glam::DMat3;
 
-use crate::asset::{CoefficientEncoding, GridGeometry};
+use crate::asset::CoefficientEncoding;
 use crate::conventions::{ENV_H, ENV_W, LT_DIM, VIEW_HARMONICS, is_rotation};
 use crate::error::{FormatError, Result};
+use crate::grid::GridGeometry;
+pub use crate::grid::{BRICK_SIZE, BRICK_VOXELS, MAX_GRID_BRICKS};
 
 /// File magic: `\x89 N E L F \r \n \x1a` (a high byte and line endings catch text-mode damage).
 pub const MAGIC: [u8; 8] = [0x89, b'N', b'E', b'L', b'F', 0x0D, 0x0A, 0x1A];
@@ -31,17 +33,11 @@ pub const HEADER_SIZE: usize = 256;
 pub const SECTION_ENTRY_SIZE: usize = 48;
 /// Size of one chunk-table entry in a chunked section.
 pub const CHUNK_ENTRY_SIZE: usize = 24;
-/// Voxels along each edge of a brick.
-pub const BRICK_SIZE: usize = 8;
-/// Voxels in one brick (`8³`).
-pub const BRICK_VOXELS: usize = BRICK_SIZE * BRICK_SIZE * BRICK_SIZE;
 /// Byte offset of the header checksum (the header's last eight bytes).
 pub const HEADER_CHECKSUM_OFFSET: usize = 248;
 
 /// Most sections a file may declare.
 pub const MAX_SECTIONS: usize = 64;
-/// Largest grid extent, in bricks, along any axis (brick coordinates are `u16`).
-pub const MAX_GRID_BRICKS: u32 = 65_536;
 /// Largest decoded size of one chunk of a chunked section (bounds a reader's
 /// working memory for random access and for a damaged chunk).
 pub const MAX_CHUNK_RAW_BYTES: u64 = 4 << 20;

@@ -15,7 +15,7 @@ use nelf_format::conventions::{ENV_H, ENV_W, LatLong, project_envmap, rotation_y
 use nelf_format::envmap_file::{EnvmapKind, decode_envmap};
 
 use crate::error::SceneError;
-use crate::mesh_io::linear_to_srgb8;
+use crate::srgb::linear_to_srgb8;
 
 pub use nelf_format::envmap_file::sanitize_radiance;
 
@@ -107,13 +107,16 @@ pub fn save_envmap_preview(
         path: path.to_path_buf(),
         source,
     })?;
-    crate::image_io::write_atomic(path, |w| preview.write_to(w, format))
+    nelf_format::atomic::write_atomically(path, |w| {
+        preview.write_to(w, format).map_err(std::io::Error::other)
+    })
+    .map_err(|e| crate::image_io::image_write_error(path, e))
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::mesh_io::linear_to_srgb;
+    use crate::srgb::linear_to_srgb;
 
     #[test]
     fn sanitize_clamps_bad_values() {

@@ -11,8 +11,8 @@
 //! Checked against NVIDIA's Python package (`pip install flip-evaluator`) on the
 //! committed metric fixture (`data/metrics`, see its README).
 
-use crate::mesh_io::linear_to_srgb8;
 use crate::metrics::MetricError;
+use crate::srgb::linear_to_srgb8;
 
 /// Pixels per degree of visual angle the error is computed for: ꟻLIP's default
 /// observer, 0.7 m from a 0.7 m wide 3840-pixel monitor,

@@ -3,42 +3,26 @@
 //! (`nelf_format::atomic`): a crash never leaves a half-written file under the
 //! final name.
 
-use std::fs::File;
-use std::io::BufWriter;
+use std::io::Error as IoError;
 use std::path::Path;
 
 use image::{ImageBuffer, ImageFormat, Luma, Rgb};
+use nelf_format::atomic::write_atomically;
 
 use crate::error::SceneError;
-use crate::mesh_io::linear_to_srgb8;
+use crate::srgb::linear_to_srgb8;
 
-fn io_error(path: &Path, source: std::io::Error) -> SceneError {
-    SceneError::Io {
-        path: path.to_path_buf(),
-        source,
-    }
-}
-
-/// Encodes with `encode` into `path` atomically (`nelf_format::atomic`).
-pub(crate) fn write_atomic(
-    path: &Path,
-    encode: impl FnOnce(&mut BufWriter<File>) -> Result<(), image::ImageError>,
-) -> Result<(), SceneError> {
-    let mut image_error = None;
-    nelf_format::atomic::write_atomically(path, |w| {
-        encode(w).map_err(|e| {
-            let message = e.to_string();
-            image_error = Some(e);
-            std::io::Error::other(message)
-        })
-    })
-    .map_err(|e| match image_error.take() {
-        Some(source) => SceneError::Image {
+/// The error of an image written through `nelf_format::atomic`, naming `path`: the
+/// encoder's own failure (passed through as [`std::io::Error::other`]) as
+/// [`SceneError::Image`], any other I/O failure as [`SceneError::Io`].
+pub(crate) fn image_write_error(path: &Path, error: std::io::Error) -> SceneError {
+    match error.downcast::<image::ImageError>() {
+        Ok(source) => SceneError::Image {
             path: path.to_path_buf(),
             source,
         },
-        None => io_error(path, e),
-    })
+        Err(error) => SceneError::io(path, error),
+    }
 }
 
 fn size_error(path: &Path, width: u32, height: u32, len: usize) -> SceneError {
@@ -59,7 +43,10 @@ pub fn write_exr_rgb(
     let data: Vec<f32> = rgb.iter().flatten().copied().collect();
     let buffer = ImageBuffer::<Rgb<f32>, _>::from_raw(width, height, data)
         .ok_or_else(|| size_error(path, width, height, rgb.len()))?;
-    write_atomic(path, |w| buffer.write_to(w, ImageFormat::OpenExr))
+    write_atomically(path, |w| {
+        buffer.write_to(w, ImageFormat::OpenExr).map_err(IoError::other)
+    })
+    .map_err(|e| image_write_error(path, e))
 }
 
 /// Writes linear RGB as an 8-bit sRGB PNG after scaling by `2^exposure_stops`
@@ -73,7 +60,10 @@ pub fn write_png_srgb(
 ) -> Result<(), SceneError> {
     let path = path.as_ref();
     let buffer = srgb8(path, width, height, rgb, exposure_stops.exp2())?;
-    write_atomic(path, |w| buffer.write_to(w, ImageFormat::Png))
+    write_atomically(path, |w| {
+        buffer.write_to(w, ImageFormat::Png).map_err(IoError::other)
+    })
+    .map_err(|e| image_write_error(path, e))
 }
 
 /// Linear RGB scaled by `gain` as an 8-bit sRGB image buffer (clamped to `[0, 1]`).
@@ -100,9 +90,12 @@ pub fn write_jpeg_srgb(
 ) -> Result<(), SceneError> {
     let path = path.as_ref();
     let buffer = srgb8(path, width, height, rgb, 1.0)?;
-    write_atomic(path, |w| {
-        image::codecs::jpeg::JpegEncoder::new_with_quality(w, quality.clamp(1, 100)).encode_image(&buffer)
+    write_atomically(path, |w| {
+        image::codecs::jpeg::JpegEncoder::new_with_quality(w, quality.clamp(1, 100))
+            .encode_image(&buffer)
+            .map_err(IoError::other)
     })
+    .map_err(|e| image_write_error(path, e))
 }
 
 /// Writes values in `[0, 1]` (a mask or coverage) as an 8-bit greyscale PNG.
@@ -119,7 +112,10 @@ pub fn write_png_gray(
         .collect();
     let buffer = ImageBuffer::<Luma<u8>, _>::from_raw(width, height, data)
         .ok_or_else(|| size_error(path, width, height, values.len()))?;
-    write_atomic(path, |w| buffer.write_to(w, ImageFormat::Png))
+    write_atomically(path, |w| {
+        buffer.write_to(w, ImageFormat::Png).map_err(IoError::other)
+    })
+    .map_err(|e| image_write_error(path, e))
 }
 
 #[cfg(test)]
@@ -150,5 +146,30 @@ mod tests {
         assert!(write_exr_rgb(dir.path().join("bad.exr"), 5, 3, &rgb).is_err());
         // Only the final files remain: no temporaries.
         assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+    }
+
+    #[test]
+    fn write_errors_name_the_file_and_keep_the_encoder_error() {
+        let dir = tempfile::tempdir().unwrap();
+        // The PNG encoder refuses an empty image: an image error, naming the file.
+        let empty = dir.path().join("empty.png");
+        let err = write_png_gray(&empty, 0, 0, &[]).unwrap_err();
+        assert!(
+            matches!(&err, SceneError::Image { path, .. } if *path == empty),
+            "{err:?}"
+        );
+        assert!(err.to_string().starts_with(&empty.display().to_string()), "{err}");
+        // A missing folder: an I/O error, naming the file.
+        let missing = dir.path().join("no/such/mask.png");
+        let err = write_png_gray(&missing, 1, 1, &[0.5]).unwrap_err();
+        assert!(
+            matches!(&err, SceneError::Io { path, .. } if *path == missing),
+            "{err:?}"
+        );
+        assert_eq!(
+            std::fs::read_dir(dir.path()).unwrap().count(),
+            0,
+            "no temporaries"
+        );
     }
 }

@@ -20,5 +20,6 @@ pub mod metrics;
 pub mod render;
 pub mod shapes;
 pub mod shot;
+pub mod srgb;
 pub mod synth;
 pub mod tracer;

@@ -24,6 +24,7 @@ use glam::{DVec3, Vec2, Vec3};
 
 use crate::error::SceneError;
 use crate::mesh::{Albedo, Mesh, Texture};
+pub use crate::srgb::{linear_to_srgb, linear_to_srgb8, srgb_to_linear};
 
 /// A plausible diffuse albedo of medium-light skin, linear RGB: what untextured
 /// meshes (and OBJ files whose MTL is missing) get unless told otherwise.
@@ -344,36 +345,6 @@ impl Mesh {
         }
         normals.iter().map(|n| n.normalize_or_zero().as_vec3()).collect()
     }
-}
-
-/// sRGB-encoded value in `[0, 1]` to linear (IEC 61966-2-1).
-pub fn srgb_to_linear(encoded: f32) -> f32 {
-    let c = encoded.clamp(0.0, 1.0);
-    if c <= 0.040_45 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }
-}
-
-/// Linear value to sRGB-encoded in `[0, 1]` (IEC 61966-2-1), clamping.
-pub fn linear_to_srgb(linear: f32) -> f32 {
-    let c = if linear.is_nan() {
-        0.0
-    } else {
-        linear.clamp(0.0, 1.0)
-    };
-    if c <= 0.003_130_8 {
-        12.92 * c
-    } else {
-        1.055 * c.powf(1.0 / 2.4) - 0.055
-    }
-}
-
-/// Linear value to an 8-bit sRGB code (rounded; clamped like [`linear_to_srgb`]): the
-/// byte every preview, JPEG texture and ꟻLIP input holds.
-pub fn linear_to_srgb8(linear: f32) -> u8 {
-    (linear_to_srgb(linear) * 255.0).round() as u8
 }
 
 /// Which optional per-vertex fields an OFF header announces (`[ST][C][N]OFF`).
@@ -760,9 +731,8 @@ pub fn write_obj(mesh: &Mesh, path: &Path) -> Result<(), SceneError> {
         }
     }
     let write_text = |target: &Path, text: &str| {
-        crate::image_io::write_atomic(target, |w| {
-            std::io::Write::write_all(w, text.as_bytes()).map_err(image::ImageError::IoError)
-        })
+        nelf_format::atomic::write_bytes_atomically(target, text.as_bytes())
+            .map_err(|e| SceneError::io(target, e))
     };
     write_text(&sibling(&mtl_name), &mtl)?;
     write_text(path, &obj)
@@ -949,15 +919,6 @@ pub fn load_texture(path: &Path) -> Result<Texture, SceneError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn srgb_round_trip() {
-        for i in 0..=20 {
-            let x = i as f32 / 20.0;
-            assert!((linear_to_srgb(srgb_to_linear(x)) - x).abs() < 1e-5);
-        }
-        assert!((srgb_to_linear(0.5) - 0.214).abs() < 1e-3);
-    }
 
     #[test]
     fn off_layout_prefixes() {

@@ -474,7 +474,7 @@ pub struct Srgb8Scores {
 pub fn srgb8_values(image: &[[f32; 3]]) -> Vec<[f32; 3]> {
     image
         .iter()
-        .map(|c| c.map(|v| (crate::mesh_io::linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round()))
+        .map(|c| c.map(|v| (crate::srgb::linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round()))
         .collect()
 }
 
