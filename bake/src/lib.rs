@@ -39,6 +39,7 @@ pub mod progress;
 pub mod rank;
 pub mod silhouette;
 pub mod source;
+pub mod stages;
 pub mod view;
 
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
@@ -52,11 +53,11 @@ pub use jobs::{
     CapturePlan, bake_capture, bake_capture_field, bake_mesh, capture_field_job, mesh_cameras, plan_capture,
     truth_field, truth_field_traced, with_capture_job,
 };
-pub use pipeline::{
-    BakeOutput, BakeReport, FieldBake, Reference, SampledField, StageTimings, bake_field, finish_bake,
-    sample_field, sidecar_path, write_bake,
-};
+pub use jobs::{bake_field, finish_bake, sample_field};
 pub use progress::Progress;
 pub use silhouette::{HullCarved, HullDistance};
 pub use source::{GroundTruth, ShellMeshField, ShellProfile};
+pub use stages::outputs::{BakeOutput, BakeReport, SampledField, StageTimings};
+pub use stages::plan::{FieldBake, Reference};
+pub use stages::write::{sidecar_path, write_bake};
 pub use view::ViewChoice;
