@@ -11,10 +11,13 @@
 //! 4. **Field sources** ([`source`]): anything implementing
 //!    `nelf_scene::field::FieldSource`; today the ground-truth mesh field. A
 //!    network's density is carved to the masks' visual hull ([`silhouette`]).
-//! 5. **PCA** ([`pca`]) weighted by visibility in the capture's views, the **rank**
-//!    chosen per scene by rendered-image loss ([`rank`]), quantized and written
-//!    ([`pipeline`]), for a capture or a mesh ([`jobs`]), with every setting in
-//!    [`config`]. Dependencies run one way: config ← source ← jobs → pipeline.
+//! 5. **The bake as stages** ([`stages`], one file each, run in order by
+//!    `stages/mod.rs`): plan → hull → occupancy → transport → PCA ([`pca`]) weighted
+//!    by visibility in the capture's views and the **rank** chosen per scene by
+//!    rendered-image loss ([`rank`], in one chooser: [`stages::rank`]) → quantize →
+//!    view dependence → write. The public entry points ([`jobs`]) check the
+//!    [`config`] once, then run the stages. [`pipeline`] re-exports the names it held
+//!    before.
 //! 6. **Choosing** the smallest asset that meets a PSNR target or a byte budget on
 //!    the capture's held-aside views ([`choose`], `--target-psnr`, `--max-bytes`).
 //! 7. **View dependence** ([`view`], `--view-dependence`): the residual of the
