@@ -9,7 +9,7 @@
 //! [`EVAL_PIXEL_GRID`]² rays per pixel.
 //!
 //! **Cheap candidates.** The field is sampled once per resolution
-//! ([`crate::pipeline::sample_field`]: density, light transport, PCA at the largest
+//! ([`crate::sample_field`]: density, light transport, PCA at the largest
 //! rank); every rank and encoding is made from that sample. A render is linear in
 //! the per-voxel radiance, so each target is marched once with the features
 //! `[1, c₀ … c_{K−1}]` (one ray per pixel) and the image of every rank `k` is a
@@ -41,11 +41,12 @@ use crate::capture_in::LoadedCapture;
 use crate::config::{BakeConfig, EncodingChoice};
 use crate::error::{BakeError, Result};
 use crate::eval::{EVAL_PIXEL_GRID, HeldAside, data_range, encoded_bytes, load_held_aside};
-use crate::jobs::with_capture_job;
-use crate::pipeline::{BakeOutput, SampledField, add_view_dependence, finish_bake, sample_field};
 use crate::progress::Progress;
 use crate::rank::{candidate_ranks, light_texels};
 use crate::source::GroundTruth;
+use crate::stages;
+use crate::stages::outputs::{BakeOutput, SampledField};
+use crate::stages::view::add_view_dependence;
 
 /// What to choose for (`nelf bake capture` options).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize, clap::Args)]
@@ -367,8 +368,8 @@ pub fn bake_capture_to_target(
             rank: None,
             ..config.clone()
         };
-        let finished = with_capture_job(capture, truth, &config_r, progress, |job, prior| {
-            let sampled = sample_field(job, &config_r, progress, prior)?;
+        let finished = stages::with_truth_job(capture, truth, &config_r, *progress, |job, prior| {
+            let sampled = stages::sample(job, &config_r, *progress, prior)?;
             let first = candidates.len();
             candidates.extend(resolution_candidates(
                 &sampled,
@@ -403,7 +404,7 @@ pub fn bake_capture_to_target(
                     encoding: c.encoding,
                     ..config_r.clone()
                 };
-                let mut output = finish_bake(job, &config_c, progress, &sampled)?;
+                let mut output = stages::finish(job, &config_c, *progress, &sampled)?;
                 // The view part (`--view-dependence`), judged at the same held-aside views;
                 // dropped again when it breaks the byte budget.
                 add_view_dependence(job, &config_c, progress, &sampled, &mut output)?;

@@ -1,55 +1,29 @@
-//! The two kinds of bake job: a **capture** (visual hull of its masks, the box
-//! where the field is dense, its cameras as the views) and a **mesh** baked
-//! directly (its box, synthetic cameras, path-traced references). Each plans the
-//! grid, builds the field (the ground-truth mesh field of [`crate::source`], or any
-//! [`FieldSource`]) and hands both to [`crate::pipeline::bake_field`].
+//! The bake's public entry points, where a [`BakeConfig`] comes in and is checked,
+//! once, before any stage of [`crate::stages`] runs: a capture's ground truth
+//! ([`bake_capture`], [`with_capture_job`]), any field over a capture's hull
+//! ([`plan_capture`], then [`bake_capture_field`]), a mesh baked directly
+//! ([`bake_mesh`]), and a planned job ([`bake_field`], or [`sample_field`] then
+//! [`finish_bake`] for many assets from one sample).
 
-use std::time::Instant;
-
-use glam::DVec3;
-use nelf_format::conventions::PinholeCamera;
-use nelf_scene::envmap::load_envmap;
 use nelf_scene::field::{FieldSource, ViewPolicy};
 use nelf_scene::mesh::Mesh;
-use nelf_scene::render::render_lt_image;
-use nelf_scene::synth::{SynthConfig, camera_for, source_viewpoints};
-use nelf_scene::tracer::{LtTracer, TraceSettings};
+use nelf_scene::tracer::TraceSettings;
 
 use crate::capture_in::LoadedCapture;
-use crate::config::{BakeConfig, ShellPlacement};
+use crate::config::BakeConfig;
 use crate::error::Result;
-use crate::eval::{HeldAside, load_held_aside};
-use crate::grid::{
-    GridPlan, geometry_for_box, occupied_box, plan_all_bricks, plan_from_hull, voxel_size_for,
-};
-use crate::hull::{HullCarver, hull_bounds};
-use crate::pipeline::{BakeOutput, FieldBake, Reference, StageTimings, bake_field, view_policy_for};
 use crate::progress::Progress;
-use crate::rank::{light_texels, test_environments};
-use crate::source::{GroundTruth, describe_trace, mesh_field};
-
-/// A capture's grid, before the bake proper: the visual hull of its masks, the box
-/// where the field is dense inside it, the voxel size the configuration asks for,
-/// and the bricks over the hull within that box.
-#[derive(Debug, Clone)]
-pub struct CapturePlan {
-    /// Bricks over the hull.
-    pub plan: GridPlan,
-    /// Voxel edge, metres.
-    pub voxel_size_m: f64,
-    /// The hull's box `(min, max)`, metres.
-    pub hull_box_m: (DVec3, DVec3),
-    /// The box the grid covers `(min, max)`, metres: where `probe` is dense inside
-    /// the hull box ([`occupied_box`]), or the hull box when `--voxel-size-m` is given.
-    pub grid_box_m: (DVec3, DVec3),
-    /// Seconds carving the hull and probing the density.
-    pub hull_secs: f64,
-}
+use crate::source::GroundTruth;
+use crate::stages;
+pub use crate::stages::hull::CapturePlan;
+use crate::stages::outputs::{BakeOutput, SampledField, StageTimings};
+use crate::stages::plan::FieldBake;
+pub use crate::stages::plan::{MESH_REFERENCE_ENV, mesh_cameras};
 
 /// Carves the visual hull of a capture's masks and lays bricks over it. With
 /// `--resolution`, the voxel size is the longest side of the region where `probe`
-/// is dense ([`occupied_box`]) over the resolution, and the grid covers that region;
-/// with `--voxel-size-m` the grid covers the hull's box.
+/// is dense ([`crate::grid::occupied_box`]) over the resolution, and the grid covers
+/// that region; with `--voxel-size-m` the grid covers the hull's box.
 pub fn plan_capture(
     capture: &LoadedCapture,
     config: &BakeConfig,
@@ -57,29 +31,14 @@ pub fn plan_capture(
     progress: &Progress,
 ) -> Result<CapturePlan> {
     config.validate()?;
-    let t = Instant::now();
-    let carver = HullCarver::new(&capture.cameras, &capture.masks, config.dilate_px)?;
-    let (lo, hi) = hull_bounds(&carver, capture.head_centre_m, config.max_hull_radius_m)?;
-    let (grid_lo, grid_hi) = match config.voxel_size_m {
-        Some(_) => (lo, hi),
-        None => occupied_box(Some(&carver), lo, hi, probe, config.min_brick_opacity, progress)?,
-    };
-    let voxel = voxel_size_for(grid_hi - grid_lo, config.resolution, config.voxel_size_m)?;
-    let plan = plan_from_hull(&carver, geometry_for_box(grid_lo, grid_hi, voxel)?);
-    Ok(CapturePlan {
-        plan,
-        voxel_size_m: voxel,
-        hull_box_m: (lo, hi),
-        grid_box_m: (grid_lo, grid_hi),
-        hull_secs: t.elapsed().as_secs_f64(),
-    })
+    stages::hull::capture_hull(capture, config, probe, *progress)
 }
 
 /// The bake job of any field source over a capture's plan: the capture's cameras
 /// are the views the PCA is weighted by and the rank is judged at; its images under
 /// its lighting (when the capture names an env map) measure the grid's own error.
 /// `field_provenance` describes the field in the metadata. Returns the job and the
-/// seconds already spent (the hull).
+/// seconds already spent (the hull). Runs no stage: [`bake_field`] checks `config`.
 pub fn capture_field_job<'a>(
     capture: &LoadedCapture,
     planned: CapturePlan,
@@ -88,44 +47,7 @@ pub fn capture_field_job<'a>(
     field_provenance: &serde_json::Value,
     config: &BakeConfig,
 ) -> Result<(FieldBake<'a>, StageTimings)> {
-    let reference = match capture.source_envmap_path() {
-        Some(path) => Reference::Images {
-            images: capture.images.clone(),
-            masks: capture.masks.clone(),
-            lighting: load_envmap(&path)?,
-        },
-        None => Reference::AssumedSnrDb(config.reference_snr_db),
-    };
-    let (lo, hi) = planned.hull_box_m;
-    let (grid_lo, grid_hi) = planned.grid_box_m;
-    let provenance = serde_json::json!({
-        "kind": "capture",
-        "capture": capture.dir.display().to_string(),
-        "camera_file": capture.camera_file.display().to_string(),
-        "views": capture.names,
-        "head_centre_m": capture.head_centre_m.to_array(),
-        "hull_box_m": [lo.to_array(), hi.to_array()],
-        "grid_box_m": [grid_lo.to_array(), grid_hi.to_array()],
-        "source": field_provenance,
-    });
-    let held = match capture.description() {
-        Some(description) => load_held_aside(description, &capture.dir)?,
-        None => HeldAside::default(),
-    };
-    let job = FieldBake {
-        field,
-        plan: planned.plan,
-        cameras: capture.cameras.clone(),
-        view_policy,
-        reference,
-        provenance,
-        held,
-    };
-    let prior = StageTimings {
-        hull_secs: planned.hull_secs,
-        ..StageTimings::default()
-    };
-    Ok((job, prior))
+    stages::plan::capture_job(capture, planned, field, view_policy, field_provenance, config)
 }
 
 /// Bakes any field source over a capture's plan ([`capture_field_job`], then
@@ -139,8 +61,10 @@ pub fn bake_capture_field(
     config: &BakeConfig,
     progress: &Progress,
 ) -> Result<BakeOutput> {
-    let (job, prior) = capture_field_job(capture, planned, field, view_policy, field_provenance, config)?;
-    bake_field(&job, config, progress, prior)
+    config.validate()?;
+    let (job, prior) =
+        stages::plan::capture_job(capture, planned, field, view_policy, field_provenance, config)?;
+    stages::run_job(&job, config, *progress, prior)
 }
 
 /// Runs `run` on the ground-truth bake job of a capture: visual hull of its masks,
@@ -153,33 +77,8 @@ pub fn with_capture_job<R>(
     progress: &Progress,
     run: impl FnOnce(&FieldBake<'_>, StageTimings) -> Result<R>,
 ) -> Result<R> {
-    let mesh = truth.mesh()?;
-    let trace = config.trace.apply_to_field(truth.trace_settings());
-    // Occupancy only: any voxel size will do for the probe's shell.
-    let probe = mesh_field(
-        &mesh,
-        trace,
-        config.voxel_size_m.unwrap_or(1e-3),
-        ShellPlacement::Inside,
-        config,
-    )?;
-    let planned = plan_capture(capture, config, probe.as_ref(), progress)?;
-    let field = mesh_field(&mesh, trace, planned.voxel_size_m, config.shell_placement, config)?;
-    let centres: Vec<DVec3> = capture.cameras.iter().map(PinholeCamera::centre).collect();
-    let view_policy = view_policy_for(config.view_policy, &centres)?;
-    let field_provenance = serde_json::json!({
-        "ground_truth": truth.describe(),
-        "field": describe_trace(&trace, config),
-    });
-    let (job, prior) = capture_field_job(
-        capture,
-        planned,
-        field.as_ref(),
-        view_policy,
-        &field_provenance,
-        config,
-    )?;
-    run(&job, prior)
+    config.validate()?;
+    stages::with_truth_job(capture, truth, config, *progress, run)
 }
 
 /// The ground-truth mesh field of `truth` at voxel size `voxel_size_m`, as a
@@ -189,7 +88,7 @@ pub fn truth_field(
     config: &BakeConfig,
     voxel_size_m: f64,
 ) -> Result<Box<dyn FieldSource>> {
-    truth_field_traced(truth, config, voxel_size_m, |_| {})
+    stages::plan::truth_field_traced(truth, config, voxel_size_m, |_| {})
 }
 
 /// [`truth_field`] with its trace settings changed by `adjust` (e.g. direct light
@@ -200,10 +99,7 @@ pub fn truth_field_traced(
     voxel_size_m: f64,
     adjust: impl FnOnce(&mut TraceSettings),
 ) -> Result<Box<dyn FieldSource>> {
-    let mesh = truth.mesh()?;
-    let mut trace = config.trace.apply_to_field(truth.trace_settings());
-    adjust(&mut trace);
-    mesh_field(&mesh, trace, voxel_size_m, config.shell_placement, config)
+    stages::plan::truth_field_traced(truth, config, voxel_size_m, adjust)
 }
 
 /// Bakes a capture's ground-truth field: visual hull of its masks, the mesh of
@@ -214,30 +110,11 @@ pub fn bake_capture(
     config: &BakeConfig,
     progress: &Progress,
 ) -> Result<BakeOutput> {
-    with_capture_job(capture, truth, config, progress, |job, prior| {
-        bake_field(job, config, progress, prior)
+    config.validate()?;
+    stages::with_truth_job(capture, truth, config, *progress, |job, prior| {
+        stages::run_job(job, config, *progress, prior)
     })
 }
-
-/// The synthetic cameras a mesh bake is judged by: the frontal cone of a default
-/// synthetic capture (`nelf_scene::synth::source_viewpoints`) around the mesh's
-/// bounding sphere, `size × size` pixels.
-pub fn mesh_cameras(mesh: &Mesh, size: u32) -> Vec<PinholeCamera> {
-    let (centre, radius) = mesh.bounding_sphere();
-    let config = SynthConfig {
-        width: size,
-        height: size,
-        ..SynthConfig::default()
-    };
-    source_viewpoints(&config)
-        .iter()
-        .map(|v| camera_for(v, centre, radius, &config))
-        .collect()
-}
-
-/// The test environment the path-traced references of a mesh bake are lit by
-/// (index into [`test_environments`]: the first outdoor map, with a sun).
-pub const MESH_REFERENCE_ENV: usize = 1;
 
 /// Bakes a mesh directly: the grid covers the mesh's field (its occupancy is the
 /// hull) and the views are [`mesh_cameras`]. The rank is chosen against
@@ -252,58 +129,45 @@ pub fn bake_mesh(
     progress: &Progress,
 ) -> Result<BakeOutput> {
     config.validate()?;
-    let t = Instant::now();
-    let (lo, hi) = mesh.bounds();
-    let voxel = voxel_size_for((hi - lo).as_dvec3(), config.resolution, config.voxel_size_m)?;
-    let trace = config.trace.apply_to_field(TraceSettings::default());
-    let field = mesh_field(mesh, trace, voxel, config.shell_placement, config)?;
-    let (flo, fhi) = field.bounds();
-    let plan = plan_all_bricks(geometry_for_box(flo.as_dvec3(), fhi.as_dvec3(), voxel)?);
-    let hull_secs = t.elapsed().as_secs_f64();
-    let cameras = mesh_cameras(mesh, config.render_size);
-    let centres: Vec<DVec3> = cameras.iter().map(PinholeCamera::centre).collect();
-    let view_policy = view_policy_for(config.view_policy, &centres)?;
+    stages::run_mesh(mesh, description, config, *progress)
+}
 
-    // Ground-truth references: the mesh path-traced at the (already reduced) views.
-    let t = Instant::now();
-    let lighting = test_environments().swap_remove(MESH_REFERENCE_ENV).map;
-    let tracer = LtTracer::new(mesh, config.trace.apply(TraceSettings::default()))?;
-    let light = light_texels(&lighting, tracer.settings().world_from_light)?;
-    let bar = progress.bar("reference", cameras.len() as u64, "views");
-    let mut images = Vec::with_capacity(cameras.len());
-    let mut masks = Vec::with_capacity(cameras.len());
-    for cam in &cameras {
-        let image = render_lt_image(&tracer, cam, &light, None)?;
-        images.push(image.over([0.0; 3]));
-        masks.push(image.alpha);
-        bar.inc(1);
-    }
-    bar.finish_and_clear();
-    let reference_secs = t.elapsed().as_secs_f64();
-    let provenance = serde_json::json!({
-        "kind": "mesh",
-        "mesh": description,
-        "triangles": mesh.triangles.len(),
-        "field": describe_trace(&trace, config),
-        "reference_views": format!("{} path-traced views under {}", cameras.len(), test_environments()[MESH_REFERENCE_ENV].name),
-    });
-    let job = FieldBake {
-        field: field.as_ref(),
-        plan,
-        cameras,
-        view_policy,
-        reference: Reference::Images {
-            images,
-            masks,
-            lighting,
-        },
-        provenance,
-        held: HeldAside::default(),
-    };
-    let prior = StageTimings {
-        hull_secs,
-        reference_secs,
-        ..StageTimings::default()
-    };
-    bake_field(&job, config, progress, prior)
+/// Bakes `job` with `config`: [`sample_field`], then the rank chosen by rendered
+/// loss ([`crate::stages::rank`]), the asset at that rank and its view dependence.
+/// `prior` holds the seconds of the stages the caller ran (planning the grid,
+/// rendering references).
+pub fn bake_field(
+    job: &FieldBake<'_>,
+    config: &BakeConfig,
+    progress: &Progress,
+    prior: StageTimings,
+) -> Result<BakeOutput> {
+    config.validate()?;
+    stages::run_job(job, config, *progress, prior)
+}
+
+/// Samples `job`'s field with `config`: density and brick drop, visibility weights,
+/// light transport on the band, weighted PCA, coefficients at the top rank. `prior`
+/// holds the seconds of the stages the caller ran (planning the grid, rendering
+/// references).
+pub fn sample_field(
+    job: &FieldBake<'_>,
+    config: &BakeConfig,
+    progress: &Progress,
+    prior: StageTimings,
+) -> Result<SampledField> {
+    config.validate()?;
+    stages::sample(job, config, *progress, prior)
+}
+
+/// The rank choice and the asset at the chosen rank, from a sampled field (no view
+/// dependence: [`crate::stages::view::add_view_dependence`] adds it).
+pub fn finish_bake(
+    job: &FieldBake<'_>,
+    config: &BakeConfig,
+    progress: &Progress,
+    sampled: &SampledField,
+) -> Result<BakeOutput> {
+    config.validate()?;
+    stages::finish(job, config, *progress, sampled)
 }

@@ -11,10 +11,13 @@
 //! 4. **Field sources** ([`source`]): anything implementing
 //!    `nelf_scene::field::FieldSource`; today the ground-truth mesh field. A
 //!    network's density is carved to the masks' visual hull ([`silhouette`]).
-//! 5. **PCA** ([`pca`]) weighted by visibility in the capture's views, the **rank**
-//!    chosen per scene by rendered-image loss ([`rank`]), quantized and written
-//!    ([`pipeline`]), for a capture or a mesh ([`jobs`]), with every setting in
-//!    [`config`]. Dependencies run one way: config ← source ← jobs → pipeline.
+//! 5. **The bake as stages** ([`stages`], one file each, run in order by
+//!    `stages/mod.rs`): plan → hull → occupancy → transport → PCA ([`pca`]) weighted
+//!    by visibility in the capture's views and the **rank** chosen per scene by
+//!    rendered-image loss ([`rank`], in one chooser: [`stages::rank`]) → quantize →
+//!    view dependence → write. The public entry points ([`jobs`]) check the
+//!    [`config`] once, then run the stages. [`pipeline`] re-exports the names it held
+//!    before.
 //! 6. **Choosing** the smallest asset that meets a PSNR target or a byte budget on
 //!    the capture's held-aside views ([`choose`], `--target-psnr`, `--max-bytes`).
 //! 7. **View dependence** ([`view`], `--view-dependence`): the residual of the
@@ -39,6 +42,7 @@ pub mod progress;
 pub mod rank;
 pub mod silhouette;
 pub mod source;
+pub mod stages;
 pub mod view;
 
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
@@ -52,11 +56,11 @@ pub use jobs::{
     CapturePlan, bake_capture, bake_capture_field, bake_mesh, capture_field_job, mesh_cameras, plan_capture,
     truth_field, truth_field_traced, with_capture_job,
 };
-pub use pipeline::{
-    BakeOutput, BakeReport, FieldBake, Reference, SampledField, StageTimings, bake_field, finish_bake,
-    sample_field, sidecar_path, write_bake,
-};
+pub use jobs::{bake_field, finish_bake, sample_field};
 pub use progress::Progress;
 pub use silhouette::{HullCarved, HullDistance};
 pub use source::{GroundTruth, ShellMeshField, ShellProfile};
+pub use stages::outputs::{BakeOutput, BakeReport, SampledField, StageTimings};
+pub use stages::plan::{FieldBake, Reference};
+pub use stages::write::{sidecar_path, write_bake};
 pub use view::ViewChoice;

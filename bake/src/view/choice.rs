@@ -1,0 +1,440 @@
+//! Choosing the view part: every candidate (lobes × view rank, and the reflection
+//! part's exponents) built from one fit, rendered at the judging views (the capture's
+//! held-aside targets, else its own views) and kept only when it gains more than
+//! `--view-min-gain-db` over the view-independent asset; `auto` first probes on a
+//! subsample of the band ([`ViewProbe`]).
+
+use glam::{DVec3, Vec3};
+use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS};
+use nelf_format::{Coefficients, Reflection, ViewDependence};
+use nelf_render::BrickGrid;
+use nelf_scene::field::FieldSource;
+use serde::{Deserialize, Serialize};
+
+use crate::error::{BakeError, Result};
+use crate::progress::Progress;
+use crate::view::harmonic::{FitScope, PROBE_SAMPLE, ViewChoice, ViewFit, fit_view};
+use crate::view::reflection::{REFLECT_EXPONENTS, ReflectionTarget};
+
+/// Rays per pixel (squared) of the judging renders: the gain is a difference of two
+/// renders with the same sampling, so fewer rays than [`crate::eval::EVAL_PIXEL_GRID`]
+/// do.
+pub const JUDGE_PIXEL_GRID: u32 = 2;
+
+/// One view-part candidate as judged.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewCandidate {
+    /// `sh1`, `sh2` or the number of learned lobes.
+    pub choice: ViewChoice,
+    /// Lobes `J`.
+    pub lobes: usize,
+    /// View basis rank `K_v`.
+    pub rank: usize,
+    /// The lobe exponent λ of a `reflect` candidate.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub exponent: Option<f32>,
+    /// Mean PSNR at the judging views, dB (`None` without judging views).
+    pub psnr_db: Option<f64>,
+    /// Gain over the view-independent asset, dB.
+    pub gain_db: Option<f64>,
+    /// Bytes of the asset with this view part (written with default options).
+    pub bytes: u64,
+}
+
+/// What the view-dependence stage decided.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewReport {
+    /// `--view-dependence`.
+    pub requested: ViewChoice,
+    /// What the asset holds (`off` when no view part was kept).
+    pub chosen: ViewChoice,
+    /// Index of the kept candidate in [`Self::candidates`].
+    pub chosen_index: Option<usize>,
+    /// Relative RMS of the residual `T(ω) − T̄` over the directions each voxel is seen
+    /// from, on the basis subsample.
+    pub residual_ratio: f64,
+    /// Mean PSNR of the view-independent asset at the judging views, dB.
+    pub base_psnr_db: Option<f64>,
+    /// Bytes of the view-independent asset.
+    pub base_bytes: u64,
+    /// Every candidate tried.
+    pub candidates: Vec<ViewCandidate>,
+    /// Where the judging views came from.
+    pub judged_at: String,
+    /// `auto`'s probe on a subsample of the band, where it ran ([`ViewProbe`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe: Option<ViewProbe>,
+    /// Seconds spent (sampling, fitting, judging).
+    pub secs: f64,
+}
+
+/// How far below `--view-min-gain-db` the probe's extrapolated gain may be and the
+/// band still be fitted: twice the largest undersell measured
+/// ([`extrapolated_gain_db`]).
+pub const PROBE_MARGIN: f64 = 4.0;
+
+impl ViewReport {
+    /// The largest gain of the judged candidates, dB (−∞ when none was judged).
+    pub fn best_gain_db(&self) -> f64 {
+        self.candidates
+            .iter()
+            .filter_map(|c| c.gain_db)
+            .fold(f64::NEG_INFINITY, f64::max)
+    }
+}
+
+/// `auto`'s probe: the candidates fitted on [`PROBE_SAMPLE`] band voxels only, basis
+/// included (the rest of the band without a view part), and judged, their gains extrapolated to the whole band
+/// ([`extrapolated_gain_db`]). Where no extrapolated gain reaches
+/// `--view-min-gain-db / PROBE_MARGIN` the band is not fitted and the asset stays
+/// view-independent.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ViewProbe {
+    /// Band voxels the probe fitted.
+    pub voxels: usize,
+    /// Band voxels.
+    pub band_voxels: usize,
+    /// The candidates as judged with the probe's view part.
+    pub candidates: Vec<ViewCandidate>,
+    /// The largest extrapolated gain, dB.
+    pub best_extrapolated_gain_db: f64,
+    /// Whether the band was then fitted.
+    pub band_fitted: bool,
+}
+
+/// The gain a view part fitted on every band voxel could reach, estimated from the
+/// gain `probe_gain_db` of one fitted on a fraction `fraction` of them, over a
+/// view-independent asset of PSNR `base_psnr_db`: the squared error the probe removed,
+/// scaled by `1/fraction`. An estimate, not a bound: measured, it undersells the band's
+/// fit about twice (the probe's basis comes from fewer voxels, and a voxel's correction
+/// reaches a pixel only through its neighbours' interpolation). Extrapolated +0.257,
+/// +1.665 and +0.009 dB where the band's fit gained +0.553, +2.124 and +0.016 dB (the
+/// tiny ground-truth head with sheen 0.04 and 0.3, `bake/tests/view.rs` `sheen_gains`;
+/// the shipped network on validation head h00200): hence [`PROBE_MARGIN`]. Capped at
+/// 30 dB (99.9 % of the error removed).
+pub fn extrapolated_gain_db(base_psnr_db: f64, probe_gain_db: f64, fraction: f64) -> f64 {
+    let mse = |psnr: f64| 10f64.powf(-psnr / 10.0);
+    let base = mse(base_psnr_db);
+    // At most 99.9 % of the error (30 dB), so that the figure stays finite in JSON.
+    let removed = ((base - mse(base_psnr_db + probe_gain_db)) / fraction.clamp(1e-9, 1.0)).min(0.999 * base);
+    10.0 * (base / (base - removed)).log10()
+}
+
+/// Mean PSNR of `asset` over `views` with [`JUDGE_PIXEL_GRID`]² rays per pixel.
+pub fn judge_psnr(
+    asset: &nelf_format::Asset,
+    views: &crate::eval::HeldAside,
+    step_voxels: f32,
+) -> Result<f64> {
+    crate::eval::held_aside_psnr(asset, views, step_voxels, JUDGE_PIXEL_GRID)
+}
+
+/// View-basis rank of an explicit `--view-dependence` without `--view-rank`, and the
+/// middle rank `auto` tries (it tries half and the largest too).
+pub const DEFAULT_VIEW_RANK: usize = 8;
+
+/// `auto` takes the smallest candidate whose gain is within this of the best (dB).
+pub const AUTO_GAIN_SLACK_DB: f64 = 0.1;
+
+/// Settings of [`choose_view`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ViewSettings {
+    /// `--view-dependence`.
+    pub choice: ViewChoice,
+    /// `--view-min-gain-db`.
+    pub min_gain_db: f64,
+    /// `--view-rank`.
+    pub rank: Option<usize>,
+    /// `--max-view-rank`.
+    pub max_rank: usize,
+    /// March step of the judging renders, voxels.
+    pub step_voxels: f32,
+}
+
+/// One judged candidate and the part it would attach (a view part or a reflection part).
+type JudgedPart = (ViewCandidate, (Option<ViewDependence>, Option<Reflection>));
+
+/// Builds and judges the view part of each of `choices` and, with `reflect`, the
+/// reflection part of each exponent, from `fit` (whose [`ViewFit::entries`] index
+/// `lt_voxels`) on top of `asset`; `base_psnr_db` is the view-independent asset's.
+#[allow(clippy::too_many_arguments)] // the asset, the fit and its band, what to judge and where
+fn judge_candidates(
+    asset: &nelf_format::Asset,
+    fit: &ViewFit,
+    lt_voxels: &[usize],
+    choices: &[(ViewChoice, usize)],
+    reflect: Option<&ReflectionTarget>,
+    views: &crate::eval::HeldAside,
+    base_psnr_db: Option<f64>,
+    step_voxels: f32,
+) -> Result<Vec<JudgedPart>> {
+    let encoding = asset.coefficients.encoding();
+    let voxels = asset.voxel_count();
+    let judge = |with: &nelf_format::Asset| -> Result<Option<f64>> {
+        if views.is_empty() {
+            Ok(None)
+        } else {
+            Ok(Some(judge_psnr(with, views, step_voxels)?))
+        }
+    };
+    let mut out = Vec::new();
+    for &(choice, rank) in choices {
+        let lobes = fit.lobes(choice);
+        let part = if fit.skipped {
+            // A field without view dependence asked for one explicitly: an all-zero part.
+            ViewDependence {
+                lobes: lobes.iter().map(|&x| x as f32).collect(),
+                basis: fit.basis[..LT_DIM].to_vec(),
+                coefficients: Coefficients::quantize(
+                    &vec![0.0; voxels * lobes.len() / VIEW_HARMONICS],
+                    lobes.len() / VIEW_HARMONICS,
+                    encoding,
+                )?,
+            }
+        } else {
+            fit.view_part(&lobes, rank, voxels, lt_voxels, encoding)?
+        };
+        let mut with = asset.clone();
+        with.view = Some(part);
+        let psnr_db = judge(&with)?;
+        let candidate = ViewCandidate {
+            choice,
+            lobes: with.view.as_ref().map_or(0, ViewDependence::lobe_count),
+            rank: with.view.as_ref().map_or(0, ViewDependence::rank),
+            exponent: None,
+            psnr_db,
+            gain_db: psnr_db.zip(base_psnr_db).map(|(a, b)| a - b),
+            bytes: crate::eval::encoded_bytes(&with)?,
+        };
+        out.push((candidate, (with.view, None)));
+    }
+    // The reflection part, one candidate per exponent (only the middle one without
+    // judging views).
+    if let Some(target) = reflect {
+        let exponents: Vec<usize> = if views.is_empty() {
+            vec![REFLECT_EXPONENTS.len() / 2]
+        } else {
+            (0..REFLECT_EXPONENTS.len()).collect()
+        };
+        let eyes_m: Vec<[f32; 3]> = target.eyes.iter().map(Vec3::to_array).collect();
+        for k in exponents {
+            let mut normals = vec![[0.0f32, 0.0, 1.0]; voxels];
+            let mut scales = vec![0.0f32; voxels];
+            for ((n, s), &e) in fit.reflection.iter().zip(&fit.entries) {
+                if let Some(&v) = lt_voxels.get(e) {
+                    normals[v] = *n;
+                    scales[v] = s[k];
+                }
+            }
+            let part = Reflection::new(REFLECT_EXPONENTS[k], eyes_m.clone(), &normals, &scales)?;
+            let mut with = asset.clone();
+            with.view = None;
+            with.reflection = Some(part);
+            let psnr_db = judge(&with)?;
+            let candidate = ViewCandidate {
+                choice: ViewChoice::Reflect,
+                lobes: 1,
+                rank: 0,
+                exponent: Some(REFLECT_EXPONENTS[k]),
+                psnr_db,
+                gain_db: psnr_db.zip(base_psnr_db).map(|(a, b)| a - b),
+                bytes: crate::eval::encoded_bytes(&with)?,
+            };
+            out.push((candidate, (None, with.reflection)));
+        }
+    }
+    Ok(out)
+}
+
+/// Fits, judges and attaches the view part to `asset` (the bake's view-independent
+/// asset) per `settings`; `judge` are the judging views (empty: none, then `auto` keeps
+/// nothing and an explicit choice is kept unjudged).
+///
+/// `auto` first probes ([`ViewProbe`]): the candidates fitted on [`PROBE_SAMPLE`] band
+/// voxels alone and judged. Only where one of them, extrapolated to the whole band, could
+/// gain `--view-min-gain-db` is the band fitted (most of the stage's cost: every band
+/// voxel's transport toward [`VIEW_DIRECTIONS`] directions).
+#[allow(clippy::too_many_arguments)]
+pub fn choose_view(
+    asset: &mut nelf_format::Asset,
+    field: &dyn FieldSource,
+    grid: &BrickGrid,
+    density: &[f32],
+    lt_voxels: &[usize],
+    lt: &[f32],
+    weights: &[f64],
+    eyes: &[DVec3],
+    reflect: Option<&ReflectionTarget>,
+    settings: &ViewSettings,
+    judge: (&crate::eval::HeldAside, &str),
+    progress: &Progress,
+) -> Result<ViewReport> {
+    let start = std::time::Instant::now();
+    let (views, judged_at) = judge;
+    if settings.choice == ViewChoice::Reflect && reflect.is_none() {
+        return Err(BakeError::Settings(
+            "--view-dependence reflect needs the view policy that averages toward the cameras (--view-policy average-cameras)".into(),
+        ));
+    }
+    let reflect = match settings.choice {
+        ViewChoice::Reflect | ViewChoice::Auto => reflect,
+        _ => None,
+    };
+    let explicit = !matches!(settings.choice, ViewChoice::Auto | ViewChoice::Off);
+    // `auto` with judging views probes first where the band is larger than the sample.
+    let probing = settings.choice == ViewChoice::Auto && !views.is_empty() && lt_voxels.len() > PROBE_SAMPLE;
+    let fit_in = |scope: FitScope| {
+        fit_view(
+            field,
+            grid,
+            density,
+            lt_voxels,
+            lt,
+            weights,
+            eyes,
+            settings.max_rank,
+            reflect,
+            scope,
+            progress,
+        )
+    };
+    let mut fit = fit_in(if probing { FitScope::Sample } else { FitScope::Band })?;
+    let base_bytes = crate::eval::encoded_bytes(asset)?;
+    let mut report = ViewReport {
+        requested: settings.choice,
+        chosen: ViewChoice::Off,
+        chosen_index: None,
+        residual_ratio: fit.residual_ratio,
+        base_psnr_db: None,
+        base_bytes,
+        candidates: Vec::new(),
+        judged_at: judged_at.to_string(),
+        probe: None,
+        secs: 0.0,
+    };
+    if settings.choice == ViewChoice::Off || (!explicit && (fit.skipped || views.is_empty())) {
+        report.secs = start.elapsed().as_secs_f64();
+        return Ok(report);
+    }
+    let max_rank = fit.max_rank();
+    let default_rank = DEFAULT_VIEW_RANK.min(max_rank);
+    let choices: Vec<(ViewChoice, usize)> = if settings.choice == ViewChoice::Reflect {
+        Vec::new()
+    } else if explicit {
+        vec![(
+            settings.choice,
+            settings.rank.unwrap_or(default_rank).min(max_rank),
+        )]
+    } else if let Some(rank) = settings.rank {
+        [ViewChoice::Sh1, ViewChoice::Learned(3), ViewChoice::Sh2]
+            .into_iter()
+            .map(|c| (c, rank.min(max_rank)))
+            .collect()
+    } else {
+        let mut list = vec![
+            (ViewChoice::Learned(3), (default_rank / 2).max(1)),
+            (ViewChoice::Learned(3), default_rank),
+            (ViewChoice::Learned(3), max_rank),
+            (ViewChoice::Sh1, default_rank),
+            (ViewChoice::Sh2, default_rank),
+        ];
+        list.dedup();
+        list
+    };
+    if !views.is_empty() {
+        report.base_psnr_db = Some(judge_psnr(asset, views, settings.step_voxels)?);
+    }
+    let base_psnr_db = report.base_psnr_db;
+    let judge_fit = |fit: &ViewFit| {
+        judge_candidates(
+            asset,
+            fit,
+            lt_voxels,
+            &choices,
+            reflect,
+            views,
+            base_psnr_db,
+            settings.step_voxels,
+        )
+    };
+    if probing {
+        let probed = judge_fit(&fit)?;
+        let fraction = fit.entries.len() as f64 / lt_voxels.len() as f64;
+        let best = probed
+            .iter()
+            .filter_map(|(c, _)| c.gain_db.zip(report.base_psnr_db))
+            .map(|(gain, base)| extrapolated_gain_db(base, gain, fraction))
+            .fold(f64::NEG_INFINITY, f64::max);
+        let band_fitted = best > settings.min_gain_db / PROBE_MARGIN;
+        report.probe = Some(ViewProbe {
+            voxels: fit.entries.len(),
+            band_voxels: lt_voxels.len(),
+            candidates: probed.into_iter().map(|(c, _)| c).collect(),
+            best_extrapolated_gain_db: best,
+            band_fitted,
+        });
+        if !band_fitted {
+            report.secs = start.elapsed().as_secs_f64();
+            return Ok(report);
+        }
+        fit = fit_in(FitScope::Band)?;
+    }
+    let (candidates, mut parts): (Vec<ViewCandidate>, Vec<_>) = judge_fit(&fit)?.into_iter().unzip();
+    report.candidates = candidates;
+    let best_psnr = |list: &[ViewCandidate]| {
+        (0..list.len()).max_by(|&a, &b| {
+            let psnr = |i: usize| list[i].psnr_db.unwrap_or(f64::NEG_INFINITY);
+            psnr(a).total_cmp(&psnr(b))
+        })
+    };
+    let pick = if settings.choice == ViewChoice::Reflect {
+        best_psnr(&report.candidates)
+    } else if explicit {
+        Some(0)
+    } else {
+        // The best gain; a candidate within AUTO_GAIN_SLACK_DB of it with fewer bytes wins.
+        let best = report.best_gain_db();
+        if best > settings.min_gain_db {
+            report
+                .candidates
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.gain_db.is_some_and(|g| g >= best - AUTO_GAIN_SLACK_DB))
+                .min_by_key(|(_, c)| c.bytes)
+                .map(|(i, _)| i)
+        } else {
+            None
+        }
+    };
+    if let Some(i) = pick {
+        report.chosen = report.candidates[i].choice;
+        report.chosen_index = Some(i);
+        (asset.view, asset.reflection) = parts.swap_remove(i);
+    }
+    report.secs = start.elapsed().as_secs_f64();
+    Ok(report)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_extrapolated_gain_scales_the_removed_error() {
+        // The whole band probed: the gain itself.
+        assert!((extrapolated_gain_db(30.0, 0.4, 1.0) - 0.4).abs() < 1e-12);
+        // No gain, or a loss, stays so.
+        assert!(extrapolated_gain_db(30.0, 0.0, 0.05).abs() < 1e-12);
+        assert!(extrapolated_gain_db(30.0, -0.01, 0.05) < 0.0);
+        // A tenth of the band removing 1 % of the error: the band removes 10 %.
+        let base = 10f64.powf(-3.0);
+        let probe = 10.0 * (base / (0.99 * base)).log10();
+        let full = extrapolated_gain_db(30.0, probe, 0.1);
+        assert!((full - 10.0 * (1.0 / 0.9f64).log10()).abs() < 1e-9, "{full}");
+        // All the error or more: capped at 30 dB, finite, so the band is fitted.
+        let capped = extrapolated_gain_db(30.0, probe, 0.005);
+        assert!((capped - 30.0).abs() < 1e-9, "{capped}");
+        // Monotonic in the probe's gain.
+        assert!(extrapolated_gain_db(25.0, 0.02, 0.04) < extrapolated_gain_db(25.0, 0.03, 0.04));
+    }
+}
