@@ -31,7 +31,7 @@ pub use checkpoint::{
 };
 pub use loss::{FREE_SPACE_MARGIN_MM, LossParts, relit_by_shape, secs_since, step_loss, step_loss_on};
 pub use prepare::{
-    PreparedHead, PreparedTarget, SHAPE_PROBES, prepare, prepare_heads, shape_probe_lightings,
+    PreparedHead, PreparedTarget, SHAPE_PROBES, prepare, prepare_heads, select_views, shape_probe_lightings,
 };
 pub use sampling::{Jitter, render_passes, step_rng, target_rays};
 pub use step::train_step;

@@ -1,7 +1,8 @@
 //! A dataset head made ready for training steps: its source views, target views,
 //! lightings and the distillation's ground truth at the training resolution, in the
 //! network's units (millimetres, network frame, network light layout), with the
-//! true radiance the distillation compares with precomputed under each lighting.
+//! true radiance the distillation compares with precomputed under each lighting;
+//! and a prepared head with fewer source views ([`select_views`]).
 
 use glam::DVec3;
 use nelf_field::capture::{
@@ -278,4 +279,33 @@ pub fn prepare_heads(
     ids.iter()
         .map(|&id| prepare(&dataset.load(id)?, size, source_relative_light))
         .collect()
+}
+
+/// `head` with only the source views `keep` (in that order; targets and the rest as
+/// they are), its hull and projections recomputed.
+pub fn select_views(head: &PreparedHead, keep: &[usize]) -> Result<PreparedHead, TrainError> {
+    let sv = &head.capture.views;
+    let (all, pixels) = (sv.views(), sv.width * sv.height);
+    if let Some(bad) = keep.iter().find(|&&k| k >= all) {
+        return Err(TrainError::Settings(format!(
+            "source view {bad} asked for; the head has {all}"
+        )));
+    }
+    let mut out = head.clone();
+    let views = &mut out.capture.views;
+    views.images = keep
+        .iter()
+        .flat_map(|&k| sv.images[k * pixels * 3..(k + 1) * pixels * 3].iter().copied())
+        .collect();
+    views.masks = keep
+        .iter()
+        .flat_map(|&k| sv.masks[k * pixels..(k + 1) * pixels].iter().copied())
+        .collect();
+    views.cameras = keep.iter().map(|&k| sv.cameras[k]).collect();
+    out.capture.cameras = keep
+        .iter()
+        .filter_map(|&k| head.capture.cameras.get(k).copied())
+        .collect();
+    out.geometry = EncodedViews::geometry_only(&out.capture.views)?;
+    Ok(out)
 }
