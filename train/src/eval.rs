@@ -19,7 +19,7 @@
 
 use std::path::Path;
 
-use nelf_field::{EncodedViews, Model};
+use nelf_field::Model;
 use nelf_scene::metrics::{Srgb8Scores, srgb8_scores};
 use serde::Serialize;
 
@@ -27,6 +27,9 @@ use crate::config::TrainConfig;
 use crate::error::TrainError;
 use crate::finetune::{FineTuneConfig, fine_tune};
 use crate::run::{ValidationView, validate_head, write_validation_sheet};
+/// Re-exported from [`crate::trainer`], where it lives beside the heads it selects
+/// from (so that [`crate::finetune`] uses it without depending on this module).
+pub use crate::trainer::select_views;
 use crate::trainer::{PreparedHead, Trainable};
 
 /// Weights to fine-tune on each head before it is scored, and how.
@@ -114,35 +117,6 @@ pub fn first_views(head: &PreparedHead, views: usize) -> Result<PreparedHead, Tr
         )));
     }
     select_views(head, &(0..views).collect::<Vec<_>>())
-}
-
-/// `head` with only the source views `keep` (in that order; targets and the rest as
-/// they are), its hull and projections recomputed.
-pub fn select_views(head: &PreparedHead, keep: &[usize]) -> Result<PreparedHead, TrainError> {
-    let sv = &head.capture.views;
-    let (all, pixels) = (sv.views(), sv.width * sv.height);
-    if let Some(bad) = keep.iter().find(|&&k| k >= all) {
-        return Err(TrainError::Settings(format!(
-            "source view {bad} asked for; the head has {all}"
-        )));
-    }
-    let mut out = head.clone();
-    let views = &mut out.capture.views;
-    views.images = keep
-        .iter()
-        .flat_map(|&k| sv.images[k * pixels * 3..(k + 1) * pixels * 3].iter().copied())
-        .collect();
-    views.masks = keep
-        .iter()
-        .flat_map(|&k| sv.masks[k * pixels..(k + 1) * pixels].iter().copied())
-        .collect();
-    views.cameras = keep.iter().map(|&k| sv.cameras[k]).collect();
-    out.capture.cameras = keep
-        .iter()
-        .filter_map(|&k| head.capture.cameras.get(k).copied())
-        .collect();
-    out.geometry = EncodedViews::geometry_only(&out.capture.views)?;
-    Ok(out)
 }
 
 /// The view-count table of `model` over `heads`, one row per count in `counts`; with

@@ -25,8 +25,9 @@ use serde::{Deserialize, Serialize};
 use crate::config::{ColourLoss, TrainConfig};
 use crate::data::TargetMode;
 use crate::error::TrainError;
-use crate::eval::select_views;
-use crate::trainer::{PreparedHead, PreparedTarget, Trainable, secs_since, step_loss_on, step_rng};
+use crate::trainer::{
+    PreparedHead, PreparedTarget, Trainable, secs_since, select_views, step_loss_on, step_rng,
+};
 
 /// Settings of a fine-tuning.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]

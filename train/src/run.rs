@@ -6,7 +6,7 @@
 //! and at the end: `checkpoint.safetensors` + `checkpoint.json` (resume state) and
 //! `weights.safetensors` (the network alone, official key names, loadable by
 //! `nelf_field::Model::load`; the weight average when `--ema-decay` keeps one,
-//! which is also what validation scores), each written through a temporary file.
+//! which is also what validation scores), each written atomically (`crate::files`).
 
 use std::io::Write as _;
 use std::path::Path;
@@ -22,6 +22,7 @@ use crate::adam::Adam;
 use crate::config::TrainConfig;
 use crate::data::{Dataset, TargetMode};
 use crate::error::TrainError;
+use crate::files::{write_bytes, write_tensors};
 use crate::forward::{encode, irradiance};
 use crate::trainer::{
     CHECKPOINT_INFO, CheckpointInfo, Jitter, LossParts, PreparedHead, RunPaths, Trainable, load_checkpoint,
@@ -331,12 +332,7 @@ pub fn export_named_weights(
             tensors.insert(key.into(), Tensor::new(&[value], &Device::Cpu)?);
         }
     }
-    let tmp = path.with_extension("tmp");
-    candle_core::safetensors::save(&tensors, &tmp)?;
-    std::fs::rename(&tmp, path).map_err(|source| TrainError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    write_tensors(&tensors, path)
 }
 
 /// Saves the checkpoint and the exported weights.
@@ -418,10 +414,7 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
     }
     let serialized = serde_json::to_vec_pretty(config).map_err(|e| TrainError::Settings(e.to_string()))?;
     let config_path = paths.dir.join("train_config.json");
-    std::fs::write(&config_path, serialized).map_err(|source| TrainError::Io {
-        path: config_path,
-        source,
-    })?;
+    write_bytes(&config_path, &serialized)?;
 
     progress.set_length(config.steps);
     progress.set_position(adam.steps());

@@ -25,6 +25,7 @@ use super::{
     head_dir,
 };
 use crate::error::TrainError;
+use crate::files::write_bytes;
 
 /// What a [`generate`] run did.
 #[derive(Debug, Clone, Serialize)]
@@ -163,10 +164,7 @@ fn check_or_write_json(path: &Path, value: &impl Serialize) -> Result<(), TrainE
                 })
             }
         }
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {
-            nelf_format::atomic::write_bytes_atomically(path, text.as_bytes())
-                .map_err(|e| TrainError::io(path, e))
-        }
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => write_bytes(path, text.as_bytes()),
         Err(e) => Err(TrainError::io(path, e)),
     }
 }
@@ -323,10 +321,6 @@ pub fn depth_map(tracer: &LtTracer, camera: &PinholeCamera) -> Vec<f32> {
         .collect()
 }
 
-fn write_file(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
-    nelf_format::atomic::write_bytes_atomically(path, bytes).map_err(|e| TrainError::io(path, e))
-}
-
 /// Renders head `spec` into a temporary folder and renames it into place.
 fn write_head(
     dir: &Path,
@@ -359,7 +353,7 @@ fn write_head(
     for target in &capture.targets {
         let depth = depth_map(field.tracer(), &target.camera);
         let bytes: Vec<u8> = depth.iter().flat_map(|d| d.to_le_bytes()).collect();
-        write_file(
+        write_bytes(
             &tmp.join(format!("targets/{}{DEPTH_SUFFIX}", target.name)),
             &bytes,
         )?;
@@ -382,7 +376,7 @@ fn write_head(
         seed: spec.distill_seed,
     };
     let distill = distill_points(&field, &eyes, &settings).map_err(ground_truth)?;
-    write_file(&tmp.join(DISTILL_FILE), &distill.to_bytes())?;
+    write_bytes(&tmp.join(DISTILL_FILE), &distill.to_bytes())?;
     let distill_secs = t0.elapsed().as_secs_f64();
 
     let timings = HeadTimings {
@@ -399,7 +393,7 @@ fn write_head(
     let head_json = tmp.join(HEAD_FILE);
     let text =
         serde_json::to_string_pretty(&record).map_err(|e| TrainError::file(&head_json, e.to_string()))?;
-    write_file(&head_json, (text + "\n").as_bytes())?;
+    write_bytes(&head_json, (text + "\n").as_bytes())?;
     let target = head_dir(dir, id);
     std::fs::rename(&tmp, &target).map_err(|e| TrainError::io(&target, e))?;
     Ok(timings)
