@@ -5,7 +5,7 @@
 //! whole new one), and every error names the destination.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use candle_core::Tensor;
 
@@ -16,30 +16,13 @@ pub fn write_bytes(path: &Path, bytes: &[u8]) -> Result<(), TrainError> {
     nelf_format::atomic::write_bytes_atomically(path, bytes).map_err(|e| TrainError::io(path, e))
 }
 
-/// Writes `tensors` to `path` as a safetensors file, atomically.
-///
-/// candle's encoder (`candle_core::safetensors::save`) writes only to a path, so the
-/// file is encoded into a scratch file beside `path` (`.NAME.PID.encoding`), read back,
-/// removed, and its bytes written through [`write_bytes`]: the bytes are candle's.
+/// Writes `tensors` to `path` as a safetensors file, atomically: encoded to bytes by
+/// the `safetensors` crate (the encoder `candle_core::safetensors::save` calls, so the
+/// bytes are candle's), then written through [`write_bytes`].
 pub fn write_tensors(tensors: &HashMap<String, Tensor>, path: &Path) -> Result<(), TrainError> {
-    let scratch = scratch_path(path);
-    let encoded = candle_core::safetensors::save(tensors, &scratch)
-        .map_err(|e| TrainError::file(path, format!("encoding the tensors: {e}")))
-        .and_then(|()| std::fs::read(&scratch).map_err(|e| TrainError::io(&scratch, e)));
-    // The scratch file goes whatever happened (it may not exist when encoding failed).
-    let removed = std::fs::remove_file(&scratch);
-    let bytes = encoded?;
-    removed.map_err(|e| TrainError::io(&scratch, e))?;
+    let bytes = safetensors::tensor::serialize(tensors, None)
+        .map_err(|e| TrainError::file(path, format!("encoding the tensors: {e}")))?;
     write_bytes(path, &bytes)
-}
-
-/// The scratch file [`write_tensors`] encodes into: hidden, in `path`'s folder, named
-/// after `path` and this process.
-fn scratch_path(path: &Path) -> PathBuf {
-    let name = path
-        .file_name()
-        .map_or_else(|| "tensors".into(), |n| n.to_string_lossy());
-    path.with_file_name(format!(".{name}.{}.encoding", std::process::id()))
 }
 
 #[cfg(test)]
@@ -48,7 +31,7 @@ mod tests {
     use candle_core::Device;
 
     #[test]
-    fn tensors_are_written_as_candle_encodes_them_and_no_scratch_file_is_left() {
+    fn tensors_are_written_as_candle_encodes_them_and_no_temporary_file_is_left() {
         let dir = tempfile::tempdir().unwrap();
         let tensors: HashMap<String, Tensor> = [
             (
