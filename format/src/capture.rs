@@ -11,6 +11,7 @@
 //! Images are not decoded here (this crate has no image codecs): a capture holds
 //! paths relative to its folder, checked to stay inside it and to exist.
 
+use crate::io_error::{FileIoError, IoResultExt};
 use std::collections::HashSet;
 use std::path::{Component, Path, PathBuf};
 
@@ -44,13 +45,8 @@ pub const ENVMAP_EXTENSIONS: &[&str] = &["exr", "hdr"];
 #[derive(Debug, thiserror::Error)]
 pub enum CaptureError {
     /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// The file is not valid JSON or does not match the schema (the message has the line).
     #[error("{path}: {source}")]
     Json {
@@ -568,10 +564,7 @@ impl Capture {
     pub fn load(dir: impl AsRef<Path>) -> Result<Self, CaptureError> {
         let dir = dir.as_ref();
         let path = dir.join(CAPTURE_FILE_NAME);
-        let text = std::fs::read_to_string(&path).map_err(|source| CaptureError::Io {
-            path: path.clone(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(&path).with_path(&path)?;
         let capture = Self::from_json_str(&text, &path)?;
         capture.check_files(dir, &path)?;
         Ok(capture)
@@ -789,10 +782,7 @@ impl Capture {
         let dir = dir.as_ref();
         let path = dir.join(CAPTURE_FILE_NAME);
         let text = self.to_json_string().map_err(|e| rename_file(e, &path))?;
-        let io = |source| CaptureError::Io {
-            path: path.clone(),
-            source,
-        };
+        let io = |source| CaptureError::Io(FileIoError::new(path.clone(), source));
         std::fs::create_dir_all(dir).map_err(io)?;
         crate::atomic::write_bytes_atomically(&path, text.as_bytes()).map_err(io)
     }
@@ -802,7 +792,7 @@ impl Capture {
 fn rename_file(error: CaptureError, real: &Path) -> CaptureError {
     let mut error = error;
     match &mut error {
-        CaptureError::Io { path, .. }
+        CaptureError::Io(FileIoError { path, .. })
         | CaptureError::Json { path, .. }
         | CaptureError::WrongFormat { path, .. }
         | CaptureError::UnsupportedVersion { path, .. }

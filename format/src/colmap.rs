@@ -15,6 +15,7 @@
 //! COLMAP reconstructions have an arbitrary scale; [`read_colmap_text`] takes the
 //! metres per model unit. The 3D points are not read.
 
+use crate::io_error::{FileIoError, IoResultExt};
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -28,13 +29,8 @@ use crate::conventions::PinholeCamera;
 #[derive(Debug, thiserror::Error)]
 pub enum ColmapError {
     /// Reading or writing a file failed (a missing `cameras.txt` or `images.txt` included).
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// A line does not have the expected fields.
     #[error("{path}:{line}: {message}")]
     Syntax {
@@ -177,10 +173,7 @@ fn split_fields(line: &str, n: usize) -> (Vec<&str>, &str) {
 
 /// Reads a text file, dropping a UTF-8 byte-order mark.
 fn read_text(path: &Path) -> Result<String, ColmapError> {
-    let text = std::fs::read_to_string(path).map_err(|source| ColmapError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let text = std::fs::read_to_string(path).with_path(path)?;
     Ok(match text.strip_prefix('\u{feff}') {
         Some(rest) => rest.to_string(),
         None => text,
@@ -462,10 +455,8 @@ pub fn read_colmap_text(
 
 /// Writes `text` to `path` atomically ([`crate::atomic`]).
 fn write_atomically(path: &Path, text: &str) -> Result<(), ColmapError> {
-    crate::atomic::write_bytes_atomically(path, text.as_bytes()).map_err(|source| ColmapError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    crate::atomic::write_bytes_atomically(path, text.as_bytes())
+        .map_err(|source| ColmapError::Io(FileIoError::new(path.to_path_buf(), source)))
 }
 
 /// Writes a COLMAP text model of `views` into `dir` (created if needed): one `PINHOLE`
@@ -534,10 +525,7 @@ pub fn write_colmap_text(
                   #   POINT3D_ID, X, Y, Z, R, G, B, ERROR, TRACK[] as (IMAGE_ID, POINT2D_IDX)\n\
                   # Number of points: 0, mean track length: 0\n";
 
-    std::fs::create_dir_all(dir).map_err(|source| ColmapError::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
+    std::fs::create_dir_all(dir).with_path(dir)?;
     write_atomically(&dir.join("cameras.txt"), &cameras)?;
     write_atomically(&dir.join("images.txt"), &images)?;
     write_atomically(&dir.join("points3D.txt"), points)?;

@@ -4,20 +4,14 @@
 //! the header field, the path), so that a damaged or hostile file produces a
 //! message a person can act on. See `SPEC.md`, "Validation".
 
-use std::path::PathBuf;
+use crate::io_error::FileIoError;
 
 /// Everything that can go wrong reading, writing or validating a `.nelf` asset.
 #[derive(Debug, thiserror::Error)]
 pub enum FormatError {
     /// An operating-system error on a file.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The error.
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// An I/O error on an in-memory or caller-supplied stream.
     #[error("I/O error while {during}: {source}")]
     Stream {

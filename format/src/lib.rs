@@ -12,6 +12,7 @@ pub mod envmap_file;
 pub mod error;
 pub mod grid;
 pub mod inspect;
+pub mod io_error;
 pub mod orbit;
 pub mod read;
 pub mod spec;

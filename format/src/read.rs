@@ -16,6 +16,7 @@
 //! Whole-asset decoding grows its arrays chunk by chunk, so a damaged or lying file
 //! costs at most one chunk beyond what its intact chunks decode to.
 
+use crate::io_error::{FileIoError, IoResultExt};
 use std::fs::File;
 use std::io::{BufReader, Cursor, Read, Seek, SeekFrom};
 use std::path::{Path, PathBuf};
@@ -121,10 +122,7 @@ pub struct AssetReader<R> {
 impl AssetReader<BufReader<File>> {
     /// Opens the file at `path` and validates its header, table and small sections.
     pub fn open(path: &Path) -> Result<Self> {
-        let file = File::open(path).map_err(|source| FormatError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let file = File::open(path).with_path(path)?;
         Self::with_path(BufReader::new(file), Some(path.to_path_buf()))
     }
 }
@@ -710,10 +708,10 @@ fn checksums_differ(stored: u64, computed: u64) -> bool {
 /// Maps an I/O error to [`FormatError::Io`] (with a path) or [`FormatError::Stream`].
 fn io_error(path: Option<&Path>, during: &str, source: std::io::Error) -> FormatError {
     match path {
-        Some(p) => FormatError::Io {
-            path: p.to_path_buf(),
-            source: std::io::Error::new(source.kind(), format!("{during}: {source}")),
-        },
+        Some(p) => FormatError::Io(FileIoError::new(
+            p.to_path_buf(),
+            std::io::Error::new(source.kind(), format!("{during}: {source}")),
+        )),
         None => FormatError::Stream {
             during: during.to_string(),
             source,

@@ -6,6 +6,7 @@
 //! then rename). Output depends only on the asset and the options, so writing
 //! the same asset twice gives byte-identical files.
 
+use crate::io_error::IoResultExt;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -70,10 +71,7 @@ impl WriteReport {
 /// left under `path` (a previous file there is untouched).
 pub fn write_asset(path: &Path, asset: &Asset, options: &WriteOptions) -> Result<WriteReport> {
     let (bytes, sections) = encode_asset(asset, options)?;
-    crate::atomic::write_bytes_atomically(path, &bytes).map_err(|source| FormatError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    crate::atomic::write_bytes_atomically(path, &bytes).with_path(path)?;
     Ok(WriteReport {
         path: path.to_path_buf(),
         file_size: bytes.len() as u64,

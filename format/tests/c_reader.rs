@@ -989,7 +989,7 @@ fn example_program_runs() {
 fn c_code(err: &FormatError) -> &'static str {
     use FormatError as E;
     match err {
-        E::Io { .. } | E::Stream { .. } => "NELF_ERR_IO",
+        E::Io(_) | E::Stream { .. } => "NELF_ERR_IO",
         E::BadMagic { .. } => "NELF_ERR_BAD_MAGIC",
         E::UnsupportedVersion { .. } => "NELF_ERR_UNSUPPORTED_VERSION",
         E::Truncated { .. } => "NELF_ERR_TRUNCATED",

@@ -229,7 +229,7 @@ fn missing_files_and_bad_arguments() {
     std::fs::write(dir.path().join("cameras.txt"), CAMERA).unwrap();
     let err = read_colmap_text(dir.path(), 1.0).unwrap_err();
     assert!(
-        matches!(err, ColmapError::Io { .. }) && err.to_string().contains("images.txt"),
+        matches!(err, ColmapError::Io(_)) && err.to_string().contains("images.txt"),
         "{err}"
     );
     assert!(matches!(

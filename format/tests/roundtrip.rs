@@ -5,6 +5,7 @@
 
 mod common;
 
+use nelf_format::io_error::FileIoError;
 use std::io::Cursor;
 
 use common::{FileParts, chunked_payload, small_asset};
@@ -224,7 +225,7 @@ fn write_is_atomic() {
     // A missing folder is an I/O error naming the path; nothing is created.
     let missing = dir.path().join("no/such/dir/asset.nelf");
     match write_asset(&missing, &good, &WriteOptions::default()) {
-        Err(FormatError::Io { path, .. }) => assert_eq!(path, missing),
+        Err(FormatError::Io(FileIoError { path, .. })) => assert_eq!(path, missing),
         other => panic!("{other:?}"),
     }
     // No temporary files are left behind.

@@ -3,15 +3,13 @@
 
 use std::path::PathBuf;
 
+use nelf_format::io_error::IoResultExt;
 use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};
 use nelf_format::{CoefficientEncoding, FormatError, WriteOptions, encode_asset};
 
 fn main() -> Result<(), FormatError> {
     let dir = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "corpus/read".into()));
-    std::fs::create_dir_all(&dir).map_err(|source| FormatError::Io {
-        path: dir.clone(),
-        source,
-    })?;
+    std::fs::create_dir_all(&dir).with_path(&dir)?;
     // One brick: small seeds keep the fuzzer fast.
     let field = SyntheticField::new(1, 1);
     let cases = [

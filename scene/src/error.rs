@@ -2,6 +2,7 @@
 //! variant names the file it is about, and parse errors name the line, so a
 //! user can fix the file without reading our code.
 
+use nelf_format::io_error::FileIoError;
 use std::path::PathBuf;
 
 use crate::mesh::MeshError;
@@ -10,13 +11,8 @@ use crate::mesh::MeshError;
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
     /// The operating system refused to read or write the file.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What went wrong.
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// A text file is malformed at a line.
     #[error("{path}:{line}: {message}")]
     Parse {
@@ -81,9 +77,6 @@ impl SceneError {
 
     /// An I/O error on `path`.
     pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.to_path_buf(),
-            source,
-        }
+        Self::Io(FileIoError::new(path.to_path_buf(), source))
     }
 }

@@ -163,7 +163,7 @@ mod tests {
         let missing = dir.path().join("no/such/mask.png");
         let err = write_png_gray(&missing, 1, 1, &[0.5]).unwrap_err();
         assert!(
-            matches!(&err, SceneError::Io { path, .. } if *path == missing),
+            matches!(&err, SceneError::Io(nelf_format::io_error::FileIoError { path, .. }) if *path == missing),
             "{err:?}"
         );
         assert_eq!(

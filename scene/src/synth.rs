@@ -19,6 +19,7 @@
 //! `targets/<target>.exr|.png` and `targets/<target>_mask.png`, and a COLMAP text
 //! model of the source cameras in `colmap/` (image names as in `images/`).
 
+use nelf_format::io_error::FileIoError;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -429,12 +430,8 @@ fn write_view(
 }
 
 fn create_dir(path: &Path) -> Result<(), SynthError> {
-    std::fs::create_dir_all(path).map_err(|source| {
-        SynthError::Scene(SceneError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
-    })
+    std::fs::create_dir_all(path)
+        .map_err(|source| SynthError::Scene(SceneError::Io(FileIoError::new(path.to_path_buf(), source))))
 }
 
 /// Renders and writes a synthetic capture into `out_dir` (created if needed).

@@ -165,7 +165,7 @@ fn load_mesh_dispatches_and_reports_files() {
     let dir = tempfile::tempdir().unwrap();
     let missing = dir.path().join("missing.off");
     let err = load_mesh(&missing, &LoadOptions::default()).unwrap_err();
-    assert!(matches!(err, SceneError::Io { .. }));
+    assert!(matches!(err, SceneError::Io(_)));
     assert!(err.to_string().contains("missing.off"));
     let ply = write(dir.path(), "mesh.ply", "ply\n");
     assert!(matches!(

@@ -22,6 +22,7 @@
 //! were trained with the hook (`train/README.md`); it is tested on a public-domain
 //! photograph in `data/metrics`.
 
+use nelf_format::io_error::IoResultExt;
 use std::path::{Path, PathBuf};
 
 use candle_core::{Module, Tensor};
@@ -102,18 +103,10 @@ impl RealImages {
                 "real portraits need a positive image size".into(),
             ));
         }
-        let entries = std::fs::read_dir(dir).map_err(|source| TrainError::Io {
-            path: dir.to_path_buf(),
-            source,
-        })?;
+        let entries = std::fs::read_dir(dir).with_path(dir)?;
         let mut paths = Vec::new();
         for entry in entries {
-            let path = entry
-                .map_err(|source| TrainError::Io {
-                    path: dir.to_path_buf(),
-                    source,
-                })?
-                .path();
+            let path = entry.with_path(dir)?.path();
             let known = path
                 .extension()
                 .and_then(|e| e.to_str())

@@ -1,18 +1,14 @@
 //! Errors of `nelf-train`. Every error that concerns a file names it.
 
+use nelf_format::io_error::FileIoError;
 use std::path::PathBuf;
 
 /// Errors making, reading or training on a dataset.
 #[derive(Debug, thiserror::Error)]
 pub enum TrainError {
     /// The operating system refused to read, write, rename or list a file or folder.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file or folder.
-        path: PathBuf,
-        /// What went wrong.
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// A file exists but its content is damaged, of the wrong size or unreadable.
     #[error("{path}: {message}")]
     File {
@@ -75,10 +71,7 @@ pub enum TrainError {
 impl TrainError {
     /// A [`TrainError::Io`] for `path`.
     pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Self {
-        Self::Io {
-            path: path.into(),
-            source,
-        }
+        Self::Io(FileIoError::new(path.into(), source))
     }
 
     /// A [`TrainError::File`] for `path`.

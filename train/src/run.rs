@@ -8,6 +8,7 @@
 //! `nelf_field::Model::load`; the weight average when `--ema-decay` keeps one,
 //! which is also what validation scores), each written atomically (`crate::files`).
 
+use nelf_format::io_error::{FileIoError, IoResultExt};
 use std::io::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -206,10 +207,7 @@ fn append_csv(path: &Path, header: &str, fields: &[String]) -> Result<(), TrainE
         .append(true)
         .open(path)
         .and_then(|mut f| f.write_all(text.as_bytes()))
-        .map_err(|source| TrainError::Io {
-            path: path.to_path_buf(),
-            source,
-        })
+        .map_err(|source| TrainError::Io(FileIoError::new(path.to_path_buf(), source)))
 }
 
 /// Appends a validation to the validation log.
@@ -352,10 +350,7 @@ pub fn run(config: &TrainConfig, device: &Device, progress: &ProgressBar) -> Res
     let paths = RunPaths {
         dir: config.out.clone(),
     };
-    std::fs::create_dir_all(&paths.dir).map_err(|source| TrainError::Io {
-        path: paths.dir.clone(),
-        source,
-    })?;
+    std::fs::create_dir_all(&paths.dir).with_path(&paths.dir)?;
     // A checkpoint of another network is refused before any work.
     let resume_from = if paths.dir.join(CHECKPOINT_INFO).exists() {
         let info = read_checkpoint_info(&paths.dir)?;

@@ -4,6 +4,7 @@
 //! density heads' reset of a saturated run ([`reset_density_heads`]) and the files
 //! of a run folder ([`RunPaths`]). Files are written through [`crate::files`].
 
+use nelf_format::io_error::IoResultExt;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -44,10 +45,7 @@ pub fn save_checkpoint(
     adam: &Adam,
     info: &CheckpointInfo,
 ) -> Result<(), TrainError> {
-    std::fs::create_dir_all(dir).map_err(|source| TrainError::Io {
-        path: dir.to_path_buf(),
-        source,
-    })?;
+    std::fs::create_dir_all(dir).with_path(dir)?;
     let mut tensors: HashMap<String, Tensor> = trainable
         .weights()?
         .into_iter()
@@ -64,10 +62,7 @@ pub fn save_checkpoint(
 /// Reads a checkpoint's description (`checkpoint.json`) without its tensors.
 pub fn read_checkpoint_info(dir: &Path) -> Result<CheckpointInfo, TrainError> {
     let info_path = dir.join(CHECKPOINT_INFO);
-    let text = std::fs::read(&info_path).map_err(|source| TrainError::Io {
-        path: info_path.clone(),
-        source,
-    })?;
+    let text = std::fs::read(&info_path).with_path(&info_path)?;
     serde_json::from_slice(&text).map_err(|e| TrainError::File {
         path: info_path,
         message: format!("not a checkpoint description: {e}"),
