@@ -15,8 +15,8 @@
 //! (8-bit-display error, colours clamped to `[0, 1]`, over an even subsample of the
 //! pixels fully inside the masks, searched over `ln g` in `[ln ¼, ln 4]`) is applied to `T` for every lighting.
 //! Measured in `field/README.md` ("Source-view calibration"). The network's own light
-//! estimate is too poor to stand in for `L_S` (it lowered held-out foreground PSNR by
-//! 2.3 dB), so a capture without a known lighting is not calibrated.
+//! estimate is too poor to stand in for `L_S` (it lowered held-out foreground PSNR;
+//! `field/README.md`), so a capture without a known lighting is not calibrated.
 
 use nelf_scene::mesh_io::linear_to_srgb;
 
@@ -99,9 +99,8 @@ pub fn fit_srgb_gain(pairs: &[([f32; 3], [f32; 3])]) -> Option<SourceGain> {
 pub const MAX_PIXELS: usize = 1536;
 
 /// Coarse and fine samples per ray of the calibration's renderings (those of
-/// training). On the five heads of `scripts/eval_heldout_heads.sh`, every inside
-/// pixel at the model's 64 + 128 samples gave gains 1.6–3.2 % lower and a bake
-/// 0.04 dB better on the mean, at about 14× the cost (57 s against about 4 s per 64² capture).
+/// training). Every inside pixel at the model's 64 + 128 samples changes the bake
+/// little at many times the cost (`field/README.md`, "Source-view calibration").
 pub const SAMPLES: (usize, usize) = (32, 32);
 
 /// Renders the source views encoded in `encoded` through `model` under `light_net`

@@ -29,25 +29,13 @@ use nelf_format::conventions::{ENV_H, ENV_TEXELS, ENV_W, LT_DIM};
 use crate::error::NetError;
 use crate::light::net_texel_direction;
 
-/// Default gradient step, mm. First chosen (8 mm) on the eight validation heads of the
-/// training set, which hardly tell the steps apart (`nelf train eval --views 5`,
-/// foreground PSNR 18.66 / 18.69 / 18.67 dB at 5 / 8 / 12 mm with weight 0.5), where
-/// the true normals gain nothing either; then (2026-12-05) on the eight fresh heads of
-/// the sunlit test protocol (`FIRST=6 COUNT=8 scripts/eval_heldout_heads.sh`), where
-/// true normals are worth 0.8 dB: bake 23.15 / 23.50 / 23.70 dB foreground at 12 / 8 / 5
-/// mm; then with [`DEFAULT_WEIGHT`] at the 128² on the same eight heads (bake
-/// at resolution 32, 2026-12-06): 23.93 / 23.97 / 23.98 / 23.94 dB at 5 / 4 / 3 / 2 mm
-/// with weight 0.7 (`field/README.md`).
+/// Default gradient step, mm: the step whose bakes scored best on held-out heads of
+/// the sunlit test protocol at 128², chosen together with [`DEFAULT_WEIGHT`]; the
+/// sweeps, the heads and the commands are in `field/README.md` ("Shading prior").
 pub const DEFAULT_STEP_MM: f32 = 3.0;
 
-/// Default weight of the prior in bakes and renders. First 0.5, chosen with the 8 mm
-/// step on the validation heads at 64² (18.47 / 18.69 / 18.71 / 18.38 dB at 0.3 / 0.5 /
-/// 0.7 / 1); re-chosen (2026-12-06) at the 128² on the eight heads of the test
-/// protocol that chose the step, bake at resolution 32 over 5 mm: 23.28 / 23.73 / 23.87 /
-/// 23.93 / 23.90 / 23.68 dB at 0.3 / 0.5 / 0.6 / 0.7 / 0.85 / 1 (over 3 mm: 23.95 /
-/// 23.98 / 23.92 at 0.6 / 0.7 / 0.85), and confirmed on 13 other heads
-/// (`field/README.md`). The shipped weights were trained through
-/// [`TRAINING_WEIGHT`].
+/// Default weight of the prior in bakes and renders, chosen with [`DEFAULT_STEP_MM`]
+/// (`field/README.md`). The shipped weights were trained through [`TRAINING_WEIGHT`].
 pub const DEFAULT_WEIGHT: f32 = 0.7;
 
 /// Weight of the prior `nelf train run --shading-prior-mm` trains through by default,

@@ -87,13 +87,10 @@ impl Specular {
 
 /// How light transport is estimated. Defaults are [`TraceSettings::default`]'s.
 ///
-/// Cost and accuracy at the defaults (measured with `cargo run --release -p
-/// nelf-scene --example trace_bench` on the 2-core reference machine, scanned
-/// head, courtyard HDRI): about 1 ms per vector on one core (≈ 1,000 shadow rays
-/// for the direct term plus the indirect paths), a 512² head image in 40–50 s;
-/// across seeds a vector's noise is ≈ 1.5 % (RMS, relative) and its shaded radiance
-/// ≈ 0.3–0.7 %; the `T·L` image agrees with the direct path tracer
-/// ([`crate::render::render_direct_image`]) to ≈ 42 dB.
+/// Cost, noise and agreement with the direct path tracer
+/// ([`crate::render::render_direct_image`]) at the defaults are measured by
+/// `cargo run --release -p nelf-scene --example trace_bench`
+/// (`docs/measurements/settings.md`).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TraceSettings {
     /// Interreflections after the direct term (0 = direct lighting only). Default 2.

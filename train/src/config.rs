@@ -98,12 +98,7 @@ pub struct TrainConfig {
     pub distill_weight: f64,
     /// How the distillation compares radiance (`Σ T·L` against `Σ T*·L` under each of
     /// the head's lightings): `l1` (linear HDR) or `srgb-l2` (clamped sRGB, squared).
-    /// Measured on `nelf-small-run` (2026-12-02): from step 15,136, where validation had
-    /// sat at 15.70–15.86 dB foreground for 3,900 steps with this term as `l1` × 0.1,
-    /// dropping it (`--distill-weight 0`, the σ term kept; the weight average shortened
-    /// to β = 0.995 at the same step) lifted validation to 16.14 dB in 364 steps and
-    /// 16.51 by 18,000, while `srgb-l2` × 1.0 over 435 of those steps (same average)
-    /// lowered it to 15.66. At this scale the term cost pixel accuracy in both forms tried.
+    /// What each form did to validation: `docs/measurements/settings.md`.
     #[arg(long, value_enum, default_value_t = ColourLoss::L1)]
     #[serde(default)]
     pub distill_radiance_loss: ColourLoss,
@@ -122,9 +117,7 @@ pub struct TrainConfig {
     /// head's target lightings and [`crate::trainer::SHAPE_PROBES`] fixed procedural
     /// ones (sun, room and studio maps, scaled to the source's mean radiance). It
     /// trains only the shape of `T` across lightings, what a bake's source
-    /// normalisation keeps from the network: `nelf eval network --split shading`
-    /// measured the truth's shape at the network's colour 1.0–1.1 dB above the
-    /// network's bake, the truth's colour at the network's shape 0.35–1.5 dB below.
+    /// normalisation keeps from the network (why: `docs/measurements/settings.md`).
     #[arg(long, default_value_t = 0.0)]
     #[serde(default)]
     pub distill_shape_weight: f64,
@@ -140,8 +133,9 @@ pub struct TrainConfig {
     /// Decay `β` of an exponential moving average of the weights, updated after every
     /// step (`θ̄ ← β·θ̄ + (1−β)·θ`; 0: off). With it on, validation, `weights.safetensors`
     /// and the exported network are the average, not the last step's weights: one
-    /// head per step makes each step's weights swing (±0.8 dB of validation between
-    /// checkpoints), and the average over the last `1/(1−β)` steps smooths them out.
+    /// head per step makes each step's weights swing between checkpoints
+    /// (`docs/measurements/settings.md`), and the average over the last `1/(1−β)`
+    /// steps smooths them out.
     /// The checkpoint keeps both (the average as `ema.NAME`); a checkpoint without an
     /// average starts it from its weights.
     #[arg(long, default_value_t = 0.0)]

@@ -9,8 +9,8 @@
 //! `leave_one_out` it renders a view `k ≥ 1` from the others (view 0 keeps the light
 //! frame), which is what training asks of the network, and which measured worse.
 //! Neither was adopted by `nelf bake capture`: the fit to the source views improves
-//! while the novel-light views gain at most 0.1 dB over the one-number source-view
-//! calibration (`nelf_field::calibrate`), for ~100 s per 64² capture
+//! while the novel-light views gain little over the one-number source-view
+//! calibration (`nelf_field::calibrate`), at a high cost per capture
 //! (train/README.md, "Test-time fine-tuning"). Only the
 //! capture's inputs are used, never a target: the figures of `nelf train eval
 //! --fine-tune-steps` stay honest.

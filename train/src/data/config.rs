@@ -90,9 +90,7 @@ pub struct DataConfig {
     #[arg(long, default_value_t = 2)]
     pub bounces: u32,
     /// Stratified samples per light texel for direct lighting. This sets the images'
-    /// noise: the defaults (4 texel, 16 indirect samples, 2 bounces) stay within 42–50
-    /// dB PSNR of the default tracer's images (16, 128, 2) at about a third of its
-    /// cost; the indirect samples and the second bounce move that by < 0.2 dB.
+    /// noise (against the default tracer's: `docs/measurements/settings.md`).
     #[arg(long, default_value_t = 4)]
     pub texel_samples: u32,
     /// Indirect directions at the first surface point.
