@@ -1,6 +1,6 @@
 //! The network's lighting: its 8 × 16 environment-map layout, the per-view light
 //! estimates and their confidence-weighted aggregation (official `encode`), and the
-//! exact map from its layout to the project's conventions (DESIGN.md,
+//! exact map from its layout to the project's conventions (`docs/CONVENTIONS.md`,
 //! `nelf_format::conventions`).
 //!
 //! **Network layout.** Texel `(i, j)` has `θ = (i + ½)π/8`, `φ = (j + ½)·2π/16` and

@@ -1,4 +1,4 @@
-//! The project's shared conventions, defined once (DESIGN.md, "Conventions"):
+//! The project's shared conventions, defined once (`docs/CONVENTIONS.md`):
 //!
 //! * **Environment maps** are lat-long images, rows from the zenith (+y) down.
 //!   Row `i` of `H` covers polar angle `θ ∈ [iπ/H, (i+1)π/H]`, column `j` of `W`

@@ -1,6 +1,6 @@
 //! The ground-truth light-transport path tracer: for a surface point `x` with
-//! normal `n` seen from direction `ω_o`, the 384-number vector `T` (DESIGN.md,
-//! "Solid angle is folded into T") such that the radiance leaving `x` under a
+//! normal `n` seen from direction `ω_o`, the 384-number vector `T` (`docs/CONVENTIONS.md`,
+//! "Solid angles") such that the radiance leaving `x` under a
 //! distant environment map with per-texel mean radiance `L_k` is
 //! `radiance_c = Σ_k T[c][k] · L_k[c]`.
 //!

@@ -1,4 +1,4 @@
-//! Frame-time benchmark of the GPU renderer (a benchmark, not a test; PLATFORM.md: on a
+//! Frame-time benchmark of the GPU renderer (a benchmark, not a test; docs/PLATFORM.md: on a
 //! machine without a GPU this is Mesa's lavapipe, so figures are CPU-bound and noisy —
 //! compare ratios taken in one run).
 //!
@@ -20,7 +20,7 @@
 //! the cache off; the first lighting change there, which builds the cache or marks the
 //! voxels, is timed below the table),
 //! jitter on and off, trilinear samples per frame and per second, and — as the ceiling
-//! of a texture march on this device — the bare dense march of PLATFORM.md (128³
+//! of a texture march on this device — the bare dense march of docs/PLATFORM.md (128³
 //! RGBA16F, 512² rays × 128 steps, every ray taking all its steps) measured in the same
 //! run ("of dense": samples taken per second against that ceiling; since the march grid
 //! skips every sample whose σ is 0 — 96 % of them on a head — a faster march takes
@@ -136,7 +136,7 @@ fn psnr(reference: &Image, test: &Image) -> f64 {
     10.0 * (f64::from(peak).powi(2) / mse.max(1e-30)).log10()
 }
 
-/// The bare dense march of PLATFORM.md on `gpu`'s device: ms per frame and samples.
+/// The bare dense march of docs/PLATFORM.md on `gpu`'s device: ms per frame and samples.
 fn dense_baseline(gpu: &GpuRenderer, reps: usize) -> Result<(Timing, u64), BoxError> {
     let device = gpu.device();
     let queue = gpu.queue();
@@ -495,7 +495,7 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
     let (dense, dense_samples) = dense_baseline(gpu, reps)?;
     let dense_rate = dense_samples as f64 / (dense.min * 1e-3) / 1e6;
     println!(
-        "bare dense march (PLATFORM.md; 512² rays × 128 steps in a 128³ RGBA16F texture): {dense} ms = {dense_rate:.0} M trilinear samples/s\n"
+        "bare dense march (docs/PLATFORM.md; 512² rays × 128 steps in a 128³ RGBA16F texture): {dense} ms = {dense_rate:.0} M trilinear samples/s\n"
     );
     println!(
         "| frame | march, fragment pass (ms) | march, compute pass (ms) | relit frame (ms) | ratio | marked relight + march (ms) | ratio | jitter on (ms) | samples/frame | M samples/s | of dense |"

@@ -4,7 +4,7 @@
 //! render pass (the app). It mirrors the CPU reference renderer `nelf_render` step for
 //! step (see `shaders/march.wgsl`), so the two agree to f16 precision.
 //!
-//! Relighting (DESIGN.md, "view"): the environment map is projected onto the asset's PCA
+//! Relighting (`docs/CONVENTIONS.md`, "Light frame and projection of a user's map"): the environment map is projected onto the asset's PCA
 //! basis on the CPU ([`nelf_render::project_light`], `3(K + 1)` numbers), then every
 //! voxel's radiance is its `K`-term dot product, written with its density into an RGBA16F
 //! atlas ([`crate::atlas`]). Shading is linear, so marching the relit atlas equals
