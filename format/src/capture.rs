@@ -11,7 +11,6 @@
 //! Images are not decoded here (this crate has no image codecs): a capture holds
 //! paths relative to its folder, checked to stay inside it and to exist.
 
-use crate::io_error::{FileIoError, IoResultExt};
 use std::collections::HashSet;
 use std::path::{Component, Path, PathBuf};
 
@@ -20,6 +19,7 @@ use serde::{Deserialize, Serialize};
 use serde_json::Value;
 
 use crate::conventions::PinholeCamera;
+use crate::io_error::{FileIoError, IoResultExt};
 
 /// Name of the capture description inside a capture folder.
 pub const CAPTURE_FILE_NAME: &str = "cameras.json";

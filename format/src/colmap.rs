@@ -15,7 +15,6 @@
 //! COLMAP reconstructions have an arbitrary scale; [`read_colmap_text`] takes the
 //! metres per model unit. The 3D points are not read.
 
-use crate::io_error::{FileIoError, IoResultExt};
 use std::collections::HashMap;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -23,6 +22,7 @@ use std::path::{Path, PathBuf};
 use glam::{DMat3, DQuat, DVec3};
 
 use crate::conventions::PinholeCamera;
+use crate::io_error::{FileIoError, IoResultExt};
 
 /// Errors from reading or writing a COLMAP text model. Parse errors name the file and
 /// the 1-based line.

@@ -5,11 +5,11 @@
 
 mod common;
 
-use nelf_format::io_error::FileIoError;
 use std::io::Cursor;
 
 use common::{FileParts, chunked_payload, small_asset};
 use nelf_format::conventions::{ENV_H, ENV_W, LT_DIM, LatLong, shade};
+use nelf_format::io_error::FileIoError;
 use nelf_format::spec::{
     BRICK_VOXELS, FLAG_SIGNED_DENSITY, KIND_COEFFICIENTS, KIND_METADATA, SectionCodec, SectionEntry,
     VERSION_MAJOR, checksum,

@@ -2,8 +2,9 @@
 //! variant names the file it is about, and parse errors name the line, so a
 //! user can fix the file without reading our code.
 
-use nelf_format::io_error::FileIoError;
 use std::path::PathBuf;
+
+use nelf_format::io_error::FileIoError;
 
 use crate::mesh::MeshError;
 

@@ -19,7 +19,6 @@
 //! `targets/<target>.exr|.png` and `targets/<target>_mask.png`, and a COLMAP text
 //! model of the source cameras in `colmap/` (image names as in `images/`).
 
-use nelf_format::io_error::FileIoError;
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -29,6 +28,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use nelf_format::capture::{Capture, CaptureView, TargetView};
 use nelf_format::colmap::write_colmap_text;
 use nelf_format::conventions::{LatLong, PinholeCamera};
+use nelf_format::io_error::FileIoError;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use serde::{Deserialize, Serialize};

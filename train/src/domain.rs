@@ -22,7 +22,6 @@
 //! were trained with the hook (`train/README.md`); it is tested on a public-domain
 //! photograph in `data/metrics`.
 
-use nelf_format::io_error::IoResultExt;
 use std::path::{Path, PathBuf};
 
 use candle_core::{Module, Tensor};
@@ -31,6 +30,7 @@ use image::imageops::FilterType;
 use nelf_field::encoder::EncoderOutput;
 use nelf_field::layers::{GroupNormLayer, NormActConv, upsample2_bilinear};
 use nelf_field::{Architecture, Model};
+use nelf_format::io_error::IoResultExt;
 use nelf_scene::mesh_io::srgb_to_linear;
 use rand::SeedableRng;
 use rand_pcg::Pcg64;

@@ -1,7 +1,8 @@
 //! Errors of `nelf-train`. Every error that concerns a file names it.
 
-use nelf_format::io_error::FileIoError;
 use std::path::PathBuf;
+
+use nelf_format::io_error::FileIoError;
 
 /// Errors making, reading or training on a dataset.
 #[derive(Debug, thiserror::Error)]

@@ -8,7 +8,6 @@
 //! `nelf_field::Model::load`; the weight average when `--ema-decay` keeps one,
 //! which is also what validation scores), each written atomically (`crate::files`).
 
-use nelf_format::io_error::{FileIoError, IoResultExt};
 use std::io::Write as _;
 use std::path::Path;
 use std::time::Instant;
@@ -16,6 +15,7 @@ use std::time::Instant;
 use candle_core::{Device, Tensor};
 use indicatif::ProgressBar;
 use nelf_field::Model;
+use nelf_format::io_error::{FileIoError, IoResultExt};
 use nelf_scene::metrics::{Srgb8Scores, flat_colour_baseline, srgb8_scores};
 use serde::Serialize;
 

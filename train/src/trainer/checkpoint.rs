@@ -4,7 +4,6 @@
 //! density heads' reset of a saturated run ([`reset_density_heads`]) and the files
 //! of a run folder ([`RunPaths`]). Files are written through [`crate::files`].
 
-use nelf_format::io_error::IoResultExt;
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
@@ -13,6 +12,8 @@ use serde::{Deserialize, Serialize};
 
 use super::loss::LossParts;
 use super::trainable::Trainable;
+use nelf_format::io_error::IoResultExt;
+
 use crate::adam::Adam;
 use crate::config::TrainConfig;
 use crate::error::TrainError;
