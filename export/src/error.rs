@@ -6,6 +6,7 @@ use std::path::PathBuf;
 
 use nelf_format::FormatError;
 use nelf_render::RenderError;
+use nelf_scene::shot::ShotError;
 
 /// What the OpenVDB writer refuses.
 #[derive(Debug, thiserror::Error)]
@@ -83,4 +84,55 @@ pub enum ExportError {
         /// What failed.
         source: std::io::Error,
     },
+    /// The asset file could not be read, or is not a valid `.nelf` file.
+    #[error("cannot read {}", .path.display())]
+    ReadAsset {
+        /// The asset file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: FormatError,
+    },
+    /// An environment map given as an option could not be loaded (boxed: the
+    /// error is large).
+    #[error(transparent)]
+    Lighting(Box<ShotError>),
+    /// A file's size could not be read.
+    #[error("cannot stat {}", .path.display())]
+    Stat {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// An export's settings record (`<out>.export.json`) could not be written.
+    #[error("cannot write {}", .path.display())]
+    WriteRecord {
+        /// The record's file.
+        path: PathBuf,
+        /// Why.
+        #[source]
+        source: std::io::Error,
+    },
+    /// One step of an export command failed: `step` says which, of what
+    /// (`cannot export head.nelf to head.vdb`), `source` why.
+    #[error("{step}")]
+    Step {
+        /// The step and its files.
+        step: String,
+        /// Why it failed.
+        #[source]
+        source: Box<ExportError>,
+    },
+}
+
+impl ExportError {
+    /// Wraps an error of the step `step` ([`ExportError::Step`]), for `map_err`.
+    pub fn step(step: String) -> impl FnOnce(Self) -> Self {
+        move |source| Self::Step {
+            step,
+            source: Box::new(source),
+        }
+    }
 }

@@ -5,10 +5,13 @@
 //! engines that relight themselves; written by our own OpenVDB 10 writer
 //! ([`openvdb`]: no crate that builds here writes OpenVDB). `export/README.md`
 //! lists the grids, units and metadata keys and how to import the file.
+//! [`commands`] holds what each `nelf export` subcommand does, as one call taking
+//! the command's settings ([`export_vdb`], [`export_web`]).
 //!
 //! Depends on `nelf-format` and `nelf-render` (relighting is `nelf-render`'s), never on
 //! wgpu or candle.
 
+pub mod commands;
 pub mod error;
 pub mod openvdb;
 pub mod shaders;
@@ -18,6 +21,9 @@ pub mod web;
 
 use std::path::Path;
 
+pub use commands::{
+    VdbExportConfig, VdbExported, VdbPreset, WebExportConfig, export_vdb, export_web, studio_envmap,
+};
 pub use error::{ExportError, VdbError};
 pub use openvdb::{Compression, VdbFile};
 pub use vdb::{Lighting, VdbOptions, VdbReport, build_vdb, encode_vdb, stored_light, write_vdb};

@@ -102,6 +102,32 @@ pub struct ShaderReport {
     pub passes: Vec<PassReport>,
 }
 
+impl ShaderReport {
+    /// The lines `nelf export shaders` prints for shaders written to `dir`.
+    #[must_use]
+    pub fn to_text(&self, dir: &Path) -> String {
+        use std::fmt::Write as _;
+        let mut text = String::new();
+        for pass in &self.passes {
+            let entries: Vec<String> = pass
+                .entries
+                .iter()
+                .map(|e| format!("{} ({})", e.name, e.stage))
+                .collect();
+            let _ = writeln!(text, "{}: {}", pass.pass, entries.join(", "));
+        }
+        let _ = writeln!(
+            text,
+            "GLSL {} and HLSL SM {} written to {} (bindings: {})",
+            self.glsl_version,
+            self.hlsl_shader_model,
+            dir.display(),
+            dir.join("shaders.json").display()
+        );
+        text
+    }
+}
+
 fn shader_error(pass: &str, what: &str, message: impl std::fmt::Display) -> ExportError {
     ExportError::Shader(format!("{pass}: {what}: {message}"))
 }

@@ -65,6 +65,29 @@ pub struct WebPageReport {
     pub defaults: String,
 }
 
+impl WebPageReport {
+    /// The lines `nelf export web` prints for a page written to `out_dir`.
+    #[must_use]
+    pub fn to_text(&self, out_dir: &Path) -> String {
+        use std::fmt::Write as _;
+        let mut text = String::new();
+        for (name, bytes) in &self.files {
+            let _ = writeln!(text, "  {name}: {bytes} bytes");
+        }
+        let _ = writeln!(
+            text,
+            "web page written to {} (viewer {} bytes; start: ?{}); serve the folder, e.g. \
+             `python3 -m http.server -d {}`, and open index.html (WebGPU, or WebGL2 with the relight \
+             on the CPU)",
+            out_dir.display(),
+            self.viewer_bytes,
+            self.defaults,
+            out_dir.display()
+        );
+        text
+    }
+}
+
 /// Writes the page into `out_dir` (created if needed; files of the same names are
 /// replaced atomically, others left alone).
 pub fn write_web_page(options: &WebPageOptions, out_dir: &Path) -> Result<WebPageReport, ExportError> {
