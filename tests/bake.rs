@@ -221,18 +221,10 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
     // shading prior mixed in.
     assert_eq!(source["source_relative_light"], true, "{source}");
     assert_eq!(source["source_normalised"], true, "{source}");
-    assert_eq!(
-        nelf_bake::DEFAULT_SHADING_PRIOR_MM,
-        nelf_field::prior::DEFAULT_STEP_MM
-    );
-    assert_eq!(
-        nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT,
-        nelf_field::prior::DEFAULT_WEIGHT
-    );
     assert_eq!(source["light_transport_scale"].as_f64(), Some(1.0), "{source}");
     assert_eq!(
         source["shading_prior"],
-        serde_json::json!({"step_mm": nelf_bake::DEFAULT_SHADING_PRIOR_MM, "weight": nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT}),
+        serde_json::json!({"step_mm": nelf_field::prior::DEFAULT_STEP_MM, "weight": nelf_field::prior::DEFAULT_WEIGHT}),
         "{source}"
     );
     // The shipped weights' last steps trained through the prior at the training weight,
@@ -251,14 +243,14 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
     assert_eq!(sidecar["config"]["network_skin_mm"], 1.0, "{sidecar}");
     assert_eq!(
         sidecar["config"]["shading_prior_weight"].as_f64(),
-        Some(f64::from(nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT)),
+        Some(f64::from(nelf_field::prior::DEFAULT_WEIGHT)),
         "{sidecar}"
     );
     // ... and carved to the visual hull of the masks (`nelf_bake::silhouette`).
     assert_eq!(sidecar["config"]["no_network_hull_carve"], false, "{sidecar}");
     assert_eq!(
         sidecar["config"]["network_hull_margin_px"].as_f64(),
-        Some(f64::from(nelf_bake::config::DEFAULT_NETWORK_HULL_MARGIN_PX)),
+        Some(f64::from(nelf_pipeline::DEFAULT_NETWORK_HULL_MARGIN_PX)),
         "{sidecar}"
     );
 

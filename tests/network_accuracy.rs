@@ -112,7 +112,7 @@ fn the_shipped_networks_bake_of_a_held_out_head_beats_the_flat_colour() {
     );
     assert_eq!(
         source["shading_prior"],
-        serde_json::json!({"step_mm": nelf_bake::DEFAULT_SHADING_PRIOR_MM, "weight": nelf_bake::DEFAULT_SHADING_PRIOR_WEIGHT}),
+        serde_json::json!({"step_mm": nelf_field::prior::DEFAULT_STEP_MM, "weight": nelf_field::prior::DEFAULT_WEIGHT}),
         "{}",
         asset.metadata
     );

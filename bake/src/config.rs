@@ -32,39 +32,6 @@ fn default_max_hull_radius_m() -> f64 {
     DEFAULT_MAX_HULL_RADIUS_M
 }
 
-/// Default `--network-skin-mm`: measured with `nelf eval network` on held-out heads
-/// (`field/README.md`, "Density of a network bake").
-pub const DEFAULT_NETWORK_SKIN_MM: f32 = 1.0;
-
-/// Default gradient step of the network field's Lambertian shading prior
-/// ([`BakeConfig::shading_prior_mm`]): `nelf_field::prior::DEFAULT_STEP_MM`, where it
-/// was chosen (this crate does not depend on `nelf-field`; `tests/bake.rs` checks the
-/// two agree).
-pub const DEFAULT_SHADING_PRIOR_MM: f32 = 3.0;
-
-/// Default weight of that prior ([`BakeConfig::shading_prior_weight`]):
-/// `nelf_field::prior::DEFAULT_WEIGHT`.
-pub const DEFAULT_SHADING_PRIOR_WEIGHT: f32 = 0.7;
-
-fn default_shading_prior_mm() -> f32 {
-    DEFAULT_SHADING_PRIOR_MM
-}
-
-fn default_shading_prior_weight() -> f32 {
-    DEFAULT_SHADING_PRIOR_WEIGHT
-}
-
-/// Default [`BakeConfig::network_hull_margin_px`].
-pub const DEFAULT_NETWORK_HULL_MARGIN_PX: f32 = 0.5;
-
-fn default_network_hull_margin_px() -> f32 {
-    DEFAULT_NETWORK_HULL_MARGIN_PX
-}
-
-fn default_network_skin_mm() -> f32 {
-    DEFAULT_NETWORK_SKIN_MM
-}
-
 /// Default `--lt-share-voxels`.
 pub const DEFAULT_LT_SHARE_VOXELS: f32 = 2.0;
 
@@ -224,49 +191,6 @@ pub struct BakeConfig {
     #[arg(long, default_value_t = DEFAULT_LT_SHARE_VOXELS)]
     #[serde(default = "default_lt_share_voxels")]
     pub lt_share_voxels: f32,
-    /// Network field: its density is stored as a signed function of `ln σ`
-    /// (`nelf_scene::field::SignedLogDensity`) for a skin across which σ grows by `e`
-    /// every this many millimetres, the surface where a ray through it reaches optical
-    /// depth ln 2 (σ = ln 2 / skin); trilinear interpolation then puts the surface
-    /// between voxels where the network has it, not a voxel outside. 0 stores σ itself
-    /// (a baked head renders swollen by about a voxel).
-    #[arg(long, default_value_t = DEFAULT_NETWORK_SKIN_MM)]
-    #[serde(default = "default_network_skin_mm")]
-    pub network_skin_mm: f32,
-    /// Network field: leave its light transport as the network gives it. By default,
-    /// when the capture names the lighting its views were taken in, the light
-    /// transport is scaled by the one gain that makes the network reproduce those
-    /// views under that lighting (`nelf_field::calibrate`; +1.4 dB foreground on
-    /// held-out heads, `field/README.md`).
-    #[arg(long)]
-    #[serde(default)]
-    pub no_source_calibration: bool,
-    /// Network field, when the capture names the lighting its views were taken in:
-    /// normalise every view's light transport to that lighting point by point
-    /// (`nelf_field::NelfField::normalised_to_sources`, instead of the one gain) and
-    /// mix in a Lambertian shading prior about the normal of the network's density,
-    /// its gradient taken over this many mm (0: the one gain, no prior). Measured on
-    /// five held-out heads: foreground PSNR of the bake 22.22 dB against 19.52 with the
-    /// gain (flat colour 18.29, ground-truth bake 26.94; models/README.md).
-    #[arg(long, default_value_t = DEFAULT_SHADING_PRIOR_MM)]
-    #[serde(default = "default_shading_prior_mm")]
-    pub shading_prior_mm: f32,
-    /// Weight of that prior against the network's own transport (1: the prior alone).
-    #[arg(long, default_value_t = DEFAULT_SHADING_PRIOR_WEIGHT)]
-    #[serde(default = "default_shading_prior_weight")]
-    pub shading_prior_weight: f32,
-    /// Network field: leave its density uncarved. By default its signed density
-    /// is carved to the visual hull of the masks (`nelf_bake::silhouette`), grown by
-    /// `--network-hull-margin-px`, so that the bake keeps the photos' silhouettes
-    /// instead of a halo outside them.
-    #[arg(long)]
-    #[serde(default)]
-    pub no_network_hull_carve: bool,
-    /// Network field: pixels every mask is grown by before the carve (room for mask
-    /// errors; 0: the exact hull of the masks thresholded at ½).
-    #[arg(long, default_value_t = DEFAULT_NETWORK_HULL_MARGIN_PX)]
-    #[serde(default = "default_network_hull_margin_px")]
-    pub network_hull_margin_px: f32,
     /// Outgoing direction the light transport is baked for.
     #[arg(long, value_enum, default_value_t)]
     pub view_policy: ViewPolicyChoice,
@@ -361,12 +285,6 @@ impl Default for BakeConfig {
             sheet_voxels: 2.0,
             hollow_voxels: 0.0,
             lt_share_voxels: DEFAULT_LT_SHARE_VOXELS,
-            network_skin_mm: DEFAULT_NETWORK_SKIN_MM,
-            no_source_calibration: false,
-            shading_prior_mm: DEFAULT_SHADING_PRIOR_MM,
-            shading_prior_weight: DEFAULT_SHADING_PRIOR_WEIGHT,
-            no_network_hull_carve: false,
-            network_hull_margin_px: DEFAULT_NETWORK_HULL_MARGIN_PX,
             view_policy: ViewPolicyChoice::AverageCameras,
             render_size: 128,
             step_voxels: 0.5,
@@ -449,30 +367,6 @@ impl BakeConfig {
                 self.lt_share_voxels
             ));
         }
-        if !(self.network_skin_mm.is_finite() && self.network_skin_mm >= 0.0) {
-            return bad(format!(
-                "--network-skin-mm {} must be ≥ 0 (0: store σ itself)",
-                self.network_skin_mm
-            ));
-        }
-        if !(self.network_hull_margin_px.is_finite() && self.network_hull_margin_px >= 0.0) {
-            return bad(format!(
-                "--network-hull-margin-px {} must be ≥ 0",
-                self.network_hull_margin_px
-            ));
-        }
-        if !(self.shading_prior_mm.is_finite() && self.shading_prior_mm >= 0.0) {
-            return bad(format!(
-                "--shading-prior-mm {} must be ≥ 0 (0: no prior)",
-                self.shading_prior_mm
-            ));
-        }
-        if !(0.0..=1.0).contains(&self.shading_prior_weight) {
-            return bad(format!(
-                "--shading-prior-weight {} must be in [0, 1]",
-                self.shading_prior_weight
-            ));
-        }
         if !(self.lead_voxels.is_finite() && self.lead_voxels > 0.0 && self.lead_voxels <= 2.0) {
             return bad(format!("--lead-voxels {} must be in (0, 2]", self.lead_voxels));
         }
@@ -506,55 +400,5 @@ impl BakeConfig {
             step_voxels: self.step_voxels,
             ..MarchSettings::default()
         }
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn network_skin_is_validated_and_defaults_for_older_configs() {
-        assert!(BakeConfig::default().validate().is_ok());
-        for bad in [-1.0f32, f32::NAN, f32::INFINITY] {
-            let config = BakeConfig {
-                network_skin_mm: bad,
-                ..BakeConfig::default()
-            };
-            let message = config.validate().err().map(|e| e.to_string()).unwrap_or_default();
-            assert!(message.contains("--network-skin-mm"), "{bad}: {message}");
-        }
-        let off = BakeConfig {
-            network_skin_mm: 0.0,
-            ..BakeConfig::default()
-        };
-        assert!(off.validate().is_ok());
-        // A config saved before the option existed reads back with the default.
-        let mut json = serde_json::to_value(BakeConfig::default()).unwrap_or_default();
-        if let Some(map) = json.as_object_mut() {
-            map.remove("network_skin_mm");
-        }
-        let read: BakeConfig = serde_json::from_value(json).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(read.network_skin_mm, DEFAULT_NETWORK_SKIN_MM);
-    }
-
-    #[test]
-    fn hull_carve_is_validated_and_defaults_on_for_older_configs() {
-        for bad in [-0.5f32, f32::NAN, f32::INFINITY] {
-            let config = BakeConfig {
-                network_hull_margin_px: bad,
-                ..BakeConfig::default()
-            };
-            let message = config.validate().err().map(|e| e.to_string()).unwrap_or_default();
-            assert!(message.contains("--network-hull-margin-px"), "{bad}: {message}");
-        }
-        let mut json = serde_json::to_value(BakeConfig::default()).unwrap_or_default();
-        if let Some(map) = json.as_object_mut() {
-            map.remove("network_hull_margin_px");
-            map.remove("no_network_hull_carve");
-        }
-        let read: BakeConfig = serde_json::from_value(json).unwrap_or_else(|e| panic!("{e}"));
-        assert_eq!(read.network_hull_margin_px, DEFAULT_NETWORK_HULL_MARGIN_PX);
-        assert!(!read.no_network_hull_carve);
     }
 }

@@ -24,13 +24,12 @@
 //!    transport toward many outgoing directions, fitted per voxel on lobes of low-order
 //!    spherical harmonics (fixed or learned per asset) and a small view basis; kept only
 //!    where it gains on the judging views (format 1.2).
-//! 8. **Judging and showing** a bake: [`eval`] scores renders against ground truth;
-//!    [`demo`] runs the whole pipeline on a built-in procedural head (`nelf demo`).
+//! 8. **Judging** a bake: [`eval`] scores renders against ground truth (`nelf demo`,
+//!    in `nelf-pipeline`, shows the whole path on a built-in procedural head).
 
 pub mod capture_in;
 pub mod choose;
 pub mod config;
-pub mod demo;
 pub mod error;
 pub mod eval;
 pub mod grid;
@@ -47,10 +46,7 @@ pub mod view;
 
 pub use capture_in::{CaptureFormat, CaptureLoadOptions, LoadedCapture, load_capture};
 pub use choose::{ChoiceArgs, ChoiceReport, bake_capture_to_target};
-pub use config::{
-    BakeConfig, DEFAULT_NETWORK_SKIN_MM, DEFAULT_SHADING_PRIOR_MM, DEFAULT_SHADING_PRIOR_WEIGHT,
-    EncodingChoice, ShellPlacement, TraceOverrides, ViewPolicyChoice,
-};
+pub use config::{BakeConfig, EncodingChoice, ShellPlacement, TraceOverrides, ViewPolicyChoice};
 pub use error::BakeError;
 pub use jobs::{
     CapturePlan, bake_capture, bake_capture_field, bake_mesh, capture_field_job, mesh_cameras, plan_capture,

@@ -5,6 +5,8 @@
 //! * [`measure`]: scoring an asset (PSNR, SSIM, ꟻLIP, baseline) and timing it.
 //! * [`pareto`]: `nelf eval pareto`, resolution × rank × encoding against accuracy.
 //! * [`stability`]: `nelf eval stability`, accuracy along axes where methods fail.
+//! * [`network`]: `nelf eval network`, the NeLF network and its bake against the
+//!   ground truth on held-out captures (through `nelf-pipeline`).
 //! * [`error`]: the errors.
 //! * [`front`]: Pareto fronts of cost against quality.
 //! * [`perturb`]: the stability axes' building blocks (pose noise, mask edits, a sun
@@ -16,6 +18,7 @@ pub mod error;
 pub mod front;
 pub mod input;
 pub mod measure;
+pub mod network;
 pub mod pareto;
 pub mod perturb;
 pub mod report;
@@ -23,5 +26,6 @@ pub mod rows;
 pub mod stability;
 
 pub use error::{EvalError, Result};
+pub use network::{NetworkEvalConfig, TargetScores, run_network};
 pub use pareto::{ParetoConfig, ParetoResults, run_pareto};
 pub use stability::{StabilityConfig, StabilityResults, run_stability};

@@ -17,11 +17,10 @@
 //! `<out>.render.json`.
 //!
 //! `--field CAPTURE_DIR [--weights W.safetensors]` renders straight from the NeLF
-//! network (the shipped one by default) over a capture instead of an asset (`nelf_field`: coarse + fine
-//! hierarchical sampling inside the head sphere, visual-hull pruning): slow, and the
-//! reference a bake of that capture must match. The lighting is projected into the
-//! network's light frame; `--estimated-light` uses the network's own estimate of the
-//! capture's lighting; orbits circle the visual hull's box.
+//! network (the shipped one by default) over a capture instead of an asset
+//! (`nelf_pipeline::render_field`): slow, and the reference a bake of that capture
+//! must match; `--estimated-light` uses the network's own estimate of the capture's
+//! lighting; orbits circle the visual hull's box.
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -143,19 +142,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     };
     let render_seconds = start.elapsed().as_secs_f64();
 
-    match output {
-        OutputKind::Png => nelf_scene::image_io::write_png_srgb(
-            &args.out,
-            image.width,
-            image.height,
-            &image.rgb,
-            args.exposure,
-        ),
-        OutputKind::Exr => {
-            nelf_scene::image_io::write_exr_rgb(&args.out, image.width, image.height, &image.rgb)
-        }
-    }
-    .with_context(|| format!("cannot write {}", args.out.display()))?;
+    output.write(&args.out, image.width, image.height, &image.rgb, args.exposure)?;
     let record = RenderRecord {
         config: args,
         camera: camera_to_json(&camera),
@@ -218,94 +205,35 @@ fn render_gpu(
 }
 
 /// `--field CAPTURE [--weights W]`: renders every pixel straight from the NeLF network
-/// (`nelf_field::render::render_image`: coarse + fine hierarchical sampling, rays
-/// through pixel centres, bounded by the head sphere) under the lighting projected
-/// into the network's light frame. Orbits circle the field's hull box.
+/// (`nelf_pipeline::render_field`), writes it and its record.
 fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyhow::Result<()> {
-    use nelf_field::capture::{default_net_from_world, load_capture_dir_for_model};
-    use nelf_field::render::{ImageSettings, Sampling, render_image};
-    use nelf_scene::field::FieldSource;
-
-    let start = Instant::now();
-    let device = nelf_field::default_device();
-    let (model, _) = nelf_field::shipped::load_or_shipped(
-        args.weights.as_deref(),
-        nelf_field::NelfConfig::for_device(&device),
-        &device,
-    )
-    .context("loading the network's weights")?;
-    let (capture, description) = load_capture_dir_for_model(capture_dir, default_net_from_world(), &model)
-        .with_context(|| format!("loading the capture {}", capture_dir.display()))?;
-    let field = nelf_field::NelfField::new(model, &capture).context("encoding the capture")?;
-    let field = super::bake::in_capture_light_units(
-        field,
-        Some(&description),
+    let rendered = nelf_pipeline::render_field(&nelf_pipeline::FieldRenderRequest {
         capture_dir,
-        if args.no_source_calibration {
-            super::bake::SourceFit::None
-        } else {
-            super::bake::SourceFit::Normalised(Some(nelf_field::prior::ShadingPrior::default()))
-        },
-    )?;
-    let (lo, hi) = field.bounds();
-    let (camera, capture_envmap) = resolve_camera(&args.view, (lo.as_dvec3(), hi.as_dvec3()))?;
-    let world_from_light = field.world_from_light();
-    let (light, light_name) = if args.estimated_light {
-        (
-            field.source_light()?,
-            "the network's estimate of the capture's lighting".to_string(),
-        )
-    } else {
-        let (env, name) = args.lighting.load(capture_envmap.as_deref())?;
-        (
-            nelf_format::conventions::project_envmap(
-                &env,
-                args.lighting.world_from_env().transpose() * world_from_light,
-            )?,
-            name,
-        )
-    };
-    let net_light = field.net_light(&light)?;
-    let load_seconds = start.elapsed().as_secs_f64();
-
-    let start = Instant::now();
-    let settings = ImageSettings {
-        head_centre: capture.head_centre_net(),
-        sampling: args.field_seed.map_or(Sampling::Stratified, Sampling::Random),
-        ..ImageSettings::default()
-    };
-    let progress = indicatif::ProgressBar::new(0);
-    let image = render_image(
-        field.model(),
-        field.encoded(),
-        &capture.net_camera(&camera),
-        &net_light,
-        &settings,
-        Some(&progress),
-    )?;
-    progress.finish_and_clear();
-    let render_seconds = start.elapsed().as_secs_f64();
+        weights: args.weights.as_deref(),
+        estimated_light: args.estimated_light,
+        no_source_calibration: args.no_source_calibration,
+        seed: args.field_seed,
+        view: &args.view,
+        lighting: &args.lighting,
+    })?;
+    let image = &rendered.image;
     let (width, height) = (image.width as u32, image.height as u32);
-    match output {
-        OutputKind::Png => {
-            nelf_scene::image_io::write_png_srgb(&args.out, width, height, &image.rgb, args.exposure)
-        }
-        OutputKind::Exr => nelf_scene::image_io::write_exr_rgb(&args.out, width, height, &image.rgb),
-    }
-    .with_context(|| format!("cannot write {}", args.out.display()))?;
+    output.write(&args.out, width, height, &image.rgb, args.exposure)?;
     let record = serde_json::json!({
         "config": args,
-        "camera": camera_to_json(&camera),
-        "envmap": light_name,
-        "device": format!("nelf-network ({})", nelf_field::device_name(&device)),
-        "world_from_light": world_from_light.to_cols_array(),
-        "load_seconds": load_seconds,
-        "render_seconds": render_seconds,
+        "camera": camera_to_json(&rendered.camera),
+        "envmap": rendered.light_name,
+        "device": format!("nelf-network ({})", rendered.device),
+        "world_from_light": rendered.world_from_light.to_cols_array(),
+        "load_seconds": rendered.load_seconds,
+        "render_seconds": rendered.render_seconds,
     });
     super::save_record(&args.out, "render", &record)?;
     println!(
-        "rendered {width}×{height} from the NeLF network over {} (lighting: {light_name}) in {render_seconds:.1} s -> {}",
+        "rendered {width}×{height} from the NeLF network over {} (lighting: {}) in {:.1} s -> {}",
         capture_dir.display(),
+        rendered.light_name,
+        rendered.render_seconds,
         args.out.display()
     );
     Ok(())
@@ -330,5 +258,22 @@ impl OutputKind {
             Some("exr") => Ok(Self::Exr),
             _ => bail!("output {} must end in .png or .exr", path.display()),
         }
+    }
+
+    /// Writes `rgb` (`width × height`, linear) to `path`: sRGB scaled by
+    /// `2^exposure` for PNG, the linear radiance for EXR.
+    fn write(
+        self,
+        path: &Path,
+        width: u32,
+        height: u32,
+        rgb: &[[f32; 3]],
+        exposure: f32,
+    ) -> anyhow::Result<()> {
+        match self {
+            Self::Png => nelf_scene::image_io::write_png_srgb(path, width, height, rgb, exposure),
+            Self::Exr => nelf_scene::image_io::write_exr_rgb(path, width, height, rgb),
+        }
+        .with_context(|| format!("cannot write {}", path.display()))
     }
 }

@@ -3,14 +3,18 @@
 //! 1. A synthetic capture of a procedural head (`nelf_scene::synth`): source views
 //!    around a frontal one, masks, cameras, ground-truth lighting, and held-aside
 //!    target views under other lighting.
-//! 2. A bake of that capture (`crate::jobs::bake_capture`): visual hull, sparse
+//! 2. A bake of that capture (`nelf_bake::bake_capture`): visual hull, sparse
 //!    bricks, the ground-truth field, weighted PCA with the rank chosen per scene,
 //!    quantization, one `.nelf` file.
 //! 3. A turntable of the asset under several lightings, rendered by the reference
 //!    renderer (`nelf-render`): relighting is the env map projected onto the PCA
 //!    basis, so each lighting costs K × 3 numbers.
 //! 4. Side-by-sides at the target views (novel view, novel light): ground truth |
-//!    baked | |difference| × 4, with PSNR and SSIM ([`crate::eval`]).
+//!    baked | |difference| × 4, with PSNR and SSIM (`nelf_bake::eval`).
+//! 5. Unless left out, the same capture baked with the shipped NeLF network
+//!    (`nelf_field::shipped`; no view-dependent part: the network's transport is
+//!    evaluated toward the mean camera), scored at the same targets beside the
+//!    ground-truth bake ([`NetworkDemo`], `demo_network.json`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -26,14 +30,15 @@ use nelf_scene::image_io::write_png_srgb;
 use nelf_scene::synth::{SynthConfig, write_synthetic_capture};
 use serde::{Deserialize, Serialize};
 
-use crate::config::BakeConfig;
-use crate::error::{BakeError, Result};
-use crate::eval::{ViewScore, data_range, read_linear_rgb, score_view};
-use crate::jobs::bake_capture;
-use crate::pipeline::{BakeReport, write_bake};
-use crate::progress::Progress;
-use crate::source::GroundTruth;
-use crate::{CaptureLoadOptions, load_capture};
+use nelf_bake::eval::{ViewScore, data_range, read_linear_rgb, score_view};
+use nelf_bake::{
+    BakeConfig, BakeReport, CaptureLoadOptions, GroundTruth, LoadedCapture, Progress, ViewChoice,
+    bake_capture, load_capture,
+};
+
+use crate::config::{PipelineConfig, write_bake};
+use crate::error::{Context as _, PipelineError, Result};
+use crate::network_bake::bake_network;
 
 /// Settings of `nelf demo`; saved as `demo_config.json` in the output folder.
 #[derive(Debug, Clone, PartialEq, clap::Args, Serialize, Deserialize)]
@@ -121,12 +126,9 @@ pub struct DemoReport {
 }
 
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
-    let text = serde_json::to_string_pretty(value).map_err(|e| BakeError::Json {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    })?;
+    let text = serde_json::to_string_pretty(value)?;
     nelf_format::atomic::write_bytes_atomically(path, (text + "\n").as_bytes()).map_err(|source| {
-        BakeError::Io {
+        PipelineError::Io {
             path: path.to_path_buf(),
             source,
         }
@@ -134,7 +136,7 @@ fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
 }
 
 fn create_dir(path: &Path) -> Result<()> {
-    std::fs::create_dir_all(path).map_err(|source| BakeError::Io {
+    std::fs::create_dir_all(path).map_err(|source| PipelineError::Io {
         path: path.to_path_buf(),
         source,
     })
@@ -188,9 +190,47 @@ pub fn side_by_side(
     )?)
 }
 
-/// Runs the demo into `out_dir`. Progress bars go to standard error when `progress`
-/// is visible.
-pub fn run_demo(config: &DemoConfig, out_dir: &Path, progress: Progress) -> Result<DemoReport> {
+/// What the demo wrote and measured: the ground-truth part and, unless left out, the
+/// network's.
+#[derive(Debug, Clone)]
+pub struct DemoRun {
+    /// Steps 1-4 (`demo_report.json`).
+    pub report: DemoReport,
+    /// Step 5 (`demo_network.json`); `None` when left out.
+    pub network: Option<NetworkDemo>,
+}
+
+/// The demo's capture baked with the shipped network, scored at the targets.
+#[derive(Debug, Clone)]
+pub struct NetworkDemo {
+    /// The network's asset.
+    pub asset: PathBuf,
+    /// Its bake's report.
+    pub bake: BakeReport,
+    /// Seconds loading, baking and writing it.
+    pub bake_secs: f64,
+    /// The weights' name.
+    pub weights: &'static str,
+    /// Side-by-side images at the target views (ground truth | network bake | |diff|×4).
+    pub comparisons: Vec<PathBuf>,
+    /// Its scores at the target views (the ground-truth bake's are the report's).
+    pub scores: Vec<ViewScore>,
+}
+
+/// Runs the demo into `out_dir`, the network's step too when `network`. Progress
+/// bars go to standard error when `progress` is visible.
+pub fn run_demo(config: &DemoConfig, out_dir: &Path, progress: Progress, network: bool) -> Result<DemoRun> {
+    let report = run_ground_truth(config, out_dir, progress)?;
+    let network = if network {
+        Some(network_step(config, &report, progress)?)
+    } else {
+        None
+    };
+    Ok(DemoRun { report, network })
+}
+
+/// Steps 1-4: capture, the ground truth's bake, turntables, comparisons.
+fn run_ground_truth(config: &DemoConfig, out_dir: &Path, progress: Progress) -> Result<DemoReport> {
     create_dir(out_dir)?;
     write_json(&out_dir.join("demo_config.json"), config)?;
 
@@ -222,7 +262,7 @@ pub fn run_demo(config: &DemoConfig, out_dir: &Path, progress: Progress) -> Resu
     };
     let mut output = bake_capture(&capture, &truth, &bake_config, &progress)?;
     let asset_path = out_dir.join("head.nelf");
-    write_bake(&mut output, &bake_config, &asset_path)?;
+    write_bake(&mut output, &PipelineConfig::from(bake_config), &asset_path)?;
     let bake_secs = t.elapsed().as_secs_f64();
     // Render what a user of the file gets: the asset as read back.
     let asset = read_asset(&asset_path)?;
@@ -315,4 +355,73 @@ pub fn run_demo(config: &DemoConfig, out_dir: &Path, progress: Progress) -> Resu
     };
     write_json(&out_dir.join("demo_report.json"), &report)?;
     Ok(report)
+}
+
+/// Step 5: the demo's capture baked with the shipped network (no view-dependent part:
+/// the network's transport is evaluated toward the mean camera), scored at the
+/// targets beside the ground-truth bake; `demo_network.json` records it.
+fn network_step(config: &DemoConfig, report: &DemoReport, progress: Progress) -> Result<NetworkDemo> {
+    let start = Instant::now();
+    let capture = load_capture(&report.capture_dir, &CaptureLoadOptions::default())
+        .with_context(|| format!("loading {}", report.capture_dir.display()))?;
+    let config = PipelineConfig::from(BakeConfig {
+        resolution: config.resolution,
+        view_dependence: ViewChoice::Off,
+        ..BakeConfig::default()
+    });
+    let mut output = bake_network(&capture, None, &config, progress)
+        .context("baking the demo's capture with the shipped network")?;
+    let asset_path = report.out_dir.join("head_network.nelf");
+    write_bake(&mut output, &config, &asset_path)
+        .with_context(|| format!("writing {}", asset_path.display()))?;
+    let bake_secs = start.elapsed().as_secs_f64();
+    let asset = read_asset(&asset_path).with_context(|| format!("reading {}", asset_path.display()))?;
+    let (comparisons, scores) = network_comparisons(&capture, &asset, report)?;
+    let weights = nelf_field::shipped::SHIPPED_WEIGHTS_NAME;
+    let summary = serde_json::json!({
+        "weights": weights,
+        "asset": asset_path,
+        "bake": output.report,
+        "bake_secs": bake_secs,
+        "scores": scores,
+        "ground_truth_bake_scores": report.scores,
+    });
+    write_json(&report.out_dir.join("demo_network.json"), &summary)?;
+    Ok(NetworkDemo {
+        asset: asset_path,
+        bake: output.report,
+        bake_secs,
+        weights,
+        comparisons,
+        scores,
+    })
+}
+
+/// The network's asset at the capture's targets: side-by-sides and scores.
+fn network_comparisons(
+    capture: &LoadedCapture,
+    asset: &nelf_format::Asset,
+    report: &DemoReport,
+) -> Result<(Vec<PathBuf>, Vec<ViewScore>)> {
+    let (mut comparisons, mut scores) = (Vec::new(), Vec::new());
+    if let Some(description) = capture.description() {
+        for target in &description.targets {
+            let env = load_envmap(target.envmap_path(&report.capture_dir))?;
+            let (_, _, truth) = read_linear_rgb(&target.image_path(&report.capture_dir))?;
+            let (score, image) = score_view(asset, &target.camera, &env, &truth, &target.name)?;
+            let path = report
+                .out_dir
+                .join(format!("compare_network_{}.png", target.name));
+            side_by_side(
+                &path,
+                &target.camera,
+                &truth,
+                &image.rgb,
+                (0.6 / data_range(&truth)).log2(),
+            )?;
+            comparisons.push(path);
+            scores.push(score);
+        }
+    }
+    Ok((comparisons, scores))
 }
