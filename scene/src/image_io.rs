@@ -32,6 +32,50 @@ fn size_error(path: &Path, width: u32, height: u32, len: usize) -> SceneError {
     }
 }
 
+/// The two kinds of image a render is written as, chosen by the file's extension.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RenderImageKind {
+    /// `.png`: 8-bit sRGB, scaled by `2^exposure` and clamped ([`write_png_srgb`]).
+    Png,
+    /// `.exr`: the linear radiance as rendered, exposure not applied ([`write_exr_rgb`]).
+    Exr,
+}
+
+impl RenderImageKind {
+    /// The kind `path`'s extension names (case-insensitive), or an error naming the
+    /// file: checked before anything is rendered.
+    pub fn of_path(path: &Path) -> Result<Self, SceneError> {
+        match path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase)
+            .as_deref()
+        {
+            Some("png") => Ok(Self::Png),
+            Some("exr") => Ok(Self::Exr),
+            _ => Err(SceneError::UnsupportedExtension {
+                path: path.to_path_buf(),
+                expected: ".png or .exr",
+            }),
+        }
+    }
+
+    /// Writes linear RGB (`width × height`) to `path` as this kind.
+    pub fn write(
+        self,
+        path: &Path,
+        width: u32,
+        height: u32,
+        rgb: &[[f32; 3]],
+        exposure_stops: f32,
+    ) -> Result<(), SceneError> {
+        match self {
+            Self::Png => write_png_srgb(path, width, height, rgb, exposure_stops),
+            Self::Exr => write_exr_rgb(path, width, height, rgb),
+        }
+    }
+}
+
 /// Writes linear RGB radiance as a 32-bit float OpenEXR file.
 pub fn write_exr_rgb(
     path: impl AsRef<Path>,

@@ -520,6 +520,47 @@ pub fn world_from_env(rotate_deg: f64) -> DMat3 {
     rotation_y(rotate_deg.to_radians())
 }
 
+/// One image of an asset as `nelf render` frames it: the camera, the lighting and the
+/// rank, resolved from the options against the asset.
+#[derive(Debug, Clone)]
+pub struct AssetShot {
+    /// The camera ([`resolve_camera`] about the asset's box).
+    pub camera: PinholeCamera,
+    /// The environment map ([`LightingArgs::load`]).
+    pub env: LatLong,
+    /// Where the map came from, for records and messages.
+    pub envmap_name: String,
+    /// The map's rotation into the world ([`LightingArgs::world_from_env`]).
+    pub world_from_env: DMat3,
+    /// The PCA rank used ([`checked_rank`]; `None`: all).
+    pub rank: Option<usize>,
+}
+
+/// Resolves `view`, `lighting` and `rank` for one image of `asset`: the rank checked
+/// against the asset's, the camera about the asset's box (or from a camera file or a
+/// capture's view), the lighting from `--envmap` or the capture view's own map.
+pub fn asset_shot(
+    asset: &nelf_format::Asset,
+    view: &CameraArgs,
+    lighting: &LightingArgs,
+    rank: Option<usize>,
+) -> Result<AssetShot, ShotError> {
+    let rank = checked_rank(rank, asset.rank())?;
+    let asset_box = (
+        DVec3::from_array(asset.grid.bbox_min_m),
+        DVec3::from_array(asset.grid.bbox_max_m()),
+    );
+    let (camera, capture_envmap) = resolve_camera(view, asset_box)?;
+    let (env, envmap_name) = lighting.load(capture_envmap.as_deref())?;
+    Ok(AssetShot {
+        camera,
+        env,
+        envmap_name,
+        world_from_env: lighting.world_from_env(),
+        rank,
+    })
+}
+
 /// `rank` (`--rank K`: the first K PCA components) checked against an asset's PCA
 /// rank: `None` (all) passes, `Some(k)` needs `1 ≤ k ≤ asset_rank`.
 pub fn checked_rank(rank: Option<usize>, asset_rank: usize) -> Result<Option<usize>, ShotError> {

@@ -9,6 +9,7 @@ pub mod export;
 pub mod inspect;
 pub mod light;
 pub mod render;
+pub mod render_field;
 pub mod train;
 pub mod view;
 

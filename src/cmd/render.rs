@@ -22,15 +22,14 @@
 //! must match; `--estimated-light` uses the network's own estimate of the capture's
 //! lighting; orbits circle the visual hull's box.
 
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::time::Instant;
 
-use anyhow::{Context, bail};
-use glam::{DMat3, DVec3};
-use nelf_format::conventions::{LatLong, PinholeCamera};
-use nelf_format::{Asset, read_asset};
-use nelf_render::{Image, MarchSettings, render_asset};
-use nelf_scene::shot::{CameraArgs, CameraJson, LightingArgs, camera_to_json, checked_rank, resolve_camera};
+use anyhow::Context;
+use nelf_format::read_asset;
+use nelf_render::{MarchSettings, render_asset};
+use nelf_scene::image_io::RenderImageKind;
+use nelf_scene::shot::{CameraArgs, CameraJson, LightingArgs, asset_shot, camera_to_json};
 use serde::{Deserialize, Serialize};
 
 /// Options of `nelf render`.
@@ -108,7 +107,7 @@ struct RenderRecord<'a> {
 
 /// Runs `nelf render`.
 pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
-    let output = OutputKind::of(&args.out)?;
+    let output = RenderImageKind::of_path(&args.out)?;
     let settings = MarchSettings {
         step_voxels: args.step_voxels,
         min_transmittance: args.min_transmittance,
@@ -116,7 +115,7 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     };
     settings.validate()?;
     if let Some(capture) = &args.field {
-        return run_field(args, capture, output);
+        return super::render_field::run(args, capture, output);
     }
     let start = Instant::now();
     let asset_path = args
@@ -124,30 +123,39 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         .as_ref()
         .context("an asset (or --field CAPTURE) is required")?;
     let asset = read_asset(asset_path).with_context(|| format!("cannot read {}", asset_path.display()))?;
-    let rank = checked_rank(args.rank, asset.rank())?;
-    let asset_box = (
-        DVec3::from_array(asset.grid.bbox_min_m),
-        DVec3::from_array(asset.grid.bbox_max_m()),
-    );
-    let (camera, capture_envmap) = resolve_camera(&args.view, asset_box)?;
-    let (env, envmap_name) = args.lighting.load(capture_envmap.as_deref())?;
-    let world_from_env = args.lighting.world_from_env();
+    let shot = asset_shot(&asset, &args.view, &args.lighting, args.rank)?;
     let load_seconds = start.elapsed().as_secs_f64();
 
     let start = Instant::now();
     let image = if args.gpu {
-        render_gpu(&asset, &camera, &env, world_from_env, rank, settings)?
+        nelf_viewer::render_asset_gpu(
+            &asset,
+            &shot.camera,
+            &shot.env,
+            shot.world_from_env,
+            shot.rank,
+            settings,
+        )?
     } else {
-        render_cpu(&asset, &camera, &env, world_from_env, rank, settings)?
+        render_asset(
+            &asset,
+            &shot.camera,
+            &shot.env,
+            shot.world_from_env,
+            shot.rank,
+            &settings,
+        )?
     };
     let render_seconds = start.elapsed().as_secs_f64();
 
-    output.write(&args.out, image.width, image.height, &image.rgb, args.exposure)?;
+    output
+        .write(&args.out, image.width, image.height, &image.rgb, args.exposure)
+        .with_context(|| format!("cannot write {}", args.out.display()))?;
     let record = RenderRecord {
         config: args,
-        camera: camera_to_json(&camera),
-        envmap: envmap_name.clone(),
-        rank_used: rank.unwrap_or(asset.rank()),
+        camera: camera_to_json(&shot.camera),
+        envmap: shot.envmap_name.clone(),
+        rank_used: shot.rank.unwrap_or(asset.rank()),
         voxels: asset.voxel_count(),
         device: if args.gpu { "gpu" } else { "cpu" },
         load_seconds,
@@ -155,125 +163,15 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
     };
     super::save_record(&args.out, "render", &record)?;
     println!(
-        "rendered {}×{} (rank {} of {}, {} voxels, lighting: {envmap_name}) in {render_seconds:.3} s on the {} -> {}",
+        "rendered {}×{} (rank {} of {}, {} voxels, lighting: {}) in {render_seconds:.3} s on the {} -> {}",
         image.width,
         image.height,
         record.rank_used,
         asset.rank(),
         asset.voxel_count(),
+        shot.envmap_name,
         if args.gpu { "GPU" } else { "CPU" },
         args.out.display()
     );
     Ok(())
-}
-
-/// The CPU path (the reference renderer); [`render_gpu`] sits beside it.
-fn render_cpu(
-    asset: &Asset,
-    camera: &PinholeCamera,
-    env: &LatLong,
-    world_from_env: DMat3,
-    rank: Option<usize>,
-    settings: MarchSettings,
-) -> anyhow::Result<Image> {
-    Ok(render_asset(asset, camera, env, world_from_env, rank, &settings)?)
-}
-
-/// The GPU path (`nelf_viewer`): the same camera, lighting, rank and march settings,
-/// no jitter, read back as the same premultiplied linear image. The time includes
-/// creating the device and uploading the asset.
-fn render_gpu(
-    asset: &Asset,
-    camera: &PinholeCamera,
-    env: &LatLong,
-    world_from_env: DMat3,
-    rank: Option<usize>,
-    settings: MarchSettings,
-) -> anyhow::Result<Image> {
-    let mut gpu = nelf_viewer::GpuRenderer::new_headless()?;
-    gpu.load_asset(asset)?;
-    gpu.set_lighting(env, world_from_env)?;
-    gpu.set_rank(rank);
-    let view = nelf_viewer::ViewSettings {
-        march: settings,
-        jitter: false,
-        frame_index: 0,
-        view: nelf_viewer::MarchView::Shaded,
-        pass: gpu.preferred_march_pass(),
-    };
-    Ok(gpu.render(camera, &view)?)
-}
-
-/// `--field CAPTURE [--weights W]`: renders every pixel straight from the NeLF network
-/// (`nelf_pipeline::render_field`), writes it and its record.
-fn run_field(args: &RenderArgs, capture_dir: &Path, output: OutputKind) -> anyhow::Result<()> {
-    let rendered = nelf_pipeline::render_field(&nelf_pipeline::FieldRenderRequest {
-        capture_dir,
-        weights: args.weights.as_deref(),
-        estimated_light: args.estimated_light,
-        no_source_calibration: args.no_source_calibration,
-        seed: args.field_seed,
-        view: &args.view,
-        lighting: &args.lighting,
-    })?;
-    let image = &rendered.image;
-    let (width, height) = (image.width as u32, image.height as u32);
-    output.write(&args.out, width, height, &image.rgb, args.exposure)?;
-    let record = serde_json::json!({
-        "config": args,
-        "camera": camera_to_json(&rendered.camera),
-        "envmap": rendered.light_name,
-        "device": format!("nelf-network ({})", rendered.device),
-        "world_from_light": rendered.world_from_light.to_cols_array(),
-        "load_seconds": rendered.load_seconds,
-        "render_seconds": rendered.render_seconds,
-    });
-    super::save_record(&args.out, "render", &record)?;
-    println!(
-        "rendered {width}×{height} from the NeLF network over {} (lighting: {}) in {:.1} s -> {}",
-        capture_dir.display(),
-        rendered.light_name,
-        rendered.render_seconds,
-        args.out.display()
-    );
-    Ok(())
-}
-
-/// Output formats, chosen by extension.
-#[derive(Debug, Clone, Copy)]
-enum OutputKind {
-    Png,
-    Exr,
-}
-
-impl OutputKind {
-    fn of(path: &Path) -> anyhow::Result<Self> {
-        match path
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase)
-            .as_deref()
-        {
-            Some("png") => Ok(Self::Png),
-            Some("exr") => Ok(Self::Exr),
-            _ => bail!("output {} must end in .png or .exr", path.display()),
-        }
-    }
-
-    /// Writes `rgb` (`width × height`, linear) to `path`: sRGB scaled by
-    /// `2^exposure` for PNG, the linear radiance for EXR.
-    fn write(
-        self,
-        path: &Path,
-        width: u32,
-        height: u32,
-        rgb: &[[f32; 3]],
-        exposure: f32,
-    ) -> anyhow::Result<()> {
-        match self {
-            Self::Png => nelf_scene::image_io::write_png_srgb(path, width, height, rgb, exposure),
-            Self::Exr => nelf_scene::image_io::write_exr_rgb(path, width, height, rgb),
-        }
-        .with_context(|| format!("cannot write {}", path.display()))
-    }
 }

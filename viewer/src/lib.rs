@@ -31,5 +31,5 @@ pub use atlas::{GpuMemory, RelightView};
 pub use error::ViewerError;
 pub use gpu::{
     AssetInfo, DEFAULT_REPLAY_BUDGET_BYTES, DisplayImage, DisplaySettings, GpuRenderer, MarchPass, MarchView,
-    ReflectionInfo, RelightKind, ToneMap, ViewInfo, ViewSettings,
+    ReflectionInfo, RelightKind, ToneMap, ViewInfo, ViewSettings, render_asset_gpu,
 };

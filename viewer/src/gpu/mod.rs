@@ -59,6 +59,7 @@ use self::march::MarchPipelines;
 pub use self::march::{MarchPass, MarchView, ViewSettings};
 pub use self::marks::RelightKind;
 use self::marks::{GpuMarks, MarkPipelines};
+pub use self::readback::render_asset_gpu;
 use self::reflect::{GpuReflection, ReflectPipeline};
 use self::relight::RelightPipeline;
 pub use self::replay::DEFAULT_REPLAY_BUDGET_BYTES;

@@ -212,3 +212,30 @@ impl GpuRenderer {
         bytemuck::try_pod_read_unaligned(&bytes).map_err(|e| ViewerError::Readback(e.to_string()))
     }
 }
+
+/// Renders one image of `asset` on a new headless device (`nelf render --gpu`): the
+/// same camera, lighting (`env` turned by `world_from_env`), rank and march settings as
+/// the CPU reference (`nelf_render::render_asset`), no jitter, read back as the same
+/// premultiplied linear [`Image`]. Creating the device and uploading the asset are
+/// part of the call.
+pub fn render_asset_gpu(
+    asset: &nelf_format::Asset,
+    camera: &PinholeCamera,
+    env: &nelf_format::conventions::LatLong,
+    world_from_env: glam::DMat3,
+    rank: Option<usize>,
+    march: nelf_render::MarchSettings,
+) -> Result<Image, ViewerError> {
+    let mut gpu = GpuRenderer::new_headless()?;
+    gpu.load_asset(asset)?;
+    gpu.set_lighting(env, world_from_env)?;
+    gpu.set_rank(rank);
+    let view = ViewSettings {
+        march,
+        jitter: false,
+        frame_index: 0,
+        view: super::MarchView::Shaded,
+        pass: gpu.preferred_march_pass(),
+    };
+    gpu.render(camera, &view)
+}
