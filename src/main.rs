@@ -48,7 +48,10 @@ fn main() -> anyhow::Result<()> {
         Command::Capture(args) => cmd::capture::run(&args),
         Command::Bake(args) => cmd::bake::run(&args),
         Command::Light(args) => cmd::light::run(&args),
-        Command::Render(args) => cmd::render::run(&args),
+        Command::Render(args) => match &args.field {
+            Some(capture) => cmd::render_field::run(&args, capture),
+            None => cmd::render::run(&args),
+        },
         Command::Eval(args) => cmd::eval::run(&args),
         Command::Export(args) => cmd::export::run(&args),
         Command::View(args) => cmd::view::run(&args),

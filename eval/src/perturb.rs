@@ -16,7 +16,7 @@
 //! the caller. The capture edits rewrite files in place, atomically
 //! (`nelf_format::atomic`): run them on a copy of the capture.
 //!
-//! Conventions are the project's (`nelf_format::conventions`, DESIGN.md): metres,
+//! Conventions are the project's (`nelf_format::conventions`, `docs/CONVENTIONS.md`): metres,
 //! OpenCV cameras with world-to-camera `x_cam = R·x_world + t`, lat-long maps in the
 //! world frame with row 0 at the zenith (+y) and texel solid angles
 //! `Ω_i = (2π/W)(cos θ_i − cos θ_{i+1})`.

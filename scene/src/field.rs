@@ -3,7 +3,7 @@
 //!
 //! [`FieldSource`] is what the baker consumes: at any batch of points a volume
 //! density `σ` (1/m) and a light-transport vector `T` (384 floats, channel-major,
-//! solid angle folded in, DESIGN.md) for an outgoing direction given by a
+//! solid angle folded in, `docs/CONVENTIONS.md`) for an outgoing direction given by a
 //! [`ViewPolicy`]. The NeLF network implements it in another crate; [`MeshField`]
 //! implements it exactly from a mesh, so a volume renderer and the baker have ground
 //! truth to consume:

@@ -105,8 +105,9 @@ struct RenderRecord<'a> {
     render_seconds: f64,
 }
 
-/// Runs `nelf render`.
-pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+/// The output's image kind and the march settings, checked before anything is read
+/// (`--field` renders check them too).
+pub fn checked_output_and_march(args: &RenderArgs) -> anyhow::Result<(RenderImageKind, MarchSettings)> {
     let output = RenderImageKind::of_path(&args.out)?;
     let settings = MarchSettings {
         step_voxels: args.step_voxels,
@@ -114,9 +115,12 @@ pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
         pixel_grid: args.pixel_grid,
     };
     settings.validate()?;
-    if let Some(capture) = &args.field {
-        return super::render_field::run(args, capture, output);
-    }
+    Ok((output, settings))
+}
+
+/// Runs `nelf render` of an asset (`--field` is [`super::render_field::run`]).
+pub fn run(args: &RenderArgs) -> anyhow::Result<()> {
+    let (output, settings) = checked_output_and_march(args)?;
     let start = Instant::now();
     let asset_path = args
         .asset

@@ -6,14 +6,14 @@
 use std::path::Path;
 
 use anyhow::Context;
-use nelf_scene::image_io::RenderImageKind;
 use nelf_scene::shot::camera_to_json;
 
 use super::render::RenderArgs;
 
 /// `--field CAPTURE [--weights W]`: renders every pixel straight from the NeLF network
 /// (`nelf_pipeline::render_field`), writes it and its record.
-pub fn run(args: &RenderArgs, capture_dir: &Path, output: RenderImageKind) -> anyhow::Result<()> {
+pub fn run(args: &RenderArgs, capture_dir: &Path) -> anyhow::Result<()> {
+    let (output, _) = super::render::checked_output_and_march(args)?;
     let rendered = nelf_pipeline::render_field(&nelf_pipeline::FieldRenderRequest {
         capture_dir,
         weights: args.weights.as_deref(),
