@@ -36,6 +36,7 @@ use image::DynamicImage;
 use nelf_format::capture::{CAPTURE_FILE_NAME, Capture};
 use nelf_format::colmap::read_colmap_text;
 use nelf_format::conventions::PinholeCamera;
+use nelf_format::io_error::IoResultExt;
 use nelf_scene::mesh_io::srgb_to_linear;
 use serde::{Deserialize, Serialize};
 
@@ -278,15 +279,9 @@ fn decode(path: &Path, what: &str) -> Result<DynamicImage> {
         });
     }
     image::ImageReader::open(path)
-        .map_err(|source| BakeError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?
+        .with_path(path)?
         .with_guessed_format()
-        .map_err(|source| BakeError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?
+        .with_path(path)?
         .decode()
         .map_err(|source| BakeError::Image {
             path: path.to_path_buf(),

@@ -7,6 +7,7 @@ use std::path::PathBuf;
 use nelf_format::FormatError;
 use nelf_format::capture::CaptureError;
 use nelf_format::colmap::ColmapError;
+use nelf_format::io_error::FileIoError;
 use nelf_render::RenderError;
 use nelf_scene::error::SceneError;
 use nelf_scene::field::FieldError;
@@ -16,13 +17,8 @@ use nelf_scene::synth::SynthError;
 #[derive(Debug, thiserror::Error)]
 pub enum BakeError {
     /// A file could not be read or written.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// An image or mask could not be decoded.
     #[error("{path}: {source}")]
     Image {
@@ -185,8 +181,5 @@ pub enum BakeError {
 pub type Result<T, E = BakeError> = std::result::Result<T, E>;
 
 pub(crate) fn io_error(path: impl Into<PathBuf>, source: std::io::Error) -> BakeError {
-    BakeError::Io {
-        path: path.into(),
-        source,
-    }
+    BakeError::Io(FileIoError::new(path.into(), source))
 }

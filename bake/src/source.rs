@@ -38,6 +38,7 @@ use std::path::{Path, PathBuf};
 
 use glam::{DMat3, Vec3};
 use nelf_format::conventions::{ENV_TEXELS, LT_DIM};
+use nelf_format::io_error::IoResultExt;
 use nelf_scene::bvh::{ClosestPoint, closest_point_on_triangle};
 use nelf_scene::field::{
     DensityProfile, FieldError, FieldSource, MeshField, ViewPolicy, check_batch, check_density_batch,
@@ -77,10 +78,7 @@ impl GroundTruth {
     /// Reads `dir/synth_config.json`.
     pub fn from_synth_capture(dir: &Path) -> Result<Self> {
         let path = dir.join(SYNTH_CONFIG_FILE);
-        let text = std::fs::read_to_string(&path).map_err(|source| BakeError::Io {
-            path: path.clone(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(&path).with_path(&path)?;
         let config: SynthConfig = serde_json::from_str(&text).map_err(|e| BakeError::Json {
             path: path.clone(),
             message: e.to_string(),

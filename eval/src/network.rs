@@ -19,6 +19,7 @@ use nelf_bake::{
     BakeConfig, CaptureLoadOptions, GroundTruth, Progress, ViewChoice, bake_capture, load_capture,
 };
 use nelf_field::render::{ImageSettings, Sampling, render_image};
+use nelf_format::io_error::{FileIoError, IoResultExt};
 use nelf_format::read_asset;
 use nelf_pipeline::error::{Context as _, PipelineError, Result};
 use nelf_pipeline::{
@@ -154,10 +155,7 @@ impl NetworkEvalConfig {
 /// `network.json` in `config.out`; returns what `network.json` holds.
 pub fn run_network(config: &NetworkEvalConfig, print: &mut dyn FnMut(&str)) -> Result<serde_json::Value> {
     let out = &config.out;
-    std::fs::create_dir_all(out).map_err(|source| PipelineError::Io {
-        path: out.clone(),
-        source,
-    })?;
+    std::fs::create_dir_all(out).with_path(out)?;
     let (model, weights_name) = load_network(config.weights.as_deref())?;
     let bake_config = config.bake_config();
     let split_parts = config.split_parts();
@@ -187,12 +185,8 @@ pub fn run_network(config: &NetworkEvalConfig, print: &mut dyn FnMut(&str)) -> R
         mean_of("flat_colour").unwrap_or(f64::NAN),
     ));
     let path = out.join("network.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n").map_err(|source| {
-        PipelineError::Io {
-            path: path.clone(),
-            source,
-        }
-    })?;
+    std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n")
+        .map_err(|source| PipelineError::Io(FileIoError::new(path.clone(), source)))?;
     if config.oracle_view {
         print(&format!(
             "  the network baked toward each target's own camera: {:.2} dB",

@@ -30,6 +30,7 @@ use glam::{DMat3, DVec3};
 use image::{ColorType, DynamicImage, ImageBuffer, ImageFormat, Primitive};
 use nelf_format::capture::{CAPTURE_FILE_NAME, Capture, CaptureError};
 use nelf_format::conventions::{LatLong, PinholeCamera};
+use nelf_format::io_error::FileIoError;
 use nelf_scene::envgen::{Emitter, EmitterShape, add_emitter};
 use nelf_scene::synth::{SynthConfig, Viewpoint, camera_for};
 use rand::{Rng, SeedableRng};
@@ -42,13 +43,8 @@ pub enum PerturbError {
     #[error(transparent)]
     Capture(#[from] CaptureError),
     /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// Decoding or encoding an image failed.
     #[error("{path}: {source}")]
     Image {
@@ -335,10 +331,7 @@ fn gaussian_blur(values: &[f32], width: usize, height: usize, sigma: f64) -> Vec
 
 /// Decodes an image, returning it with the format its content has.
 fn decode(path: &Path) -> Result<(DynamicImage, Option<ImageFormat>), PerturbError> {
-    let io = |source| PerturbError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
+    let io = |source| PerturbError::Io(FileIoError::new(path.to_path_buf(), source));
     let reader = image::ImageReader::open(path)
         .map_err(io)?
         .with_guessed_format()
@@ -417,10 +410,7 @@ fn write_image_atomically(
             path: path.to_path_buf(),
             source,
         },
-        None => PerturbError::Io {
-            path: path.to_path_buf(),
-            source,
-        },
+        None => PerturbError::Io(FileIoError::new(path.to_path_buf(), source)),
     })
 }
 

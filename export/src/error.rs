@@ -5,6 +5,7 @@
 use std::path::PathBuf;
 
 use nelf_format::FormatError;
+use nelf_format::io_error::FileIoError;
 use nelf_render::RenderError;
 use nelf_scene::shot::ShotError;
 
@@ -77,13 +78,8 @@ pub enum ExportError {
     #[error("engine shaders: {0}")]
     Shader(String),
     /// Reading or writing a file.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What failed.
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// The asset file could not be read, or is not a valid `.nelf` file.
     #[error("cannot read {}", .path.display())]
     ReadAsset {

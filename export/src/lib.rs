@@ -21,6 +21,8 @@ pub mod web;
 
 use std::path::Path;
 
+use nelf_format::io_error::FileIoError;
+
 pub use commands::{
     VdbExportConfig, VdbExported, VdbPreset, WebExportConfig, export_vdb, export_web, studio_envmap,
 };
@@ -31,8 +33,6 @@ pub use vdb::{Lighting, VdbOptions, VdbReport, build_vdb, encode_vdb, stored_lig
 /// Writes `bytes` to `path` atomically (`nelf_format::atomic`: the mode a plain
 /// create gives, synced, renamed), so nothing half-written ever has the final name.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
-    nelf_format::atomic::write_bytes_atomically(path, bytes).map_err(|source| ExportError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    nelf_format::atomic::write_bytes_atomically(path, bytes)
+        .map_err(|source| ExportError::Io(FileIoError::new(path.to_path_buf(), source)))
 }

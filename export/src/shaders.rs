@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 
 use naga::back::{glsl, hlsl};
 use naga::valid::{Capabilities, ValidationFlags, Validator};
+use nelf_format::io_error::IoResultExt;
 use nelf_render::wgsl::{DISPLAY_WGSL, MARCH_WGSL, REFLECT_WGSL, RELIGHT_WGSL, VIEW_WGSL, preprocess};
 use serde::Serialize;
 
@@ -298,13 +299,9 @@ pub fn write_engine_shaders(dir: &Path) -> Result<ShaderReport, ExportError> {
         if let Some(parent) = path.parent()
             && made.insert(parent.to_path_buf())
         {
-            std::fs::create_dir_all(parent).map_err(|source| ExportError::Io {
-                path: parent.to_path_buf(),
-                source,
-            })?;
+            std::fs::create_dir_all(parent).with_path(parent)?;
         }
-        nelf_format::atomic::write_bytes_atomically(&path, text.as_bytes())
-            .map_err(|source| ExportError::Io { path, source })?;
+        nelf_format::atomic::write_bytes_atomically(&path, text.as_bytes()).with_path(&path)?;
     }
     Ok(report)
 }

@@ -12,6 +12,7 @@
 use std::path::{Path, PathBuf};
 
 use nelf_format::conventions::LatLong;
+use nelf_format::io_error::FileIoError;
 
 use crate::{ExportError, write_atomic};
 
@@ -93,7 +94,7 @@ impl WebPageReport {
 pub fn write_web_page(options: &WebPageOptions, out_dir: &Path) -> Result<WebPageReport, ExportError> {
     let io = |path: &Path| {
         let path = path.to_path_buf();
-        move |source| ExportError::Io { path, source }
+        move |source| ExportError::Io(FileIoError::new(path, source))
     };
     let asset_bytes = std::fs::read(&options.asset).map_err(io(&options.asset))?;
     nelf_format::read_asset_bytes(&asset_bytes)?;

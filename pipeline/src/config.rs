@@ -6,6 +6,7 @@
 use std::path::Path;
 
 use nelf_bake::{BakeConfig, BakeOutput, sidecar_path};
+use nelf_format::io_error::FileIoError;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{PipelineError, Result};
@@ -167,10 +168,7 @@ pub fn write_bake(
     }
     let written = nelf_bake::write_bake(output, &config.bake, path)?;
     let sidecar = sidecar_path(path);
-    let io = |source| PipelineError::Io {
-        path: sidecar.clone(),
-        source,
-    };
+    let io = |source| PipelineError::Io(FileIoError::new(sidecar.clone(), source));
     let mut json: serde_json::Value = serde_json::from_slice(&std::fs::read(&sidecar).map_err(io)?)?;
     if let Some(recorded) = json.get_mut("config") {
         config.fill_in(recorded)?;

@@ -22,6 +22,7 @@ use std::time::Instant;
 use glam::{DMat3, DVec3};
 use indicatif::ProgressBar;
 use nelf_format::conventions::{LatLong, PinholeCamera, rotation_y};
+use nelf_format::io_error::FileIoError;
 use nelf_format::read_asset;
 use nelf_render::{MarchSettings, render_asset};
 use nelf_scene::envgen::{EnvGenParams, procedural_envmap};
@@ -127,19 +128,13 @@ pub struct DemoReport {
 
 fn write_json(path: &Path, value: &impl Serialize) -> Result<()> {
     let text = serde_json::to_string_pretty(value)?;
-    nelf_format::atomic::write_bytes_atomically(path, (text + "\n").as_bytes()).map_err(|source| {
-        PipelineError::Io {
-            path: path.to_path_buf(),
-            source,
-        }
-    })
+    nelf_format::atomic::write_bytes_atomically(path, (text + "\n").as_bytes())
+        .map_err(|source| PipelineError::Io(FileIoError::new(path.to_path_buf(), source)))
 }
 
 fn create_dir(path: &Path) -> Result<()> {
-    std::fs::create_dir_all(path).map_err(|source| PipelineError::Io {
-        path: path.to_path_buf(),
-        source,
-    })
+    std::fs::create_dir_all(path)
+        .map_err(|source| PipelineError::Io(FileIoError::new(path.to_path_buf(), source)))
 }
 
 /// Centre and radius of the sphere around the box of the voxels that are more

@@ -1,6 +1,8 @@
 //! Errors of the pipeline: the libraries' own, and what the pipeline was doing when
 //! one happened ([`Context`]).
 
+use nelf_format::io_error::FileIoError;
+
 /// What can go wrong between a capture and an asset.
 #[derive(Debug, thiserror::Error)]
 pub enum PipelineError {
@@ -47,13 +49,8 @@ pub enum PipelineError {
     #[error(transparent)]
     Shot(Box<nelf_scene::shot::ShotError>),
     /// Reading or writing a file failed.
-    #[error("{path}: {source}")]
-    Io {
-        /// The file.
-        path: std::path::PathBuf,
-        /// What went wrong.
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] FileIoError),
     /// Encoding JSON failed.
     #[error(transparent)]
     Json(#[from] serde_json::Error),
