@@ -14,11 +14,8 @@ use crate::view::ViewChoice;
 
 /// Samples per light texel the ground-truth field takes at most by default (a
 /// capture's images take 16). A baked vector needs fewer samples than a pixel: the
-/// PCA keeps K of its 384 dimensions and drops most of the noise. Measured on the
-/// head-and-shoulders scan (`scripts/eval_scan.sh`, 256², 8 HDRI targets, 3-voxel
-/// hollow shells): 16 / 128
-/// samples 30.08 dB in 538 s of light transport, 4 / 32 30.05 dB in 135 s, 2 / 16
-/// 29.96 dB in 67 s, 1 / 8 29.81 dB in 35 s.
+/// PCA keeps K of its 384 dimensions and drops most of the noise (the sweep that
+/// chose it: `docs/measurements/settings.md`).
 pub const FIELD_TEXEL_SAMPLES: u32 = 4;
 
 /// Indirect directions the ground-truth field takes at most by default (a
@@ -215,8 +212,8 @@ pub struct BakeConfig {
     pub max_loss_db: f64,
     /// Rank choice: the signal-to-noise ratio (dB) assumed for the unquantized grid
     /// against ground truth when the capture's lighting is unknown (no envmap in
-    /// cameras.json). The default synthetic capture measures about 13 dB at 128
-    /// voxels; 20 dB asks for more accuracy than that.
+    /// cameras.json); the default asks for more accuracy than the default synthetic
+    /// capture's grid has (`docs/measurements/settings.md`).
     #[arg(long, default_value_t = 20.0)]
     pub reference_snr_db: f64,
     /// Coefficient storage.

@@ -31,8 +31,7 @@
 //! world-lattice cell of `C` voxels share one trace, made at the triangle's point
 //! closest to the cell's centre and rescaled per colour channel to each point's
 //! own albedo (diffuse transport is proportional to it), so texture finer than a
-//! cell survives. On the head-and-shoulders scan light transport drops from 38 s to
-//! 10 s for 0.07 dB (bake/README.md).
+//! cell survives; its price in time and accuracy is measured in bake/README.md.
 
 use std::path::{Path, PathBuf};
 

@@ -55,8 +55,8 @@ pub struct PipelineConfig {
     /// Network field: leave its light transport as the network gives it. By default,
     /// when the capture names the lighting its views were taken in, the light
     /// transport is scaled by the one gain that makes the network reproduce those
-    /// views under that lighting (`nelf_field::calibrate`; +1.4 dB foreground on
-    /// held-out heads, `field/README.md`).
+    /// views under that lighting (`nelf_field::calibrate`; measured in
+    /// `field/README.md`, "Source-view calibration").
     #[arg(long)]
     #[serde(default)]
     pub no_source_calibration: bool,
@@ -64,9 +64,8 @@ pub struct PipelineConfig {
     /// normalise every view's light transport to that lighting point by point
     /// (`nelf_field::NelfField::normalised_to_sources`, instead of the one gain) and
     /// mix in a Lambertian shading prior about the normal of the network's density,
-    /// its gradient taken over this many mm (0: the one gain, no prior). Measured on
-    /// five held-out heads: foreground PSNR of the bake 22.22 dB against 19.52 with the
-    /// gain (flat colour 18.29, ground-truth bake 26.94; models/README.md).
+    /// its gradient taken over this many mm (0: the one gain, no prior). Its measured
+    /// effect on bakes of held-out heads is in `models/README.md`.
     #[arg(long, default_value_t = nelf_field::prior::DEFAULT_STEP_MM)]
     #[serde(default = "default_shading_prior_mm")]
     pub shading_prior_mm: f32,

@@ -107,10 +107,8 @@ pub struct ViewProbe {
 /// view-independent asset of PSNR `base_psnr_db`: the squared error the probe removed,
 /// scaled by `1/fraction`. An estimate, not a bound: measured, it undersells the band's
 /// fit about twice (the probe's basis comes from fewer voxels, and a voxel's correction
-/// reaches a pixel only through its neighbours' interpolation). Extrapolated +0.257,
-/// +1.665 and +0.009 dB where the band's fit gained +0.553, +2.124 and +0.016 dB (the
-/// tiny ground-truth head with sheen 0.04 and 0.3, `bake/tests/view.rs` `sheen_gains`;
-/// the shipped network on validation head h00200): hence [`PROBE_MARGIN`]. Capped at
+/// reaches a pixel only through its neighbours' interpolation; the measurements are in
+/// `docs/measurements/settings.md`): hence [`PROBE_MARGIN`]. Capped at
 /// 30 dB (99.9 % of the error removed).
 pub fn extrapolated_gain_db(base_psnr_db: f64, probe_gain_db: f64, fraction: f64) -> f64 {
     let mse = |psnr: f64| 10f64.powf(-psnr / 10.0);

@@ -17,8 +17,8 @@ const VIEW_KERNEL: f64 = 8.0;
 const VIEW_WEIGHT_FLOOR: f64 = 0.02;
 
 /// The fixed outgoing directions (a Fibonacci sphere of [`VIEW_DIRECTIONS`] points).
-/// Sampling only a cap around the capture's views was measured no better (glossy tiny
-/// head, held-aside targets: +0.64 dB against +0.88 dB for three learned lobes).
+/// Sampling only a cap around the capture's views was measured no better
+/// (`docs/measurements/settings.md`).
 pub fn sample_directions() -> Vec<Vec3> {
     let n = VIEW_DIRECTIONS as f64;
     let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
