@@ -4,7 +4,7 @@
 //!
 //! **Why**: the network's density leaves a thin halo outside the true silhouette
 //! once it is sampled on a grid of voxels about two pixels wide and box-filtered
-//! (`nelf_scene::field::VoxelFiltered`): a baked head renders up to a pixel too
+//! (`nelf_pipeline::VoxelFiltered`): a baked head renders up to a pixel too
 //! wide all round, where the network's own rendering does not. The masks bound the
 //! subject exactly: no point outside the visual hull (Laurentini 1994) can be
 //! occupied.
