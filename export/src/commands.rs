@@ -14,7 +14,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use nelf_format::conventions::LatLong;
-use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
+use nelf_scene::envgen::EnvFamily;
 use nelf_scene::shot::{LightingArgs, load_lighting};
 use serde::{Deserialize, Serialize};
 
@@ -31,13 +31,7 @@ const STUDIO_NAME: &str = "built-in studio map (procedural, seed 1)";
 /// "studio (procedural)").
 #[must_use]
 pub fn studio_envmap() -> LatLong {
-    procedural_envmap(
-        1,
-        &EnvGenParams {
-            family: Some(EnvFamily::Studio),
-            ..EnvGenParams::default()
-        },
-    )
+    nelf_scene::envgen::builtin_envmap(EnvFamily::Studio)
 }
 
 /// Target presets of [`export_vdb`].

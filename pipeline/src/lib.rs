@@ -16,7 +16,8 @@
 //! 5. **Settings** ([`config`]): the network-only options beside `nelf-bake`'s
 //!    [`nelf_bake::BakeConfig`], saved with the asset as one flat object.
 //! 6. **Showing it** ([`demo`], `nelf demo`; [`field_render`], `nelf render
-//!    --field`; [`summary`], what `nelf bake` prints).
+//!    --field`; [`summary`], what `nelf bake` prints; [`light`], the network's
+//!    estimate of a capture's lighting, `nelf light`).
 //!
 //! Dependencies run one way: `error` ← `config` ← `network` ← `adapter` ←
 //! `voxel_filter`, `split` ← `truth_split` ← `network_bake` ← `capture_bake`, `demo`.
@@ -27,6 +28,7 @@ pub mod config;
 pub mod demo;
 pub mod error;
 pub mod field_render;
+pub mod light;
 pub mod network;
 pub mod network_bake;
 pub mod split;
@@ -40,6 +42,7 @@ pub use config::{DEFAULT_NETWORK_HULL_MARGIN_PX, DEFAULT_NETWORK_SKIN_MM, Pipeli
 pub use demo::{DemoConfig, DemoReport, DemoRun, NetworkDemo, run_demo};
 pub use error::{PipelineError, Result};
 pub use field_render::{FieldRender, FieldRenderRequest, render_field};
+pub use light::{LightEstimate, LightRequest, estimate_light};
 pub use network::{
     SourceFit, capture_source_lighting, in_capture_light_units, load_network, network_field,
     network_provenance,

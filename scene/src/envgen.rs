@@ -154,6 +154,31 @@ pub struct ProceduralEnv {
     pub emitters: Vec<Emitter>,
 }
 
+/// The built-in map of `family`: its procedural map at seed 1. `nelf view`'s picker
+/// offers one per family ([`builtin_envmaps`]); `nelf export` lights with the studio one.
+pub fn builtin_envmap(family: EnvFamily) -> LatLong {
+    procedural_envmap(
+        1,
+        &EnvGenParams {
+            family: Some(family),
+            ..EnvGenParams::default()
+        },
+    )
+}
+
+/// The built-in maps, studio, outdoor and indoor ([`builtin_envmap`]), each with the
+/// name the viewer's picker shows ("studio (procedural)", …).
+pub fn builtin_envmaps() -> Vec<(String, LatLong)> {
+    [
+        ("studio (procedural)", EnvFamily::Studio),
+        ("outdoor (procedural)", EnvFamily::Outdoor),
+        ("indoor (procedural)", EnvFamily::Indoor),
+    ]
+    .into_iter()
+    .map(|(name, family)| (name.to_string(), builtin_envmap(family)))
+    .collect()
+}
+
 /// A procedural environment map for `seed` ([`procedural_env`]'s map).
 pub fn procedural_envmap(seed: u64, params: &EnvGenParams) -> LatLong {
     procedural_env(seed, params).map

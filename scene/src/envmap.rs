@@ -38,6 +38,33 @@ pub fn load_envmap(path: impl AsRef<Path>) -> Result<LatLong, SceneError> {
     decode_envmap(&bytes, kind).map_err(|e| SceneError::format(path, e.to_string()))
 }
 
+/// One file of [`envmaps_in_dir`]: its path, and its map or why it did not load.
+pub type EnvmapFile = (std::path::PathBuf, Result<LatLong, SceneError>);
+
+/// The environment maps in folder `dir` (its `.exr` and `.hdr` files, any case, in
+/// name order), each loaded ([`load_envmap`]) or with the error that stopped it, so a
+/// caller can keep the good ones and say which were skipped. An unreadable folder is
+/// an error naming it.
+pub fn envmaps_in_dir(dir: &Path) -> Result<Vec<EnvmapFile>, SceneError> {
+    let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(dir)
+        .map_err(|e| SceneError::io(dir, e))?
+        .filter_map(Result::ok)
+        .map(|e| e.path())
+        .filter(|p| {
+            p.extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("exr") || e.eq_ignore_ascii_case("hdr"))
+        })
+        .collect();
+    files.sort();
+    Ok(files
+        .into_iter()
+        .map(|path| {
+            let env = load_envmap(&path);
+            (path, env)
+        })
+        .collect())
+}
+
 /// Projects `env` (any resolution, in the world frame) into the 8 × 16 basis of a
 /// light frame equal to the world frame, after turning the environment by
 /// `rotate_y_deg` degrees about +y (right-handed; a feature at azimuth φ moves to

@@ -14,17 +14,11 @@
 //! instead. Radiance is the network's (linear, the images' scale).
 
 use std::path::PathBuf;
-use std::time::Instant;
 
 use anyhow::Context;
-use nelf_field::NelfConfig;
-use nelf_field::capture::{default_net_from_world, load_capture_dir_for_model};
-use nelf_field::light::{light_map_in_world, net_light_to_latlong};
-use nelf_field::shipped::load_or_shipped;
-use nelf_format::conventions::LatLong;
+use nelf_pipeline::{LightRequest, estimate_light};
 use nelf_scene::image_io::write_exr_rgb;
 
-/// Options of `nelf light`.
 #[derive(Debug, clap::Args)]
 pub struct LightArgs {
     /// Capture folder (cameras.json, images, masks).
@@ -48,57 +42,49 @@ pub struct LightArgs {
 }
 
 pub fn run(args: &LightArgs) -> anyhow::Result<()> {
-    let start = Instant::now();
-    let device = nelf_field::default_device();
-    let (model, weights_name) =
-        load_or_shipped(args.weights.as_deref(), NelfConfig::for_device(&device), &device)
-            .context("loading the network's weights")?;
-    let (capture, _) = load_capture_dir_for_model(&args.capture, default_net_from_world(), &model)
-        .with_context(|| format!("loading the capture {}", args.capture.display()))?;
-    let encoded = model.encode(&capture.views).context("running the encoder")?;
-    let light = net_light_to_latlong(&encoded.light().source_light)?;
-    if model.source_relative_light() {
+    let estimate = estimate_light(&LightRequest {
+        capture_dir: &args.capture,
+        weights: args.weights.as_deref(),
+        width: args.width,
+        light_frame: args.light_frame,
+    })?;
+    if estimate.source_relative {
         eprintln!(
-            "note: {weights_name} estimates lightings relative to their own power (mean radiance about 1): \
-             images cannot tell a bright head under a dim light from a dim head under a bright one"
+            "note: {} estimates lightings relative to their own power (mean radiance about 1): \
+             images cannot tell a bright head under a dim light from a dim head under a bright one",
+            estimate.weights_name
         );
     }
-    let world_from_light = capture.world_from_light();
-    let map: LatLong = if args.light_frame {
-        light.clone()
-    } else {
-        let width = args.width.max(2) as usize;
-        light_map_in_world(&light, world_from_light, width, width / 2)?
-    };
+    let map = &estimate.map;
     write_exr_rgb(&args.out, map.width() as u32, map.height() as u32, map.texels())
         .with_context(|| format!("writing {}", args.out.display()))?;
     let power = map.integral();
-    let frame = if args.light_frame { "light" } else { "world" };
     if args.json {
         let summary = serde_json::json!({
             "out": args.out,
-            "frame": frame,
+            "frame": estimate.frame,
             "width": map.width(),
             "height": map.height(),
-            "world_from_light": world_from_light.to_cols_array(),
+            "world_from_light": estimate.world_from_light.to_cols_array(),
             "power_rgb": power,
-            "views": capture.cameras.len(),
-            "image_size": [capture.views.width, capture.views.height],
-            "seconds": start.elapsed().as_secs_f64(),
-            "device": nelf_field::device_name(&device),
-            "weights": weights_name,
+            "views": estimate.views,
+            "image_size": estimate.image_size,
+            "seconds": estimate.seconds,
+            "device": estimate.device,
+            "weights": estimate.weights_name,
         });
         println!("{}", serde_json::to_string_pretty(&summary)?);
     } else {
         println!(
-            "wrote {} ({}×{}, {frame} frame) from {} views of {}×{} in {:.1} s; ∫L dω = [{:.3}, {:.3}, {:.3}]",
+            "wrote {} ({}×{}, {} frame) from {} views of {}×{} in {:.1} s; ∫L dω = [{:.3}, {:.3}, {:.3}]",
             args.out.display(),
             map.width(),
             map.height(),
-            capture.cameras.len(),
-            capture.views.width,
-            capture.views.height,
-            start.elapsed().as_secs_f64(),
+            estimate.frame,
+            estimate.views,
+            estimate.image_size[0],
+            estimate.image_size[1],
+            estimate.seconds,
             power[0],
             power[1],
             power[2]

@@ -8,9 +8,6 @@ use std::path::PathBuf;
 
 use anyhow::Context as _;
 use clap::Args;
-use nelf_format::conventions::LatLong;
-use nelf_scene::envgen::{EnvFamily, EnvGenParams, procedural_envmap};
-use nelf_scene::envmap::load_envmap;
 use nelf_viewer::{NamedEnvmap, ViewerConfig, run_viewer};
 
 /// Options of `nelf view`.
@@ -52,44 +49,16 @@ fn parse_size(text: &str) -> Result<[f32; 2], String> {
     Ok([parse(w)?, parse(h)?])
 }
 
-/// The built-in procedural map of `family` (seed 1), as the picker names it
-/// "… (procedural)"; `nelf export` lights with the studio one.
-pub fn builtin_envmap(family: EnvFamily) -> LatLong {
-    procedural_envmap(
-        1,
-        &EnvGenParams {
-            family: Some(family),
-            ..EnvGenParams::default()
-        },
-    )
-}
-
 /// Built-in maps: one procedural map per family, then the files of `dir`.
 fn builtin_envmaps(dir: Option<&PathBuf>) -> anyhow::Result<Vec<NamedEnvmap>> {
-    let mut maps: Vec<NamedEnvmap> = [
-        ("studio (procedural)", EnvFamily::Studio),
-        ("outdoor (procedural)", EnvFamily::Outdoor),
-        ("indoor (procedural)", EnvFamily::Indoor),
-    ]
-    .into_iter()
-    .map(|(name, family)| NamedEnvmap {
-        name: name.to_string(),
-        env: builtin_envmap(family),
-    })
-    .collect();
+    let mut maps: Vec<NamedEnvmap> = nelf_scene::envgen::builtin_envmaps()
+        .into_iter()
+        .map(|(name, env)| NamedEnvmap { name, env })
+        .collect();
     if let Some(dir) = dir {
-        let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
-            .with_context(|| format!("cannot list {}", dir.display()))?
-            .filter_map(Result::ok)
-            .map(|e| e.path())
-            .filter(|p| {
-                p.extension()
-                    .is_some_and(|e| e.eq_ignore_ascii_case("exr") || e.eq_ignore_ascii_case("hdr"))
-            })
-            .collect();
-        files.sort();
-        for path in files {
-            match load_envmap(&path) {
+        let found = nelf_scene::envmap::envmaps_in_dir(dir).context("cannot list the environment maps")?;
+        for (path, env) in found {
+            match env {
                 Ok(env) => maps.push(NamedEnvmap {
                     name: path.file_name().map_or_else(
                         || path.display().to_string(),
