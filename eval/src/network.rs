@@ -19,7 +19,7 @@ use nelf_bake::{
     BakeConfig, CaptureLoadOptions, GroundTruth, Progress, ViewChoice, bake_capture, load_capture,
 };
 use nelf_field::render::{ImageSettings, Sampling, render_image};
-use nelf_format::io_error::{FileIoError, IoResultExt};
+use nelf_format::io_error::IoResultExt;
 use nelf_format::read_asset;
 use nelf_pipeline::error::{Context as _, PipelineError, Result};
 use nelf_pipeline::{
@@ -185,8 +185,11 @@ pub fn run_network(config: &NetworkEvalConfig, print: &mut dyn FnMut(&str)) -> R
         mean_of("flat_colour").unwrap_or(f64::NAN),
     ));
     let path = out.join("network.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&summary)? + "\n")
-        .map_err(|source| PipelineError::Io(FileIoError::new(path.clone(), source)))?;
+    nelf_format::atomic::write_bytes_atomically(
+        &path,
+        (serde_json::to_string_pretty(&summary)? + "\n").as_bytes(),
+    )
+    .with_path(&path)?;
     if config.oracle_view {
         print(&format!(
             "  the network baked toward each target's own camera: {:.2} dB",

@@ -21,7 +21,7 @@ pub mod web;
 
 use std::path::Path;
 
-use nelf_format::io_error::FileIoError;
+use nelf_format::io_error::IoResultExt;
 
 pub use commands::{
     VdbExportConfig, VdbExported, VdbPreset, WebExportConfig, export_vdb, export_web, studio_envmap,
@@ -34,5 +34,6 @@ pub use vdb::{Lighting, VdbOptions, VdbReport, build_vdb, encode_vdb, stored_lig
 /// create gives, synced, renamed), so nothing half-written ever has the final name.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<(), ExportError> {
     nelf_format::atomic::write_bytes_atomically(path, bytes)
-        .map_err(|source| ExportError::Io(FileIoError::new(path.to_path_buf(), source)))
+        .with_path(path)
+        .map_err(ExportError::from)
 }

@@ -31,7 +31,7 @@ fn main() -> Result<(), FormatError> {
         };
         let (bytes, _) = encode_asset(&asset, &options)?;
         let path = dir.join(format!("seed-{i}.nelf"));
-        std::fs::write(&path, bytes).map_err(|source| FormatError::Io { path, source })?;
+        std::fs::write(&path, bytes).with_path(&path)?;
     }
     // Format 1.3: a reflection part (VREF, VRCO): 5 eyes, lobe exponent 20.
     let mut asset = field.asset(2, CoefficientEncoding::U8Affine)?;
@@ -43,6 +43,6 @@ fn main() -> Result<(), FormatError> {
     };
     let (bytes, _) = encode_asset(&asset, &options)?;
     let path = dir.join("seed-reflection.nelf");
-    std::fs::write(&path, bytes).map_err(|source| FormatError::Io { path, source })?;
+    std::fs::write(&path, bytes).with_path(&path)?;
     Ok(())
 }

@@ -73,7 +73,8 @@ fn write_curve(csv: &Path, svg: &Path) -> anyhow::Result<bool> {
         threshold_y: None,
     };
     let drawn = nelf_eval::report::chart_svg(&chart).context("drawing the validation curve")?;
-    std::fs::write(svg, drawn).with_context(|| format!("writing {}", svg.display()))?;
+    nelf_format::atomic::write_bytes_atomically(svg, drawn.as_bytes())
+        .with_context(|| format!("writing {}", svg.display()))?;
     Ok(true)
 }
 
