@@ -10,7 +10,9 @@
 //! * no crate has a file-level import circle: file A imports file B when A names a
 //!   `crate::…` or `super::…` path that resolves to B's module, and every strongly
 //!   connected group (Tarjan) of two or more files is a circle. This is
-//!   `scripts/import_cycles.py` in Rust, so CI needs no Python for it.
+//!   `scripts/import_cycles.py` in Rust, so CI needs no Python for it;
+//! * the crates ARCHITECTURE.md keeps light stay light (`cargo tree`: no candle or
+//!   wgpu in the baker and the exporters, no candle, baker or ground truth in the viewer).
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use std::path::{Path, PathBuf};
@@ -540,4 +542,68 @@ fn no_crate_has_a_file_level_import_circle() {
         circles.len(),
         circles.join("\n")
     );
+}
+
+/// The normal dependencies (direct and indirect, any target) of workspace crate
+/// `package`, by name, as `cargo tree` resolves them from the lock file.
+fn resolved_dependencies(package: &str) -> BTreeSet<String> {
+    let manifest = repo_root().join("Cargo.toml");
+    let out = Command::new(env!("CARGO"))
+        .args([
+            "tree",
+            "--offline",
+            "--edges",
+            "normal",
+            "--target",
+            "all",
+            "--prefix",
+            "none",
+            "--format",
+            "{p}",
+            "--package",
+            package,
+            "--manifest-path",
+        ])
+        .arg(&manifest)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run cargo tree: {e}"));
+    assert!(
+        out.status.success(),
+        "cargo tree failed: {}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|line| line.split_whitespace().next())
+        .map(str::to_string)
+        .collect()
+}
+
+/// ARCHITECTURE.md's promises about heavy dependencies: the baker and the exporters
+/// never pull in the GPU stack or the network's tensor library, and the viewer never
+/// pulls in the tensor library, the baker or the ground-truth crate.
+#[test]
+fn crates_stay_free_of_the_dependencies_architecture_md_rules_out() {
+    let rules: [(&str, &[&str]); 3] = [
+        ("nelf-bake", &["candle-core", "nelf-field", "wgpu"]),
+        ("nelf-export", &["candle-core", "nelf-field", "wgpu"]),
+        (
+            "nelf-viewer",
+            &["candle-core", "nelf-bake", "nelf-field", "nelf-scene"],
+        ),
+    ];
+    let architecture = read_text(&repo_root().join("ARCHITECTURE.md"));
+    for (crate_name, forbidden) in rules {
+        assert!(
+            architecture.contains(&format!("`{crate_name}`")),
+            "ARCHITECTURE.md no longer names `{crate_name}`: update this test with it"
+        );
+        let found = resolved_dependencies(crate_name);
+        assert!(
+            found.contains(crate_name),
+            "cargo tree listed nothing for {crate_name}: {found:?}"
+        );
+        let broken: Vec<_> = forbidden.iter().filter(|f| found.contains(**f)).collect();
+        assert!(broken.is_empty(), "{crate_name} depends on {broken:?}");
+    }
 }
