@@ -544,7 +544,7 @@ fn no_crate_has_a_file_level_import_circle() {
     );
 }
 
-/// The normal dependencies (direct and indirect, any target) of workspace crate
+/// The normal dependencies (direct and indirect, on this host) of workspace crate
 /// `package`, by name, as `cargo tree` resolves them from the lock file.
 fn resolved_dependencies(package: &str) -> BTreeSet<String> {
     let manifest = repo_root().join("Cargo.toml");
@@ -554,8 +554,6 @@ fn resolved_dependencies(package: &str) -> BTreeSet<String> {
             "--offline",
             "--edges",
             "normal",
-            "--target",
-            "all",
             "--prefix",
             "none",
             "--format",
