@@ -28,14 +28,18 @@
 //! elsewhere (which only carves less).
 //!
 //! **Carve**: the stored density (the signed function of `ln σ`,
-//! `nelf_scene::field::SignedLogDensity`) becomes `min(s_net(x), s(d(x)))` with
+//! `nelf_scene::signed_density::SignedLogDensity`) becomes `min(s_net(x), s(d(x)))` with
 //! `s(d)` the same signed profile of a surface at distance `d`: inside the hull
 //! nothing changes (beyond a voxel or two of it, `s(d)` is at its cap); outside, the
 //! density falls as it does across any surface. Light transport is untouched.
+//! [`HullCarved`] is an `nelf_scene::adapter::Adapter` over the signed density:
+//! bounds and light frame are its.
 
 use glam::{DVec3, Vec3};
 use nelf_format::conventions::PinholeCamera;
-use nelf_scene::field::{FieldError, FieldSource, SignedLogDensity, ViewPolicy};
+use nelf_scene::adapter::{Adapted, Adapter};
+use nelf_scene::field::{FieldError, FieldSource, ViewPolicy};
+use nelf_scene::signed_density::SignedLogDensity;
 
 use crate::error::{BakeError, Result};
 use crate::hull::{check_mask_count, check_mask_size, is_foreground};
@@ -246,9 +250,10 @@ impl HullDistance {
 }
 
 /// A network field's signed density carved to the visual hull ([`HullDistance`]):
-/// `min(s_net(x), s(d(x)))`, light transport unchanged.
+/// `min(s_net(x), s(d(x)))`, light transport unchanged. Its constructor returns it
+/// [`Adapted`] (a [`FieldSource`]).
 pub struct HullCarved<'a> {
-    signed: &'a SignedLogDensity<'a>,
+    signed: &'a Adapted<SignedLogDensity<'a>>,
     hull: HullDistance,
 }
 
@@ -263,8 +268,8 @@ impl std::fmt::Debug for HullCarved<'_> {
 
 impl<'a> HullCarved<'a> {
     /// `signed` carved to `hull`.
-    pub fn new(signed: &'a SignedLogDensity<'a>, hull: HullDistance) -> Self {
-        Self { signed, hull }
+    pub fn new(signed: &'a Adapted<SignedLogDensity<'a>>, hull: HullDistance) -> Adapted<Self> {
+        Adapted(Self { signed, hull })
     }
 
     fn carve(&self, points: &[Vec3], density: &mut [f32]) {
@@ -277,7 +282,11 @@ impl<'a> HullCarved<'a> {
     }
 }
 
-impl FieldSource for HullCarved<'_> {
+impl Adapter for HullCarved<'_> {
+    fn base(&self) -> &dyn FieldSource {
+        self.signed
+    }
+
     fn evaluate(
         &self,
         points: &[Vec3],
@@ -288,14 +297,6 @@ impl FieldSource for HullCarved<'_> {
         self.signed.evaluate(points, view, density, lt)?;
         self.carve(points, density);
         Ok(())
-    }
-
-    fn bounds(&self) -> (Vec3, Vec3) {
-        self.signed.bounds()
-    }
-
-    fn world_from_light(&self) -> glam::DMat3 {
-        self.signed.world_from_light()
     }
 
     fn evaluate_density(&self, points: &[Vec3], density: &mut [f32]) -> std::result::Result<(), FieldError> {

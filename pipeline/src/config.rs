@@ -44,7 +44,7 @@ pub struct PipelineConfig {
     #[serde(flatten)]
     pub bake: BakeConfig,
     /// Network field: its density is stored as a signed function of `ln σ`
-    /// (`nelf_scene::field::SignedLogDensity`) for a skin across which σ grows by `e`
+    /// (`nelf_scene::signed_density::SignedLogDensity`) for a skin across which σ grows by `e`
     /// every this many millimetres, the surface where a ray through it reaches optical
     /// depth ln 2 (σ = ln 2 / skin); trilinear interpolation then puts the surface
     /// between voxels where the network has it, not a voxel outside. 0 stores σ itself

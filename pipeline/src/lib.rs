@@ -7,9 +7,10 @@
 //! 2. **The network's field** ([`network`]): weights loaded, views encoded, light
 //!    transport put in the capture's light units and fitted to its views
 //!    ([`SourceFit`]), and what a bake records of it.
-//! 3. **Between a field and the baker** ([`adapter`], one delegation mechanism; the
-//!    adapters [`voxel_filter`] and [`split`]): the network bake's box filter, and
-//!    parts of one field swapped for another's.
+//! 3. **Between a field and the baker** (the adapters [`voxel_filter`] and
+//!    [`split`], on `nelf-scene`'s one delegation mechanism [`Adapter`] /
+//!    [`Adapted`]): the network bake's box filter, and parts of one field swapped
+//!    for another's.
 //! 4. **The network's bake** ([`network_bake`]): filtered, its density signed and
 //!    carved to the masks' hull, optionally with a part from the ground truth
 //!    ([`truth_split`], `nelf eval network --split`), baked by `nelf-bake`.
@@ -19,10 +20,9 @@
 //!    --field`; [`summary`], what `nelf bake` prints; [`light`], the network's
 //!    estimate of a capture's lighting, `nelf light`).
 //!
-//! Dependencies run one way: `error` ← `config` ← `network` ← `adapter` ←
+//! Dependencies run one way: `error` ← `config` ← `network` ←
 //! `voxel_filter`, `split` ← `truth_split` ← `network_bake` ← `capture_bake`, `demo`.
 
-pub mod adapter;
 pub mod capture_bake;
 pub mod config;
 pub mod demo;
@@ -36,7 +36,6 @@ pub mod summary;
 pub mod truth_split;
 pub mod voxel_filter;
 
-pub use adapter::{Adapted, Adapter};
 pub use capture_bake::{CaptureBake, CaptureBakeOptions, SourceChoice, bake_capture_dir};
 pub use config::{DEFAULT_NETWORK_HULL_MARGIN_PX, DEFAULT_NETWORK_SKIN_MM, PipelineConfig, write_bake};
 pub use demo::{DemoConfig, DemoReport, DemoRun, NetworkDemo, run_demo};
@@ -51,3 +50,7 @@ pub use network_bake::{NETWORK_VOXEL_FILTER, NetworkSampling, bake_network, bake
 pub use split::{DensityAndTransport, TransportShapeFrom, TrueNormalsLambert};
 pub use truth_split::{FromTruth, with_truth_part};
 pub use voxel_filter::VoxelFiltered;
+
+// The delegation mechanism the adapters rest on, now `nelf-scene`'s, where callers
+// of the pipeline have named it.
+pub use nelf_scene::adapter::{Adapted, Adapter};

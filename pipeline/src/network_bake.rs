@@ -7,7 +7,8 @@ use std::path::Path;
 
 use nelf_bake::{BakeOutput, GroundTruth, HullCarved, HullDistance, LoadedCapture, Progress};
 use nelf_field::NelfField;
-use nelf_scene::field::{FieldSource, SignedLogDensity, ViewPolicy};
+use nelf_scene::field::{FieldSource, ViewPolicy};
+use nelf_scene::signed_density::SignedLogDensity;
 
 use crate::config::PipelineConfig;
 use crate::error::{Context as _, Result};

@@ -6,10 +6,9 @@
 
 use glam::{DMat3, Vec3};
 use nelf_format::conventions::{LT_DIM, LatLong};
+use nelf_scene::adapter::{Adapted, Adapter};
 use nelf_scene::field::{FieldError, FieldSource, MeshField, ViewPolicy, check_batch, check_density_batch};
 use rayon::prelude::*;
-
-use crate::adapter::{Adapted, Adapter};
 
 /// A field with the density of one source and the light transport of another, at
 /// the same points: the ablation that tells a learned field's geometry error from its

@@ -5,9 +5,8 @@
 
 use glam::Vec3;
 use nelf_format::conventions::LT_DIM;
+use nelf_scene::adapter::{Adapted, Adapter};
 use nelf_scene::field::{FieldError, FieldSource, ViewPolicy, check_batch, check_density_batch};
-
-use crate::adapter::{Adapted, Adapter};
 
 /// A field box-filtered over voxels: each query point stands for the cube of side
 /// `voxel_m` around it, sampled on a fixed `n³` lattice of sub-points (cell centres).

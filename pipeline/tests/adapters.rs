@@ -1,4 +1,4 @@
-//! The adapters between a field and the baker (`nelf_pipeline::adapter`): the
+//! The adapters between a field and the baker (`nelf_scene::adapter`): the
 //! network bake's box filter, the signed log density over it, and parts of one field
 //! swapped for another's, on small analytic fields and a sphere's ground truth.
 //! Moved from `scene/tests/field.rs` with the adapters.
@@ -323,7 +323,7 @@ fn half_transmittance_x(grid: &[f32], voxel: f32) -> f32 {
 /// filter), renders swollen by a third to half a voxel.
 #[test]
 fn a_signed_log_density_keeps_a_steep_skin_in_place() {
-    use nelf_scene::field::SignedLogDensity;
+    use nelf_scene::signed_density::SignedLogDensity;
     let voxel = 0.004f32;
     let k = 1000.0f32; // σ × e every millimetre
     let (mut raw_errors, mut signed_errors) = (Vec::new(), Vec::new());

@@ -5,6 +5,7 @@
 //! `shot`: the cameras (camera files, capture views, orbits) and lightings (env-map
 //! files, constant white) a render is made with, for every command that renders.
 
+pub mod adapter;
 pub mod bvh;
 pub mod defects;
 pub mod envgen;
@@ -20,6 +21,7 @@ pub mod metrics;
 pub mod render;
 pub mod shapes;
 pub mod shot;
+pub mod signed_density;
 pub mod srgb;
 pub mod synth;
 pub mod tracer;

@@ -1,12 +1,15 @@
 //! One way to build a field out of other fields: an [`Adapter`] names the field it
 //! rests on ([`Adapter::base`]) and overrides only what it changes; [`Adapted`] turns
 //! it into a [`FieldSource`], every method it leaves alone delegated to the base.
-//! The adapters themselves: [`crate::voxel_filter`] (the network bake's box
-//! filter) and [`crate::split`] (parts of one field swapped for another's).
+//! It lives beside [`FieldSource`] so that every crate's wrappers share it: here
+//! [`crate::signed_density::SignedLogDensity`] (the baker's signed density),
+//! `nelf-bake`'s `HullCarved` (that density carved to the masks' visual hull), and
+//! `nelf-pipeline`'s `VoxelFiltered` (the network bake's box filter) and splits
+//! (parts of one field swapped for another's).
 
 use glam::{DMat3, Vec3};
-use nelf_format::conventions::LT_DIM;
-use nelf_scene::field::{FieldError, FieldSource, ViewPolicy, check_directions_batch};
+
+use crate::field::{FieldError, FieldSource, ViewPolicy, evaluate_directions_one_by_one};
 
 /// A field made from another ([`Adapter::base`]): its density, bounds and light
 /// frame are the base's unless the adapter overrides them; its light transport is
@@ -33,17 +36,9 @@ pub trait Adapter: Sync {
         density: &mut [f32],
         lt: &mut [f32],
     ) -> Result<(), FieldError> {
-        check_directions_batch(points, directions, density, lt)?;
-        let count = directions.len();
-        let mut one = vec![0.0f32; points.len() * LT_DIM];
-        for (d, dir) in directions.iter().enumerate() {
-            self.evaluate(points, &ViewPolicy::Direction(*dir), density, &mut one)?;
-            for (i, t) in one.chunks_exact(LT_DIM).enumerate() {
-                let at = (i * count + d) * LT_DIM;
-                lt[at..at + LT_DIM].copy_from_slice(t);
-            }
-        }
-        Ok(())
+        evaluate_directions_one_by_one(points, directions, density, lt, |p, view, d, t| {
+            self.evaluate(p, view, d, t)
+        })
     }
 
     /// [`FieldSource::bounds`]; by default the base's.
