@@ -68,6 +68,14 @@ pub enum GroundTruth {
         /// How to load it.
         options: LoadOptions,
     },
+    /// A mesh made in memory (a surface reconstructed from photographs), traced
+    /// with the default settings.
+    Reconstructed {
+        /// The mesh.
+        mesh: Box<Mesh>,
+        /// How it was made, for the asset's metadata.
+        description: serde_json::Value,
+    },
 }
 
 /// Name of the synthetic capture configuration inside a capture folder.
@@ -93,6 +101,7 @@ impl GroundTruth {
         match self {
             Self::Synth { config, .. } => Ok(synth_mesh(config)?),
             Self::MeshFile { path, options } => Ok(load_mesh(path, options)?),
+            Self::Reconstructed { mesh, .. } => Ok(mesh.as_ref().clone()),
         }
     }
 
@@ -100,7 +109,7 @@ impl GroundTruth {
     pub fn trace_settings(&self) -> TraceSettings {
         match self {
             Self::Synth { config, .. } => config.trace_settings(),
-            Self::MeshFile { .. } => TraceSettings::default(),
+            Self::MeshFile { .. } | Self::Reconstructed { .. } => TraceSettings::default(),
         }
     }
 
@@ -119,6 +128,10 @@ impl GroundTruth {
                 "file": path.display().to_string(),
                 "fit_height_m": options.fit_height_m,
                 "rotate_y_deg": options.rotate_y_deg,
+            }),
+            Self::Reconstructed { description, .. } => serde_json::json!({
+                "kind": "reconstructed-mesh",
+                "reconstruction": description,
             }),
         }
     }

@@ -22,6 +22,7 @@ use nelf_field::render::{ImageSettings, Sampling, render_image};
 use nelf_format::io_error::IoResultExt;
 use nelf_format::read_asset;
 use nelf_pipeline::error::{Context as _, PipelineError, Result};
+use nelf_pipeline::photo::{bake_photographs, write_reconstruction};
 use nelf_pipeline::{
     FromTruth, NetworkSampling, PipelineConfig, SourceFit, bake_network_field, load_network, network_field,
     network_provenance, write_bake,
@@ -92,6 +93,17 @@ pub struct NetworkEvalConfig {
     /// `truth_<part>_bake`.
     #[arg(long, value_enum, value_delimiter = ',', num_args = 0..)]
     pub split: Option<Vec<FromTruth>>,
+    /// Also bake each capture from its photographs alone (`nelf bake capture --source
+    /// photos`: the masks' visual hull, its reflectance from the photographs, baked as
+    /// a mesh; `nelf_pipeline::photo`), scored as `photos_bake`.
+    #[arg(long)]
+    pub photos: bool,
+    /// With `--photos`: reconstruct as if the capture named no lighting (the network
+    /// estimates it; real photographs). The exposure of such an asset is then
+    /// unknowable, so its renders are scored after one gain for all of a capture's
+    /// targets (least squares in linear light inside the true masks), reported beside it.
+    #[arg(long)]
+    pub unnamed_lighting: bool,
     /// Score the bakes alone, without rendering the network directly (its renders take
     /// most of an evaluation's time at 128²; `network` is then null in the scores).
     #[arg(long)]
@@ -116,6 +128,10 @@ pub struct TargetScores {
     pub truth_bake: Srgb8Scores,
     /// The network baked toward this target's camera (`--oracle-view`).
     pub oracle_view_bake: Option<Srgb8Scores>,
+    /// The photographs' reconstruction baked (`--photos`).
+    pub photos_bake: Option<Srgb8Scores>,
+    /// The one gain its renders were scaled by (1 unless `--unnamed-lighting`).
+    pub photos_gain: Option<f64>,
     /// `--split`: the scores of each part swapped for the ground truth's, by name.
     #[serde(skip_serializing_if = "BTreeMap::is_empty")]
     pub split: BTreeMap<&'static str, Srgb8Scores>,
@@ -184,6 +200,17 @@ pub fn run_network(config: &NetworkEvalConfig, print: &mut dyn FnMut(&str)) -> R
         mean_of("truth_bake").unwrap_or(f64::NAN),
         mean_of("flat_colour").unwrap_or(f64::NAN),
     ));
+    if let Some(photos) = mean_of("photos_bake") {
+        print(&format!(
+            "  the photographs' reconstruction baked{}: {photos:.2} dB foreground, {:.2} dB whole image",
+            if config.unnamed_lighting {
+                " (lighting not named; one exposure gain per capture)"
+            } else {
+                ""
+            },
+            summary["mean_psnr"]["photos_bake"].as_f64().unwrap_or(f64::NAN)
+        ));
+    }
     let path = out.join("network.json");
     nelf_format::atomic::write_bytes_atomically(
         &path,
@@ -285,6 +312,47 @@ impl Capture<'_> {
         let truth_path = config.out.join(format!("capture{index}_truth.nelf"));
         write_bake(&mut truth_bake, bake_config, &truth_path)?;
         let truth_asset = read_asset(&truth_path)?;
+        let photos_asset = if config.photos {
+            let mut photographs = capture.clone();
+            if config.unnamed_lighting
+                && let nelf_bake::capture_in::CaptureSource::CamerasJson(description) =
+                    &mut photographs.source
+            {
+                description.envmap = None;
+            }
+            let mut baked = bake_photographs(
+                &photographs,
+                config.weights.as_deref(),
+                &nelf_pipeline::config::PhotoSettings::default(),
+                bake_config,
+                progress,
+            )?;
+            let path = config.out.join(format!("capture{index}_photos.nelf"));
+            write_bake(&mut baked.output, bake_config, &path)?;
+            write_reconstruction(&baked.reconstruction, &path.with_extension("reconstruction"))?;
+            let asset = read_asset(&path)?;
+            let renders = (0..held.len())
+                .map(|t| {
+                    render_asset(
+                        &asset,
+                        &held.cameras[t],
+                        &held.envs[t],
+                        DMat3::IDENTITY,
+                        None,
+                        &MarchSettings::default(),
+                    )
+                    .map(|image| image.rgb)
+                })
+                .collect::<std::result::Result<Vec<_>, _>>()?;
+            let gain = if config.unnamed_lighting {
+                exposure_gain(&renders, &held.images, &held.masks)
+            } else {
+                1.0
+            };
+            Some((renders, gain))
+        } else {
+            None
+        };
 
         let mut rows = Vec::new();
         for t in 0..held.len() {
@@ -330,6 +398,15 @@ impl Capture<'_> {
                 network_bake: score(&baked(&network_asset)?.rgb)?,
                 truth_bake: score(&baked(&truth_asset)?.rgb)?,
                 oracle_view_bake,
+                photos_bake: photos_asset
+                    .as_ref()
+                    .map(|(renders, gain)| {
+                        let scaled: Vec<[f32; 3]> =
+                            renders[t].iter().map(|p| p.map(|v| v * *gain as f32)).collect();
+                        score(&scaled)
+                    })
+                    .transpose()?,
+                photos_gain: photos_asset.as_ref().map(|(_, gain)| *gain),
                 split: split_assets
                     .iter()
                     .map(|(name, asset)| Ok((*name, score(&baked(asset)?.rgb)?)))
@@ -340,12 +417,34 @@ impl Capture<'_> {
     }
 }
 
+/// The one gain `g` minimising `Σ m (g·r − t)²` over every target's pixels and
+/// channels (renders `r`, truths `t`, masks `m`): the exposure of an asset whose
+/// lighting's scale is unknown. 1 when the renders are black.
+fn exposure_gain(renders: &[Vec<[f32; 3]>], truths: &[Vec<[f32; 3]>], masks: &[Vec<f32>]) -> f64 {
+    let (mut rt, mut rr) = (0.0f64, 0.0f64);
+    for ((render, truth), mask) in renders.iter().zip(truths).zip(masks) {
+        for ((r, t), m) in render.iter().zip(truth).zip(mask) {
+            for c in 0..3 {
+                rt += f64::from(*m) * f64::from(r[c]) * f64::from(t[c]);
+                rr += f64::from(*m) * f64::from(r[c]) * f64::from(r[c]);
+            }
+        }
+    }
+    if rr > 0.0 { rt / rr } else { 1.0 }
+}
+
 /// One target's scores, one line.
 fn describe_row(row: &TargetScores) -> String {
     let network = |f: fn(&Srgb8Scores) -> String| row.network.as_ref().map_or("-".to_string(), f);
+    let photos = row.photos_bake.as_ref().map_or(String::new(), |s| {
+        format!(
+            "; photographs' bake {:.2} ({:.2}, SSIM {:.3}) dB",
+            s.foreground_psnr, s.psnr, s.ssim
+        )
+    });
     format!(
         "{} {}: foreground PSNR network {}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB \
-         (whole image {}, {:.2}, {:.2}, {:.2}; SSIM {}, {:.3}, {:.3}, {:.3})",
+         (whole image {}, {:.2}, {:.2}, {:.2}; SSIM {}, {:.3}, {:.3}, {:.3}){photos}",
         row.capture.display(),
         row.target,
         network(|s| format!("{:.2}", s.foreground_psnr)),
@@ -393,7 +492,9 @@ fn summarise(
             "network_bake": mean(&|r| r.network_bake.foreground_psnr),
             "truth_bake": mean(&|r| r.truth_bake.foreground_psnr),
             "flat_colour": mean(&|r| r.network_bake.flat_foreground_psnr),
+            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
         },
+        "photos_unnamed_lighting": config.photos.then_some(config.unnamed_lighting),
         "mean_foreground_psnr_oracle_view_bake": config.oracle_view.then(|| mean(&|r| r.oracle_view_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
         "mean_split": (!split_parts.is_empty()).then(|| split_parts.iter().map(|part| {
             let (name, _) = part.describe();
@@ -408,12 +509,14 @@ fn summarise(
             "network_bake": mean(&|r| r.network_bake.psnr),
             "truth_bake": mean(&|r| r.truth_bake.psnr),
             "flat_colour": mean(&|r| r.network_bake.flat_psnr),
+            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.psnr))),
         },
         "mean_ssim": {
             "network": mean_network(|s| s.ssim),
             "network_bake": mean(&|r| r.network_bake.ssim),
             "truth_bake": mean(&|r| r.truth_bake.ssim),
             "flat_colour": mean(&|r| r.network_bake.flat_ssim),
+            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.ssim))),
         },
         "rows": rows,
     })

@@ -11,9 +11,10 @@ use nelf_bake::{
 };
 use nelf_scene::mesh_io::LoadOptions;
 
-use crate::config::PipelineConfig;
+use crate::config::{PhotoSettings, PipelineConfig};
 use crate::error::{Context as _, Result, invalid};
 use crate::network_bake::bake_network;
+use crate::photo::{Reconstruction, bake_photographs};
 
 /// Which field `nelf bake capture` bakes.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
@@ -24,6 +25,10 @@ pub enum SourceChoice {
     Auto,
     /// The NeLF network from the capture's own images.
     Network,
+    /// A surface and its reflectance reconstructed from the capture's photographs
+    /// (`nelf_pipeline::photo`: the masks' visual hull, its albedo from the views),
+    /// baked as a mesh. Experimental: measured in `docs/measurements/photographs.md`.
+    Photos,
     /// The ground-truth mesh.
     Truth,
 }
@@ -65,6 +70,9 @@ pub struct CaptureBakeOptions {
     /// A choice among ground-truth bakes (`--target-psnr`, `--max-bytes`).
     #[command(flatten)]
     pub choice: ChoiceArgs,
+    /// How `--source photos` reconstructs the capture.
+    #[command(flatten)]
+    pub photo: PhotoSettings,
 }
 
 /// A baked capture, not yet written: the bake and, when one was asked for, the
@@ -75,32 +83,47 @@ pub struct CaptureBake {
     pub output: BakeOutput,
     /// The candidates tried and the one chosen (`--target-psnr`, `--max-bytes`).
     pub choice: Option<ChoiceReport>,
+    /// The surface reconstructed from the photographs (`--source photos`).
+    pub reconstruction: Option<Reconstruction>,
 }
 
-/// Whether `options` bake the network's field (else the ground truth's), checked
-/// against the options that only one of them reads.
-fn bakes_network(options: &CaptureBakeOptions, synth_truth: impl Fn() -> bool) -> Result<bool> {
-    let network = match options.source {
-        SourceChoice::Network => true,
-        SourceChoice::Truth => false,
-        SourceChoice::Auto => options.weights.is_some() || (options.mesh.is_none() && !synth_truth()),
+/// The field a bake reads, once `auto` is resolved.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Source {
+    Truth,
+    Network,
+    Photos,
+}
+
+/// Which field `options` bake, checked against the options that only one of them
+/// reads. `auto`: the ground truth when there is one and no `--weights` are given,
+/// else the network (the photographs' reconstruction is not yet better than the
+/// network: `docs/measurements/photographs.md`).
+fn chosen_source(options: &CaptureBakeOptions, synth_truth: impl Fn() -> bool) -> Result<Source> {
+    let source = match options.source {
+        SourceChoice::Truth => Source::Truth,
+        SourceChoice::Photos => Source::Photos,
+        SourceChoice::Auto if options.weights.is_none() && (options.mesh.is_some() || synth_truth()) => {
+            Source::Truth
+        }
+        SourceChoice::Network | SourceChoice::Auto => Source::Network,
     };
-    if network && options.mesh.is_some() {
+    if source != Source::Truth && options.mesh.is_some() {
         return Err(invalid(
-            "--source network bakes the network's field; --mesh gives a ground truth",
+            "--mesh gives a ground truth; --source network and --source photos bake without one",
         ));
     }
-    if !network && options.weights.is_some() {
+    if source == Source::Truth && options.weights.is_some() {
         return Err(invalid(
             "--weights are the network's; --source truth bakes the ground truth",
         ));
     }
-    if network && options.choice.is_active() {
+    if source != Source::Truth && options.choice.is_active() {
         return Err(invalid(
-            "--target-psnr/--max-bytes choose among ground-truth bakes; the network bakes at a given --resolution and --rank",
+            "--target-psnr/--max-bytes choose among ground-truth bakes; the network and the photographs' reconstruction bake at a given --resolution and --rank",
         ));
     }
-    Ok(network)
+    Ok(source)
 }
 
 /// Bakes the capture in `options.dir` from the field [`SourceChoice`] picks.
@@ -113,14 +136,35 @@ pub fn bake_capture_dir(options: &CaptureBakeOptions, progress: Progress) -> Res
     let capture =
         load_capture(dir, &load).with_context(|| format!("loading the capture in {}", dir.display()))?;
     let synth_truth = || GroundTruth::from_synth_capture(dir);
-    if bakes_network(options, || synth_truth().is_ok())? {
-        let name = options.weights.as_ref().map_or_else(
-            || nelf_field::shipped::SHIPPED_WEIGHTS_NAME.to_string(),
-            |w| w.display().to_string(),
-        );
-        let output = bake_network(&capture, options.weights.as_deref(), &options.config, progress)
-            .with_context(|| format!("baking {} with the network {name}", dir.display()))?;
-        return Ok(CaptureBake { output, choice: None });
+    match chosen_source(options, || synth_truth().is_ok())? {
+        Source::Network => {
+            let name = options.weights.as_ref().map_or_else(
+                || nelf_field::shipped::SHIPPED_WEIGHTS_NAME.to_string(),
+                |w| w.display().to_string(),
+            );
+            let output = bake_network(&capture, options.weights.as_deref(), &options.config, progress)
+                .with_context(|| format!("baking {} with the network {name}", dir.display()))?;
+            return Ok(CaptureBake {
+                output,
+                choice: None,
+                reconstruction: None,
+            });
+        }
+        Source::Photos => {
+            let baked = bake_photographs(
+                &capture,
+                options.weights.as_deref(),
+                &options.photo,
+                &options.config,
+                progress,
+            )?;
+            return Ok(CaptureBake {
+                output: baked.output,
+                choice: None,
+                reconstruction: Some(baked.reconstruction),
+            });
+        }
+        Source::Truth => {}
     }
     let truth = match &options.mesh {
         Some(path) => GroundTruth::MeshFile {
@@ -156,9 +200,14 @@ fn bake_truth(
         return Ok(CaptureBake {
             output,
             choice: Some(report),
+            reconstruction: None,
         });
     }
     let output = bake_capture(capture, truth, config, &progress)
         .with_context(|| format!("baking {}", dir.display()))?;
-    Ok(CaptureBake { output, choice: None })
+    Ok(CaptureBake {
+        output,
+        choice: None,
+        reconstruction: None,
+    })
 }

@@ -87,6 +87,62 @@ pub struct PipelineConfig {
     pub network_hull_margin_px: f32,
 }
 
+/// Default `--photo-spacing-mm`.
+pub const DEFAULT_PHOTO_SPACING_MM: f64 = 1.5;
+/// Default `--photo-smoothing`.
+pub const DEFAULT_PHOTO_SMOOTHING: usize = 10;
+
+fn default_photo_spacing_mm() -> f64 {
+    DEFAULT_PHOTO_SPACING_MM
+}
+
+fn default_photo_smoothing() -> usize {
+    DEFAULT_PHOTO_SMOOTHING
+}
+
+/// How a capture without ground truth is reconstructed before its bake
+/// (`--source photos`): the masks' visual hull as a mesh, its reflectance from the
+/// photographs, then a mesh bake.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize, clap::Args)]
+pub struct PhotoSettings {
+    /// Photographs: grid spacing of the reconstructed surface, millimetres.
+    #[arg(long, default_value_t = DEFAULT_PHOTO_SPACING_MM)]
+    #[serde(default = "default_photo_spacing_mm")]
+    pub photo_spacing_mm: f64,
+    /// Photographs: Taubin smoothing iterations of the reconstructed surface.
+    #[arg(long, default_value_t = DEFAULT_PHOTO_SMOOTHING)]
+    #[serde(default = "default_photo_smoothing")]
+    pub photo_smoothing: usize,
+    /// Photographs: interreflections in the shading the photographs are divided by
+    /// to recover reflectance (0: direct light with shadows only).
+    #[arg(long, default_value_t = 0)]
+    #[serde(default)]
+    pub photo_shading_bounces: u32,
+}
+
+impl PhotoSettings {
+    /// Checks the ranges of every setting.
+    pub fn validate(&self) -> Result<()> {
+        if !(self.photo_spacing_mm.is_finite() && self.photo_spacing_mm > 0.0) {
+            return Err(PipelineError::Invalid(format!(
+                "invalid reconstruction settings: --photo-spacing-mm {} must be positive",
+                self.photo_spacing_mm
+            )));
+        }
+        Ok(())
+    }
+}
+
+impl Default for PhotoSettings {
+    fn default() -> Self {
+        Self {
+            photo_spacing_mm: DEFAULT_PHOTO_SPACING_MM,
+            photo_smoothing: DEFAULT_PHOTO_SMOOTHING,
+            photo_shading_bounces: 0,
+        }
+    }
+}
+
 impl Default for PipelineConfig {
     fn default() -> Self {
         Self::from(BakeConfig::default())

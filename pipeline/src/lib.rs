@@ -16,12 +16,15 @@
 //!    ([`truth_split`], `nelf eval network --split`), baked by `nelf-bake`.
 //! 5. **Settings** ([`config`]): the network-only options beside `nelf-bake`'s
 //!    [`nelf_bake::BakeConfig`], saved with the asset as one flat object.
-//! 6. **Showing it** ([`demo`], `nelf demo`; [`field_render`], `nelf render
+//! 6. **Photographs by reconstruction** ([`photo`], `--source photos`): the masks'
+//!    visual hull as a mesh, its reflectance from the photographs, baked as a mesh.
+//! 7. **Showing it** ([`demo`], `nelf demo`; [`field_render`], `nelf render
 //!    --field`; [`summary`], what `nelf bake` prints; [`light`], the network's
 //!    estimate of a capture's lighting, `nelf light`).
 //!
 //! Dependencies run one way: `error` ← `config` ← `network` ←
-//! `voxel_filter`, `split` ← `truth_split` ← `network_bake` ← `capture_bake`, `demo`.
+//! `voxel_filter`, `split` ← `truth_split` ← `network_bake` ← `capture_bake`, `demo`;
+//! `light`, `network` ← `photo` ← `capture_bake`.
 
 pub mod capture_bake;
 pub mod config;
@@ -31,6 +34,7 @@ pub mod field_render;
 pub mod light;
 pub mod network;
 pub mod network_bake;
+pub mod photo;
 pub mod split;
 pub mod summary;
 pub mod truth_split;

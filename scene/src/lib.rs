@@ -23,5 +23,6 @@ pub mod shapes;
 pub mod shot;
 pub mod signed_density;
 pub mod srgb;
+pub mod surface_nets;
 pub mod synth;
 pub mod tracer;

@@ -10,6 +10,7 @@ use std::path::PathBuf;
 
 use anyhow::Context;
 use nelf_bake::{BakeOutput, Progress, bake_mesh};
+use nelf_pipeline::photo::write_reconstruction;
 use nelf_pipeline::summary::{describe_bake, describe_choice};
 use nelf_pipeline::{CaptureBakeOptions, PipelineConfig, bake_capture_dir, write_bake};
 use nelf_scene::mesh_io::{LoadOptions, load_mesh};
@@ -92,7 +93,16 @@ fn run_capture(args: &CaptureBakeArgs) -> anyhow::Result<()> {
     if let Some(choice) = baked.choice.as_ref().filter(|_| !args.output.json) {
         print!("{}", describe_choice(choice));
     }
-    finish(&mut baked.output, &args.capture.config, &args.output)
+    finish(&mut baked.output, &args.capture.config, &args.output)?;
+    if let Some(reconstruction) = &baked.reconstruction {
+        let dir = args.output.out.with_extension("reconstruction");
+        write_reconstruction(reconstruction, &dir)
+            .with_context(|| format!("writing the reconstruction to {}", dir.display()))?;
+        if !args.output.json {
+            println!("reconstruction: {}", dir.display());
+        }
+    }
+    Ok(())
 }
 
 fn run_mesh(args: &MeshBakeArgs) -> anyhow::Result<()> {

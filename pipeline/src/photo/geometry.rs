@@ -1,0 +1,236 @@
+//! Geometry from photographs: the surface of the masks' visual hull (Laurentini
+//! 1994) as a smooth triangle mesh.
+//!
+//! The signed distance to the hull ([`nelf_bake::HullDistance`]: per view, the
+//! exact Euclidean distance transform of the mask at unit depth, scaled by the
+//! point's depth; the maximum over views) is sampled on a regular grid over the
+//! hull's box ([`nelf_bake::hull::hull_bounds`], grown by two cells), with the
+//! grid's faces forced outside so that the surface closes where the views leave the
+//! hull open (behind the head, below the neck). Its zero level becomes a mesh by
+//! surface nets ([`nelf_scene::surface_nets`]), smoothed by Taubin's λ|μ steps so
+//! that the cones' ridges and the grid's staircase do not show in the normals.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use nelf_bake::hull::{HullCarver, hull_bounds};
+use nelf_bake::{HullDistance, LoadedCapture};
+use nelf_scene::mesh::{Albedo, Mesh};
+use nelf_scene::surface_nets::{GridSamples, surface_net, taubin_smooth};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Context as _, Result, invalid};
+
+/// Most grid samples the hull is sampled at (about 0.4 GB of `f32`).
+const MAX_SAMPLES: usize = 100_000_000;
+
+/// How the hull's surface is made.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SurfaceSettings {
+    /// Grid spacing, metres.
+    pub spacing_m: f64,
+    /// Taubin λ|μ smoothing iterations.
+    pub smoothing_iterations: usize,
+    /// Largest distance of the hull from the capture's head centre, metres (where
+    /// the views leave the hull unbounded).
+    pub max_radius_m: f64,
+}
+
+/// What the geometry stage made.
+#[derive(Debug, Clone, Serialize)]
+pub struct SurfaceReport {
+    /// The hull's box, metres.
+    pub box_m: [[f64; 3]; 2],
+    /// Grid samples per axis.
+    pub grid: [usize; 3],
+    /// Vertices and triangles of the mesh.
+    pub vertices: usize,
+    /// Triangles of the mesh.
+    pub triangles: usize,
+    /// Seconds: sampling the distance, meshing and smoothing.
+    pub seconds: f64,
+}
+
+/// The visual hull of `capture`'s masks as a closed mesh (albedo a uniform grey, to
+/// be replaced by the reflectance stage).
+pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Result<(Mesh, SurfaceReport)> {
+    let start = Instant::now();
+    if !(settings.spacing_m.is_finite() && settings.spacing_m > 0.0) {
+        return Err(invalid(format!(
+            "the surface's grid spacing {} m must be positive",
+            settings.spacing_m
+        )));
+    }
+    let carver = HullCarver::new(&capture.cameras, &capture.masks, 0)?;
+    let (lo, hi) = hull_bounds(&carver, capture.head_centre_m, settings.max_radius_m)
+        .context("bounding the masks' visual hull")?;
+    let distance = HullDistance::new(&capture.cameras, &capture.masks, 0.0)?;
+    let h = settings.spacing_m;
+    let origin = lo - DVec3::splat(2.0 * h);
+    let extent = hi - lo + DVec3::splat(4.0 * h);
+    let dims = extent.to_array().map(|e| (e / h).ceil() as usize + 1);
+    let count = dims.iter().product::<usize>();
+    if count > MAX_SAMPLES {
+        return Err(invalid(format!(
+            "the hull's box {:.3} × {:.3} × {:.3} m at {:.2} mm needs {count} samples (at most {MAX_SAMPLES}): use a coarser spacing",
+            extent.x,
+            extent.y,
+            extent.z,
+            h * 1e3
+        )));
+    }
+    let [nx, ny, nz] = dims;
+    let mut values = vec![0.0f32; count];
+    values.par_chunks_mut(nx * ny).enumerate().for_each(|(z, slab)| {
+        for y in 0..ny {
+            for x in 0..nx {
+                let face = x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
+                let p = origin + DVec3::new(x as f64, y as f64, z as f64) * h;
+                let d = distance.distance_m(p);
+                slab[y * nx + x] = if face {
+                    h as f32
+                } else if d == f64::NEG_INFINITY {
+                    -(h as f32)
+                } else {
+                    d as f32
+                };
+            }
+        }
+    });
+    let net = surface_net(&GridSamples {
+        values: &values,
+        dims,
+        origin_m: origin,
+        spacing_m: h,
+    });
+    if net.triangles.is_empty() {
+        return Err(invalid(format!(
+            "{}: the masks' visual hull is empty (do the masks and cameras agree?)",
+            capture.camera_file.display()
+        )));
+    }
+    let mut positions = net.positions;
+    taubin_smooth(&mut positions, &net.triangles, settings.smoothing_iterations);
+    let mesh = Mesh {
+        positions,
+        triangles: net.triangles,
+        albedo: Albedo::Uniform([0.5; 3]),
+    };
+    mesh.validate().context("the hull's mesh")?;
+    let report = SurfaceReport {
+        box_m: [lo.to_array(), hi.to_array()],
+        grid: dims,
+        vertices: mesh.positions.len(),
+        triangles: mesh.triangles.len(),
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((mesh, report))
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    use super::*;
+    use nelf_bake::capture_in::CaptureSource;
+    use nelf_format::conventions::PinholeCamera;
+    use std::path::PathBuf;
+
+    /// Six views along ±x, ±y, ±z of a sphere of radius `r` at the origin, with
+    /// exact masks (a pixel is foreground when its ray meets the sphere).
+    pub(crate) fn sphere_capture(r: f64) -> LoadedCapture {
+        let size = 64;
+        let eyes = [DVec3::X, -DVec3::X, DVec3::Y, -DVec3::Y, DVec3::Z, -DVec3::Z];
+        let cameras: Vec<PinholeCamera> = eyes
+            .iter()
+            .map(|&e| {
+                let up = if e.y.abs() > 0.5 { DVec3::Z } else { DVec3::Y };
+                PinholeCamera::look_at(e, DVec3::ZERO, up, size, size, 0.3)
+            })
+            .collect();
+        let masks: Vec<Vec<f32>> = cameras
+            .iter()
+            .map(|c| {
+                (0..size * size)
+                    .map(|i| {
+                        let (origin, dir) = c.pixel_ray(i % size, i / size);
+                        let closest = origin - dir * origin.dot(dir);
+                        if closest.length() < r { 1.0 } else { 0.0 }
+                    })
+                    .collect()
+            })
+            .collect();
+        LoadedCapture {
+            dir: PathBuf::from("sphere"),
+            camera_file: PathBuf::from("sphere/cameras.json"),
+            source: CaptureSource::Colmap {
+                model_dir: PathBuf::from("sphere"),
+            },
+            names: (0..6).map(|i| format!("view_{i}")).collect(),
+            image_files: (0..6).map(|i| PathBuf::from(format!("view_{i}.png"))).collect(),
+            images: masks
+                .iter()
+                .map(|m| m.iter().map(|&v| [v; 3]).collect())
+                .collect(),
+            masks,
+            cameras,
+            head_centre_m: DVec3::ZERO,
+        }
+    }
+
+    #[test]
+    fn the_hull_of_a_sphere_seen_along_the_axes_is_a_closed_surface_around_it() {
+        let r = 0.1;
+        let capture = sphere_capture(r);
+        let settings = SurfaceSettings {
+            spacing_m: 0.005,
+            smoothing_iterations: 5,
+            max_radius_m: 0.5,
+        };
+        let (mesh, report) = hull_surface(&capture, &settings).expect("a hull");
+        assert!(report.triangles > 1000, "{report:?}");
+        // The hull holds the sphere and lies inside the three cylinders' intersection,
+        // whose farthest points are at r·√(3/2); one pixel at the views' distance is
+        // about 4.7 mm.
+        for p in &mesh.positions {
+            let d = f64::from(p.length());
+            assert!(d > r - 0.008, "a vertex {d} m from the centre, inside the sphere");
+            assert!(d < r * 1.5f64.sqrt() + 0.008, "a vertex {d} m from the centre");
+        }
+        // Closed and outward: the enclosed volume is positive, between the sphere's and
+        // the tricylinder's (8 (2 − √2) r³).
+        let volume: f64 = mesh
+            .triangles
+            .iter()
+            .map(|t| {
+                let [a, b, c] = t.map(|i| mesh.positions[i as usize].as_dvec3());
+                a.dot(b.cross(c)) / 6.0
+            })
+            .sum();
+        let sphere = 4.0 / 3.0 * std::f64::consts::PI * r.powi(3);
+        let tricylinder = 8.0 * (2.0 - 2f64.sqrt()) * r.powi(3);
+        assert!(
+            volume > 0.95 * sphere && volume < 1.05 * tricylinder,
+            "volume {volume}"
+        );
+    }
+
+    #[test]
+    fn a_bad_spacing_and_an_empty_hull_are_errors() {
+        let capture = sphere_capture(0.1);
+        let bad = SurfaceSettings {
+            spacing_m: 0.0,
+            smoothing_iterations: 0,
+            max_radius_m: 0.5,
+        };
+        assert!(hull_surface(&capture, &bad).is_err());
+        let mut empty = capture;
+        for m in &mut empty.masks {
+            m.fill(0.0);
+        }
+        let settings = SurfaceSettings {
+            spacing_m: 0.005,
+            ..bad
+        };
+        assert!(hull_surface(&empty, &settings).is_err());
+    }
+}

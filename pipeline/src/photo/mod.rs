@@ -1,0 +1,177 @@
+//! Photographs to an asset by reconstruction (`nelf bake capture --source photos`):
+//! instead of asking a network for 384 light-transport numbers per point, recover
+//! what our path tracer needs — a surface and its reflectance — from the
+//! photographs, and bake that surface as any mesh is baked (path-traced transport,
+//! shadows, interreflection, PCA, rank).
+//!
+//! Stages, one file each, each output kept for inspection:
+//! 1. [`geometry`]: the masks' visual hull as a smooth closed mesh.
+//! 2. [`lighting`]: the lighting the capture names, else the network's estimate.
+//! 3. [`reflectance`]: each vertex's colour in the views that see it divided by the
+//!    shading a white copy of the surface gets under that lighting.
+//! 4. The bake: the textured surface as a ground truth
+//!    ([`nelf_bake::GroundTruth::Reconstructed`]) through [`nelf_bake::bake_capture`].
+//!    A reconstructed surface is Lambertian, so there is no view dependence to fit.
+//!
+//! [`write_reconstruction`] saves the reconstruction (an OBJ with per-vertex
+//! colours) and a JSON report of each stage for inspection.
+
+pub mod geometry;
+pub mod lighting;
+pub mod reflectance;
+
+use std::path::Path;
+use std::time::Instant;
+
+use nelf_bake::{BakeOutput, GroundTruth, LoadedCapture, Progress, ViewChoice, bake_capture};
+use nelf_scene::mesh::{Albedo, Mesh};
+use nelf_scene::srgb::linear_to_srgb;
+use serde::Serialize;
+
+use crate::config::{PhotoSettings, PipelineConfig};
+use crate::error::{Context as _, Result};
+use geometry::{SurfaceReport, SurfaceSettings, hull_surface};
+use lighting::{LightingReport, capture_lighting};
+use reflectance::{ReflectanceReport, ReflectanceSettings, estimate_reflectance};
+
+/// The albedo the brightest texels are scaled to when the lighting's scale is unknown.
+const NORMALISED_ALBEDO: f32 = 0.9;
+
+/// A capture's surface and reflectance, reconstructed from its photographs.
+#[derive(Debug, Clone)]
+pub struct Reconstruction {
+    /// The surface with its per-vertex albedo, in the capture's world frame.
+    pub mesh: Mesh,
+    /// What each stage did.
+    pub report: ReconstructionReport,
+}
+
+/// What each stage of the reconstruction did.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReconstructionReport {
+    /// Geometry.
+    pub surface: SurfaceReport,
+    /// Lighting.
+    pub lighting: LightingReport,
+    /// Reflectance.
+    pub reflectance: ReflectanceReport,
+}
+
+/// Reconstructs `capture`'s surface and reflectance; `weights` are the network's
+/// for a lighting estimate (`None`: the shipped one); `max_radius_m` bounds the hull
+/// where the views leave it open.
+pub fn reconstruct(
+    capture: &LoadedCapture,
+    weights: Option<&Path>,
+    settings: &PhotoSettings,
+    max_radius_m: f64,
+) -> Result<Reconstruction> {
+    settings.validate()?;
+    let spacing_m = settings.photo_spacing_mm * 1e-3;
+    let (mesh, surface) = hull_surface(
+        capture,
+        &SurfaceSettings {
+            spacing_m,
+            smoothing_iterations: settings.photo_smoothing,
+            max_radius_m,
+        },
+    )?;
+    let (light, lighting) = capture_lighting(capture, weights)?;
+    let (albedo, reflectance) = estimate_reflectance(
+        &mesh,
+        capture,
+        &light,
+        &ReflectanceSettings {
+            bounces: settings.photo_shading_bounces,
+            normalise_to: (!lighting.named).then_some(NORMALISED_ALBEDO),
+            ..ReflectanceSettings::default()
+        },
+        spacing_m as f32,
+    )?;
+    let mesh = Mesh {
+        albedo: Albedo::PerVertex(albedo),
+        ..mesh
+    };
+    mesh.validate().context("the reconstructed surface")?;
+    Ok(Reconstruction {
+        mesh,
+        report: ReconstructionReport {
+            surface,
+            lighting,
+            reflectance,
+        },
+    })
+}
+
+/// A bake from photographs and what its reconstruction did.
+#[derive(Debug)]
+pub struct PhotoBake {
+    /// The asset and its report.
+    pub output: BakeOutput,
+    /// The reconstruction the asset was baked from.
+    pub reconstruction: Reconstruction,
+    /// Seconds spent reconstructing (before the bake).
+    pub reconstruct_secs: f64,
+}
+
+/// Reconstructs `capture` and bakes the result (see the module documentation).
+pub fn bake_photographs(
+    capture: &LoadedCapture,
+    weights: Option<&Path>,
+    settings: &PhotoSettings,
+    config: &PipelineConfig,
+    progress: Progress,
+) -> Result<PhotoBake> {
+    config.validate()?;
+    let start = Instant::now();
+    let reconstruction = reconstruct(capture, weights, settings, config.bake.max_hull_radius_m)
+        .with_context(|| format!("reconstructing {} from its photographs", capture.dir.display()))?;
+    let reconstruct_secs = start.elapsed().as_secs_f64();
+    let description = serde_json::to_value(&reconstruction.report)?;
+    let truth = GroundTruth::Reconstructed {
+        mesh: Box::new(reconstruction.mesh.clone()),
+        description,
+    };
+    let bake_config = nelf_bake::BakeConfig {
+        view_dependence: ViewChoice::Off,
+        ..config.bake.clone()
+    };
+    let output = bake_capture(capture, &truth, &bake_config, &progress)
+        .with_context(|| format!("baking the surface reconstructed from {}", capture.dir.display()))?;
+    Ok(PhotoBake {
+        output,
+        reconstruction,
+        reconstruct_secs,
+    })
+}
+
+/// Writes `dir/reconstruction.obj` (vertices with sRGB-encoded colours, the
+/// `v x y z r g b` extension that Blender and `MeshLab` read) and `dir/reconstruction.json`.
+pub fn write_reconstruction(reconstruction: &Reconstruction, dir: &Path) -> Result<()> {
+    use std::fmt::Write as _;
+    std::fs::create_dir_all(dir)
+        .map_err(|e| nelf_format::io_error::FileIoError::new(dir.to_path_buf(), e))?;
+    let mesh = &reconstruction.mesh;
+    let colours: Vec<[f32; 3]> = match &mesh.albedo {
+        Albedo::PerVertex(c) => c.clone(),
+        _ => vec![[0.5; 3]; mesh.positions.len()],
+    };
+    let mut obj =
+        String::from("# nelf: surface and albedo reconstructed from photographs (sRGB vertex colours)\n");
+    for (p, c) in mesh.positions.iter().zip(&colours) {
+        let [r, g, b] = c.map(linear_to_srgb);
+        let _ = writeln!(obj, "v {} {} {} {r:.4} {g:.4} {b:.4}", p.x, p.y, p.z);
+    }
+    for t in &mesh.triangles {
+        let _ = writeln!(obj, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
+    }
+    let write = |name: &str, bytes: &[u8]| {
+        let path = dir.join(name);
+        nelf_format::atomic::write_bytes_atomically(&path, bytes)
+            .map_err(|e| nelf_format::io_error::FileIoError::new(path, e))
+    };
+    write("reconstruction.obj", obj.as_bytes())?;
+    let json = serde_json::to_string_pretty(&reconstruction.report)? + "\n";
+    write("reconstruction.json", json.as_bytes())?;
+    Ok(())
+}

@@ -1,0 +1,369 @@
+//! Reflectance from photographs: the diffuse albedo of each vertex of a
+//! reconstructed surface, the colour the views see there divided by the shading
+//! our path tracer computes there under the capture's lighting.
+//!
+//! For a Lambertian surface seen in view `v`, the pixel's linear colour is
+//! `c_v = a · S(x)` with `S(x) = Σ_k T₁(x)_k L_k` the outgoing radiance of a white
+//! surface (`T₁` the light transport with albedo 1: direct light over the 8 × 16
+//! map's texels with the mesh's own shadows, [`nelf_scene::tracer::LtTracer`]), so
+//!
+//! `a(x) = Σ_v w_v c_v / (Σ_v w_v · S(x))`,
+//!
+//! with `w_v = max(0, n·ω_v)²` for the views that see `x` (in front of the camera,
+//! inside its frame and mask, and no surface between: one shadow ray toward the
+//! camera), so that grazing views, where a misplaced surface smears the image
+//! most, count least. Vertices no view sees take the mean of their neighbours
+//! (repeated until every vertex that touches a seen one has a value); the rest take
+//! the mean albedo. Shading below 2 % of the median is held at that floor (a
+//! point the lighting barely reaches says nothing about its albedo).
+//!
+//! Interreflection is left out of `S` when [`ReflectanceSettings::bounces`] is 0:
+//! the bake then adds it back with the recovered albedo, which brightens concave
+//! places a little (measured in `docs/measurements/photographs.md`).
+
+use std::time::Instant;
+
+use glam::{DVec2, Vec3};
+use nelf_bake::LoadedCapture;
+use nelf_format::conventions::{LT_DIM, LatLong, shade};
+use nelf_scene::mesh::{Albedo, Mesh};
+use nelf_scene::tracer::{LtTracer, TraceSettings};
+use rayon::prelude::*;
+use serde::Serialize;
+
+use crate::error::{Context as _, Result, invalid};
+
+/// How the reflectance is estimated.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ReflectanceSettings {
+    /// Direct-light samples per map texel for the shading (1 = 128 directions).
+    pub texel_samples: u32,
+    /// Interreflections in the shading (0: direct light only).
+    pub bounces: u32,
+    /// Cosine-weighted indirect directions when `bounces > 0`.
+    pub indirect_samples: u32,
+    /// Seed of the shading's samples.
+    pub seed: u64,
+    /// When the lighting's scale is unknown (estimated, not named): scale every
+    /// albedo so that the 98th percentile of the brightest channel is this value.
+    pub normalise_to: Option<f32>,
+}
+
+impl Default for ReflectanceSettings {
+    fn default() -> Self {
+        Self {
+            texel_samples: 1,
+            bounces: 0,
+            indirect_samples: 16,
+            seed: 0,
+            normalise_to: None,
+        }
+    }
+}
+
+/// What the reflectance stage found.
+#[derive(Debug, Clone, Serialize)]
+pub struct ReflectanceReport {
+    /// Vertices at least one view sees.
+    pub seen_vertices: usize,
+    /// Vertices filled from their neighbours.
+    pub filled_vertices: usize,
+    /// Vertices given the mean albedo (no seen vertex reachable).
+    pub defaulted_vertices: usize,
+    /// Albedos above 1 in some channel before clamping (lighting too dim for the
+    /// photographs, or a misplaced surface).
+    pub clamped_vertices: usize,
+    /// The factor every albedo was multiplied by ([`ReflectanceSettings::normalise_to`];
+    /// 1 when the lighting's scale is known): the lighting's scale relative to the
+    /// photographs is its inverse.
+    pub albedo_gain: f32,
+    /// Mean albedo of the seen vertices, linear RGB.
+    pub mean_albedo: [f32; 3],
+    /// Seconds.
+    pub seconds: f64,
+}
+
+/// Bilinear sample of a row-major image at continuous pixel coordinates (pixel
+/// centres at `i + ½`), or `None` outside the centres' hull.
+fn bilinear<T: Copy>(
+    pixels: &[T],
+    width: usize,
+    height: usize,
+    p: DVec2,
+    mix: impl Fn([T; 4], [f32; 4]) -> T,
+) -> Option<T> {
+    let (x, y) = (p.x - 0.5, p.y - 0.5);
+    if !(x >= 0.0 && y >= 0.0 && x <= (width - 1) as f64 && y <= (height - 1) as f64) {
+        return None;
+    }
+    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+    let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(height - 1));
+    let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
+    let at = |x: usize, y: usize| pixels[y * width + x];
+    Some(mix(
+        [at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1)],
+        [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy],
+    ))
+}
+
+/// The weighted mean colour the views see at `x` (normal `n`), with its total weight.
+fn seen_colour(
+    tracer: &LtTracer,
+    capture: &LoadedCapture,
+    x: Vec3,
+    n: Vec3,
+    offset_m: f32,
+) -> ([f64; 3], f64) {
+    let mut sum = [0.0f64; 3];
+    let mut total = 0.0f64;
+    for (v, camera) in capture.cameras.iter().enumerate() {
+        let eye = camera.centre();
+        let to_eye = eye - x.as_dvec3();
+        let dist = to_eye.length();
+        let dir = (to_eye / dist).as_vec3();
+        let cosine = n.dot(dir);
+        if cosine <= 0.0 {
+            continue;
+        }
+        let Some(pixel) = camera.project(x.as_dvec3()) else {
+            continue;
+        };
+        let (w, h) = (camera.width as usize, camera.height as usize);
+        let mask = bilinear(&capture.masks[v], w, h, pixel, |m, k| {
+            m.iter().zip(k).map(|(m, k)| m * k).sum()
+        });
+        if mask.is_none_or(|m| m < 0.5) {
+            continue;
+        }
+        let origin = x + n * offset_m + dir * offset_m;
+        if let Some(hit) = tracer.intersect(origin, dir)
+            && f64::from(hit.t) < dist - 2.0 * f64::from(offset_m)
+        {
+            continue;
+        }
+        let Some(colour) = bilinear(&capture.images[v], w, h, pixel, |c, k| {
+            std::array::from_fn(|ch| c.iter().zip(k).map(|(c, k)| c[ch] * k).sum())
+        }) else {
+            continue;
+        };
+        let weight = f64::from(cosine * cosine);
+        for ch in 0..3 {
+            sum[ch] += weight * f64::from(colour[ch]);
+        }
+        total += weight;
+    }
+    (sum, total)
+}
+
+/// The diffuse albedo of every vertex of `mesh` from `capture`'s photographs under
+/// `lighting` (an 8 × 16 map in the world frame, the photographs' units); see the
+/// module documentation. `offset_m` moves shadow-ray origins off the surface (about
+/// the mesh's spacing).
+pub fn estimate_reflectance(
+    mesh: &Mesh,
+    capture: &LoadedCapture,
+    lighting: &LatLong,
+    settings: &ReflectanceSettings,
+    offset_m: f32,
+) -> Result<(Vec<[f32; 3]>, ReflectanceReport)> {
+    let start = Instant::now();
+    if lighting.texels().len() * 3 != LT_DIM {
+        return Err(invalid(format!(
+            "the reflectance stage needs the lighting as an 8 × 16 map, not {} × {}",
+            lighting.width(),
+            lighting.height()
+        )));
+    }
+    let white = Mesh {
+        albedo: Albedo::Uniform([1.0; 3]),
+        ..mesh.clone()
+    };
+    let trace = TraceSettings {
+        bounces: settings.bounces,
+        texel_samples: settings.texel_samples.max(1),
+        indirect_samples: settings.indirect_samples,
+        seed: settings.seed,
+        ..TraceSettings::default()
+    };
+    let tracer = LtTracer::new(&white, trace).context("tracing the reconstructed surface")?;
+    let normals = mesh.vertex_normals();
+    // Per vertex: seen colour (weighted mean) and shading of a white surface.
+    let per_vertex: Vec<(Option<[f64; 3]>, [f32; 3])> = (0..mesh.positions.len())
+        .into_par_iter()
+        .map(|i| {
+            let (x, n) = (mesh.positions[i], normals[i]);
+            if n == Vec3::ZERO {
+                return (None, [0.0; 3]);
+            }
+            let (sum, total) = seen_colour(&tracer, capture, x, n, offset_m);
+            let colour = (total > 0.0).then(|| sum.map(|s| s / total));
+            let sp = nelf_scene::tracer::SurfacePoint {
+                position: x + n * offset_m,
+                geometric_normal: n,
+                shading_normal: n,
+                albedo: [1.0; 3],
+            };
+            let mut rng = tracer.rng(i as u64);
+            let mut lt = [0.0f32; LT_DIM];
+            tracer.light_transport_averaged(&sp, &[], &mut rng, &mut lt);
+            (colour, shade(&lt, lighting))
+        })
+        .collect();
+    let mut shading_lum: Vec<f32> = per_vertex
+        .iter()
+        .filter(|(c, _)| c.is_some())
+        .map(|(_, s)| (s[0] + s[1] + s[2]) / 3.0)
+        .collect();
+    if shading_lum.is_empty() {
+        return Err(invalid(format!(
+            "{}: no view sees the reconstructed surface (do the masks and cameras agree?)",
+            capture.camera_file.display()
+        )));
+    }
+    let mid = shading_lum.len() / 2;
+    let (_, median, _) = shading_lum.select_nth_unstable_by(mid, f32::total_cmp);
+    let floor = (0.02 * *median).max(1e-12);
+    let raw: Vec<Option<[f32; 3]>> = per_vertex
+        .iter()
+        .map(|(colour, s)| {
+            colour.map(|c| std::array::from_fn(|ch| (c[ch] as f32 / s[ch].max(floor)).max(0.0)))
+        })
+        .collect();
+    let albedo_gain = match settings.normalise_to {
+        Some(target) => {
+            let mut brightest: Vec<f32> = raw.iter().flatten().map(|a| a[0].max(a[1]).max(a[2])).collect();
+            let k = (brightest.len() * 98 / 100).min(brightest.len() - 1);
+            let (_, p98, _) = brightest.select_nth_unstable_by(k, f32::total_cmp);
+            if *p98 > 0.0 { target / *p98 } else { 1.0 }
+        }
+        None => 1.0,
+    };
+    let mut clamped = 0;
+    let mut albedo: Vec<Option<[f32; 3]>> = raw
+        .iter()
+        .map(|a| {
+            a.map(|a| {
+                let a = a.map(|v| v * albedo_gain);
+                if a.iter().any(|&v| v > 1.0) {
+                    clamped += 1;
+                }
+                a.map(|v| v.min(1.0))
+            })
+        })
+        .collect();
+    let seen = albedo.iter().filter(|a| a.is_some()).count();
+    let mut mean = [0.0f64; 3];
+    for a in albedo.iter().flatten() {
+        for ch in 0..3 {
+            mean[ch] += f64::from(a[ch]) / seen as f64;
+        }
+    }
+    let mean = mean.map(|m| m as f32);
+    let filled = fill_from_neighbours(&mut albedo, &mesh.triangles);
+    let defaulted = albedo.iter().filter(|a| a.is_none()).count();
+    let albedo = albedo.into_iter().map(|a| a.unwrap_or(mean)).collect();
+    let report = ReflectanceReport {
+        seen_vertices: seen,
+        filled_vertices: filled,
+        defaulted_vertices: defaulted,
+        clamped_vertices: clamped,
+        albedo_gain,
+        mean_albedo: mean,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    Ok((albedo, report))
+}
+
+/// Gives every unknown vertex that borders known ones their mean, in rounds, until
+/// no round adds any; returns how many were filled.
+fn fill_from_neighbours(values: &mut [Option<[f32; 3]>], triangles: &[[u32; 3]]) -> usize {
+    let n = values.len();
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
+    for t in triangles {
+        for i in 0..3 {
+            let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
+            if a < n && b < n {
+                neighbours[a].push(b as u32);
+                neighbours[b].push(a as u32);
+            }
+        }
+    }
+    let mut filled = 0;
+    loop {
+        let updates: Vec<(usize, [f32; 3])> = (0..n)
+            .filter(|&i| values[i].is_none())
+            .filter_map(|i| {
+                let known: Vec<[f32; 3]> = neighbours[i].iter().filter_map(|&j| values[j as usize]).collect();
+                (!known.is_empty()).then(|| {
+                    let k = known.len() as f32;
+                    (
+                        i,
+                        std::array::from_fn(|ch| known.iter().map(|a| a[ch]).sum::<f32>() / k),
+                    )
+                })
+            })
+            .collect();
+        if updates.is_empty() {
+            return filled;
+        }
+        filled += updates.len();
+        for (i, a) in updates {
+            values[i] = Some(a);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photo::geometry::tests::sphere_capture;
+    use crate::photo::geometry::{SurfaceSettings, hull_surface};
+
+    #[test]
+    fn a_grey_convex_object_under_uniform_light_gets_its_albedo_back() {
+        // Photographs of a Lambertian albedo 0.4 under uniform radiance 1: every
+        // pixel reads 0.4, the shading of a white convex surface is 1.
+        let mut capture = sphere_capture(0.1);
+        for image in &mut capture.images {
+            for p in image.iter_mut() {
+                *p = p.map(|v| 0.4 * v);
+            }
+        }
+        let settings = SurfaceSettings {
+            spacing_m: 0.005,
+            smoothing_iterations: 5,
+            max_radius_m: 0.5,
+        };
+        let (mesh, _) = hull_surface(&capture, &settings).expect("a hull");
+        let light = LatLong::constant(16, 8, [1.0; 3]);
+        let (albedo, report) =
+            estimate_reflectance(&mesh, &capture, &light, &ReflectanceSettings::default(), 0.005)
+                .expect("albedo");
+        assert_eq!(report.defaulted_vertices, 0);
+        assert!(report.seen_vertices > mesh.positions.len() * 9 / 10, "{report:?}");
+        let mean = albedo.iter().map(|a| f64::from(a[1])).sum::<f64>() / albedo.len() as f64;
+        assert!((mean - 0.4).abs() < 0.03, "mean albedo {mean}");
+        // Unknown lighting scale: the brightest albedos are put at the target.
+        let normalised = ReflectanceSettings {
+            normalise_to: Some(0.8),
+            ..ReflectanceSettings::default()
+        };
+        let (scaled, report) =
+            estimate_reflectance(&mesh, &capture, &light, &normalised, 0.005).expect("albedo");
+        let p98 = {
+            let mut g: Vec<f32> = scaled.iter().map(|a| a[1]).collect();
+            g.sort_by(f32::total_cmp);
+            g[g.len() * 98 / 100]
+        };
+        assert!(
+            (p98 - 0.8).abs() < 0.02,
+            "98th percentile {p98}, gain {}",
+            report.albedo_gain
+        );
+        // The lighting must be the 8 × 16 basis.
+        let wrong = LatLong::constant(32, 16, [1.0; 3]);
+        assert!(
+            estimate_reflectance(&mesh, &capture, &wrong, &ReflectanceSettings::default(), 0.005).is_err()
+        );
+    }
+}
