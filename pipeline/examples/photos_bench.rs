@@ -6,10 +6,10 @@
 //! bake (8-bit sRGB PSNR, foreground and whole image, at the held-aside targets)
 //! beside the ground-truth bake and the flat colour.
 //!
-//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed]`
+//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [hull]`
 //! (a synthetic capture with `synth_config.json` and targets, e.g. `nelf demo`'s
 //! `out/demo/capture`). `unnamed` reconstructs as if the capture named no lighting
-//! and scores after one exposure gain.
+//! and scores after one exposure gain; `hull` keeps the visual hull uncarved.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -64,7 +64,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let baked = bake_photographs(
         &photographs,
         None,
-        &nelf_pipeline::config::PhotoSettings::default(),
+        &nelf_pipeline::config::PhotoSettings {
+            photo_hull_only: args.iter().any(|a| a == "hull"),
+            ..Default::default()
+        },
         &config,
         Progress::hidden(),
     )?;

@@ -27,7 +27,7 @@ pub enum SourceChoice {
     Network,
     /// A surface and its reflectance reconstructed from the capture's photographs
     /// (`nelf_pipeline::photo`: the masks' visual hull, its albedo from the views),
-    /// baked as a mesh. Experimental: measured in `docs/measurements/photographs.md`.
+    /// baked as a mesh. Experimental: measured in `docs/measurements/2026-12-06-photographs.md`.
     Photos,
     /// The ground-truth mesh.
     Truth,
@@ -98,7 +98,7 @@ enum Source {
 /// Which field `options` bake, checked against the options that only one of them
 /// reads. `auto`: the ground truth when there is one and no `--weights` are given,
 /// else the network (the photographs' reconstruction is not yet better than the
-/// network: `docs/measurements/photographs.md`).
+/// network: `docs/measurements/2026-12-06-photographs.md`).
 fn chosen_source(options: &CaptureBakeOptions, synth_truth: impl Fn() -> bool) -> Result<Source> {
     let source = match options.source {
         SourceChoice::Truth => Source::Truth,

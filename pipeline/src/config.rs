@@ -90,7 +90,7 @@ pub struct PipelineConfig {
 /// Default `--photo-spacing-mm`.
 pub const DEFAULT_PHOTO_SPACING_MM: f64 = 1.5;
 /// Default `--photo-smoothing`.
-pub const DEFAULT_PHOTO_SMOOTHING: usize = 10;
+pub const DEFAULT_PHOTO_SMOOTHING: usize = 30;
 
 fn default_photo_spacing_mm() -> f64 {
     DEFAULT_PHOTO_SPACING_MM
@@ -118,6 +118,12 @@ pub struct PhotoSettings {
     #[arg(long, default_value_t = 0)]
     #[serde(default)]
     pub photo_shading_bounces: u32,
+    /// Photographs: keep the masks' visual hull as it is. By default it is carved by
+    /// multi-view stereo (plane-sweep depth maps fused into a truncated signed
+    /// distance, `nelf_pipeline::photo::stereo`).
+    #[arg(long)]
+    #[serde(default)]
+    pub photo_hull_only: bool,
 }
 
 impl PhotoSettings {
@@ -139,6 +145,7 @@ impl Default for PhotoSettings {
             photo_spacing_mm: DEFAULT_PHOTO_SPACING_MM,
             photo_smoothing: DEFAULT_PHOTO_SMOOTHING,
             photo_shading_bounces: 0,
+            photo_hull_only: false,
         }
     }
 }

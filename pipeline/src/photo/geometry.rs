@@ -1,5 +1,6 @@
 //! Geometry from photographs: the surface of the masks' visual hull (Laurentini
-//! 1994) as a smooth triangle mesh.
+//! 1994), carved where multi-view stereo finds the surface deeper
+//! ([`crate::photo::stereo`]), as a smooth triangle mesh.
 //!
 //! The signed distance to the hull ([`nelf_bake::HullDistance`]: per view, the
 //! exact Euclidean distance transform of the mask at unit depth, scaled by the
@@ -21,6 +22,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Context as _, Result, invalid};
+use crate::photo::stereo::{StereoReport, StereoSettings, depth_maps, fused_distance};
 
 /// Most grid samples the hull is sampled at (about 0.4 GB of `f32`).
 const MAX_SAMPLES: usize = 100_000_000;
@@ -35,6 +37,8 @@ pub struct SurfaceSettings {
     /// Largest distance of the hull from the capture's head centre, metres (where
     /// the views leave the hull unbounded).
     pub max_radius_m: f64,
+    /// Carve the hull by multi-view stereo ([`crate::photo::stereo`]); `None`: the hull.
+    pub stereo: Option<StereoSettings>,
 }
 
 /// What the geometry stage made.
@@ -48,6 +52,8 @@ pub struct SurfaceReport {
     pub vertices: usize,
     /// Triangles of the mesh.
     pub triangles: usize,
+    /// The stereo stage, when it ran.
+    pub stereo: Option<StereoReport>,
     /// Seconds: sampling the distance, meshing and smoothing.
     pub seconds: f64,
 }
@@ -80,35 +86,61 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
             h * 1e3
         )));
     }
-    let [nx, ny, nz] = dims;
-    let mut values = vec![0.0f32; count];
-    values.par_chunks_mut(nx * ny).enumerate().for_each(|(z, slab)| {
-        for y in 0..ny {
-            for x in 0..nx {
-                let face = x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
-                let p = origin + DVec3::new(x as f64, y as f64, z as f64) * h;
-                let d = distance.distance_m(p);
-                slab[y * nx + x] = if face {
-                    h as f32
-                } else if d == f64::NEG_INFINITY {
-                    -(h as f32)
-                } else {
-                    d as f32
-                };
+    let sample = |field: &(dyn Fn(DVec3) -> f64 + Sync)| {
+        let [nx, ny, nz] = dims;
+        let mut values = vec![0.0f32; count];
+        values.par_chunks_mut(nx * ny).enumerate().for_each(|(z, slab)| {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let face = x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
+                    let d = field(origin + DVec3::new(x as f64, y as f64, z as f64) * h);
+                    slab[y * nx + x] = if face {
+                        h as f32
+                    } else if d == f64::NEG_INFINITY {
+                        -(h as f32)
+                    } else {
+                        d as f32
+                    };
+                }
             }
-        }
-    });
-    let net = surface_net(&GridSamples {
-        values: &values,
-        dims,
-        origin_m: origin,
-        spacing_m: h,
-    });
-    if net.triangles.is_empty() {
-        return Err(invalid(format!(
+        });
+        surface_net(&GridSamples {
+            values: &values,
+            dims,
+            origin_m: origin,
+            spacing_m: h,
+        })
+    };
+    let empty = || {
+        invalid(format!(
             "{}: the masks' visual hull is empty (do the masks and cameras agree?)",
             capture.camera_file.display()
-        )));
+        ))
+    };
+    let mut net = sample(&|p| distance.distance_m(p));
+    if net.triangles.is_empty() {
+        return Err(empty());
+    }
+    let mut stereo_report = None;
+    if let Some(stereo) = &settings.stereo {
+        let hull_mesh = Mesh {
+            positions: net.positions.clone(),
+            triangles: net.triangles.clone(),
+            albedo: Albedo::Uniform([0.5; 3]),
+        };
+        let (maps, report) = depth_maps(capture, &hull_mesh, stereo);
+        stereo_report = Some(report);
+        let tau = stereo.truncation_m;
+        net = sample(&|p| {
+            let hull = distance.distance_m(p);
+            match fused_distance(capture, &maps, p, tau) {
+                Some(fused) => hull.max(fused),
+                None => hull,
+            }
+        });
+        if net.triangles.is_empty() {
+            return Err(empty());
+        }
     }
     let mut positions = net.positions;
     taubin_smooth(&mut positions, &net.triangles, settings.smoothing_iterations);
@@ -123,6 +155,7 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
         grid: dims,
         vertices: mesh.positions.len(),
         triangles: mesh.triangles.len(),
+        stereo: stereo_report,
         seconds: start.elapsed().as_secs_f64(),
     };
     Ok((mesh, report))
@@ -138,39 +171,62 @@ pub(crate) mod tests {
     /// Six views along ±x, ±y, ±z of a sphere of radius `r` at the origin, with
     /// exact masks (a pixel is foreground when its ray meets the sphere).
     pub(crate) fn sphere_capture(r: f64) -> LoadedCapture {
-        let size = 64;
         let eyes = [DVec3::X, -DVec3::X, DVec3::Y, -DVec3::Y, DVec3::Z, -DVec3::Z];
+        sphere_views(r, &eyes, 64, 0.3, |_| [1.0; 3])
+    }
+
+    /// Views from `eyes` (looking at the origin) of a sphere of radius `r` whose
+    /// surface shows `colour(point)` (no shading), with exact masks.
+    pub(crate) fn sphere_views(
+        r: f64,
+        eyes: &[DVec3],
+        size: u32,
+        fov_rad: f64,
+        colour: impl Fn(DVec3) -> [f32; 3],
+    ) -> LoadedCapture {
         let cameras: Vec<PinholeCamera> = eyes
             .iter()
             .map(|&e| {
-                let up = if e.y.abs() > 0.5 { DVec3::Z } else { DVec3::Y };
-                PinholeCamera::look_at(e, DVec3::ZERO, up, size, size, 0.3)
+                let up = if e.normalize().y.abs() > 0.9 {
+                    DVec3::Z
+                } else {
+                    DVec3::Y
+                };
+                PinholeCamera::look_at(e, DVec3::ZERO, up, size, size, fov_rad)
             })
             .collect();
+        let hit = |c: &PinholeCamera, i: u32| {
+            let (origin, dir) = c.pixel_ray(i % size, i / size);
+            let b = origin.dot(dir);
+            let disc = b * b - (origin.length_squared() - r * r);
+            (disc > 0.0).then(|| origin + dir * (-b - disc.sqrt()))
+        };
         let masks: Vec<Vec<f32>> = cameras
             .iter()
             .map(|c| {
                 (0..size * size)
-                    .map(|i| {
-                        let (origin, dir) = c.pixel_ray(i % size, i / size);
-                        let closest = origin - dir * origin.dot(dir);
-                        if closest.length() < r { 1.0 } else { 0.0 }
-                    })
+                    .map(|i| if hit(c, i).is_some() { 1.0 } else { 0.0 })
                     .collect()
             })
             .collect();
+        let images: Vec<Vec<[f32; 3]>> = cameras
+            .iter()
+            .map(|c| {
+                (0..size * size)
+                    .map(|i| hit(c, i).map_or([0.0; 3], &colour))
+                    .collect()
+            })
+            .collect();
+        let n = eyes.len();
         LoadedCapture {
             dir: PathBuf::from("sphere"),
             camera_file: PathBuf::from("sphere/cameras.json"),
             source: CaptureSource::Colmap {
                 model_dir: PathBuf::from("sphere"),
             },
-            names: (0..6).map(|i| format!("view_{i}")).collect(),
-            image_files: (0..6).map(|i| PathBuf::from(format!("view_{i}.png"))).collect(),
-            images: masks
-                .iter()
-                .map(|m| m.iter().map(|&v| [v; 3]).collect())
-                .collect(),
+            names: (0..n).map(|i| format!("view_{i}")).collect(),
+            image_files: (0..n).map(|i| PathBuf::from(format!("view_{i}.png"))).collect(),
+            images,
             masks,
             cameras,
             head_centre_m: DVec3::ZERO,
@@ -185,6 +241,7 @@ pub(crate) mod tests {
             spacing_m: 0.005,
             smoothing_iterations: 5,
             max_radius_m: 0.5,
+            stereo: None,
         };
         let (mesh, report) = hull_surface(&capture, &settings).expect("a hull");
         assert!(report.triangles > 1000, "{report:?}");
@@ -215,12 +272,59 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn stereo_carves_the_hull_of_a_textured_sphere_seen_from_a_narrow_cone() {
+        // Five views within 35° of +z, as a portrait capture has them: the hull bulges
+        // in front of the sphere; the texture lets stereo find the surface.
+        let r = 0.1;
+        let eyes: Vec<DVec3> = [(0.0, 0.0), (0.6, 0.2), (-0.6, 0.2), (0.2, 0.6), (-0.2, -0.6)]
+            .iter()
+            .map(|&(x, y)| DVec3::new(x, y, 1.0).normalize())
+            .collect();
+        let texture = |p: DVec3| {
+            let v =
+                0.5 + 0.4 * ((p.x * 150.0).sin() * (p.y * 130.0).cos() + 0.3 * (p.z * 170.0).sin()) as f32;
+            [v, 0.6 * v + 0.2, 1.0 - v]
+        };
+        let capture = sphere_views(r, &eyes, 96, 0.3, texture);
+        let front_error = |mesh: &Mesh| {
+            // Mean radial error over the vertices every view faces.
+            let (mut sum, mut n) = (0.0f64, 0usize);
+            for p in &mesh.positions {
+                let p = p.as_dvec3();
+                if p.z > 0.7 * r {
+                    sum += (p.length() - r).abs();
+                    n += 1;
+                }
+            }
+            sum / n.max(1) as f64
+        };
+        let hull_settings = SurfaceSettings {
+            spacing_m: 0.003,
+            smoothing_iterations: 10,
+            max_radius_m: 0.5,
+            stereo: None,
+        };
+        let (hull, _) = hull_surface(&capture, &hull_settings).expect("a hull");
+        let stereo_settings = SurfaceSettings {
+            stereo: Some(StereoSettings::default()),
+            ..hull_settings
+        };
+        let (carved, report) = hull_surface(&capture, &stereo_settings).expect("a carved hull");
+        let (hull_error, carved_error) = (front_error(&hull), front_error(&carved));
+        assert!(
+            carved_error < 0.5 * hull_error,
+            "front error: hull {hull_error} m, stereo {carved_error} m ({report:?})"
+        );
+    }
+
+    #[test]
     fn a_bad_spacing_and_an_empty_hull_are_errors() {
         let capture = sphere_capture(0.1);
         let bad = SurfaceSettings {
             spacing_m: 0.0,
             smoothing_iterations: 0,
             max_radius_m: 0.5,
+            stereo: None,
         };
         assert!(hull_surface(&capture, &bad).is_err());
         let mut empty = capture;

@@ -5,7 +5,8 @@
 //! shadows, interreflection, PCA, rank).
 //!
 //! Stages, one file each, each output kept for inspection:
-//! 1. [`geometry`]: the masks' visual hull as a smooth closed mesh.
+//! 1. [`geometry`]: the masks' visual hull, carved by multi-view stereo
+//!    ([`stereo`]), as a smooth closed mesh.
 //! 2. [`lighting`]: the lighting the capture names, else the network's estimate.
 //! 3. [`reflectance`]: each vertex's colour in the views that see it divided by the
 //!    shading a white copy of the surface gets under that lighting.
@@ -19,6 +20,7 @@
 pub mod geometry;
 pub mod lighting;
 pub mod reflectance;
+pub mod stereo;
 
 use std::path::Path;
 use std::time::Instant;
@@ -74,6 +76,7 @@ pub fn reconstruct(
             spacing_m,
             smoothing_iterations: settings.photo_smoothing,
             max_radius_m,
+            stereo: (!settings.photo_hull_only).then(stereo::StereoSettings::default),
         },
     )?;
     let (light, lighting) = capture_lighting(capture, weights)?;

@@ -19,7 +19,7 @@
 //!
 //! Interreflection is left out of `S` when [`ReflectanceSettings::bounces`] is 0:
 //! the bake then adds it back with the recovered albedo, which brightens concave
-//! places a little (measured in `docs/measurements/photographs.md`).
+//! places a little (not yet measured).
 
 use std::time::Instant;
 
@@ -333,6 +333,7 @@ mod tests {
             spacing_m: 0.005,
             smoothing_iterations: 5,
             max_radius_m: 0.5,
+            stereo: None,
         };
         let (mesh, _) = hull_surface(&capture, &settings).expect("a hull");
         let light = LatLong::constant(16, 8, [1.0; 3]);
