@@ -61,8 +61,8 @@ impl Default for StereoSettings {
             max_depth_m: 0.08,
             step_m: 0.001,
             min_ncc: 0.7,
-            truncation_m: 0.004,
-            median_radius: 4,
+            truncation_m: 0.008,
+            median_radius: 7,
         }
     }
 }
