@@ -19,6 +19,7 @@
 
 pub mod geometry;
 pub mod lighting;
+mod pixels;
 pub mod reflectance;
 pub mod stereo;
 

@@ -23,7 +23,7 @@
 
 use std::time::Instant;
 
-use glam::{DVec2, Vec3};
+use glam::Vec3;
 use nelf_bake::LoadedCapture;
 use nelf_format::conventions::{LT_DIM, LatLong, shade};
 use nelf_scene::mesh::{Albedo, Mesh};
@@ -32,6 +32,7 @@ use rayon::prelude::*;
 use serde::Serialize;
 
 use crate::error::{Context as _, Result, invalid};
+use crate::photo::pixels::{bilinear, bilinear_rgb};
 
 /// How the reflectance is estimated.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -83,29 +84,6 @@ pub struct ReflectanceReport {
     pub seconds: f64,
 }
 
-/// Bilinear sample of a row-major image at continuous pixel coordinates (pixel
-/// centres at `i + ½`), or `None` outside the centres' hull.
-fn bilinear<T: Copy>(
-    pixels: &[T],
-    width: usize,
-    height: usize,
-    p: DVec2,
-    mix: impl Fn([T; 4], [f32; 4]) -> T,
-) -> Option<T> {
-    let (x, y) = (p.x - 0.5, p.y - 0.5);
-    if !(x >= 0.0 && y >= 0.0 && x <= (width - 1) as f64 && y <= (height - 1) as f64) {
-        return None;
-    }
-    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(width - 1), (y0 + 1).min(height - 1));
-    let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
-    let at = |x: usize, y: usize| pixels[y * width + x];
-    Some(mix(
-        [at(x0, y0), at(x1, y0), at(x0, y1), at(x1, y1)],
-        [(1.0 - fx) * (1.0 - fy), fx * (1.0 - fy), (1.0 - fx) * fy, fx * fy],
-    ))
-}
-
 /// The weighted mean colour the views see at `x` (normal `n`), with its total weight.
 fn seen_colour(
     tracer: &LtTracer,
@@ -141,9 +119,7 @@ fn seen_colour(
         {
             continue;
         }
-        let Some(colour) = bilinear(&capture.images[v], w, h, pixel, |c, k| {
-            std::array::from_fn(|ch| c.iter().zip(k).map(|(c, k)| c[ch] * k).sum())
-        }) else {
+        let Some(colour) = bilinear_rgb(&capture.images[v], w, h, pixel) else {
             continue;
         };
         let weight = f64::from(cosine * cosine);

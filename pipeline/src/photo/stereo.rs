@@ -38,6 +38,8 @@ use nelf_scene::mesh::Mesh;
 use rayon::prelude::*;
 use serde::Serialize;
 
+use crate::photo::pixels::bilinear_rgb;
+
 /// Stereo settings.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct StereoSettings {
@@ -59,8 +61,8 @@ impl Default for StereoSettings {
             max_depth_m: 0.08,
             step_m: 0.001,
             min_ncc: 0.7,
-            truncation_m: 0.004,
-            median_radius: 4,
+            truncation_m: 0.008,
+            median_radius: 7,
         }
     }
 }
@@ -86,23 +88,6 @@ pub struct StereoReport {
 }
 
 const HALF: i64 = 2;
-
-fn bilinear(image: &[[f32; 3]], w: usize, h: usize, p: DVec2) -> Option<[f32; 3]> {
-    let (x, y) = (p.x - 0.5, p.y - 0.5);
-    if !(x >= 0.0 && y >= 0.0 && x <= (w - 1) as f64 && y <= (h - 1) as f64) {
-        return None;
-    }
-    let (x0, y0) = (x.floor() as usize, y.floor() as usize);
-    let (x1, y1) = ((x0 + 1).min(w - 1), (y0 + 1).min(h - 1));
-    let (fx, fy) = ((x - x0 as f64) as f32, (y - y0 as f64) as f32);
-    let a = image[y0 * w + x0];
-    let b = image[y0 * w + x1];
-    let c = image[y1 * w + x0];
-    let d = image[y1 * w + x1];
-    Some(std::array::from_fn(|k| {
-        (a[k] * (1.0 - fx) + b[k] * fx) * (1.0 - fy) + (c[k] * (1.0 - fx) + d[k] * fx) * fy
-    }))
-}
 
 fn ncc(a: &[[f32; 3]], b: &[[f32; 3]]) -> f64 {
     let n = a.len() as f64;
@@ -185,7 +170,7 @@ pub fn depth_maps(
                         for ray in &rays {
                             let p = centre + *ray * t;
                             let Some(px) = other.project(p) else { break };
-                            let Some(c) = bilinear(&capture.images[n], ow, oh, px) else {
+                            let Some(c) = bilinear_rgb(&capture.images[n], ow, oh, px) else {
                                 break;
                             };
                             sample.push(c);
