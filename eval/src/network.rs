@@ -345,7 +345,7 @@ impl Capture<'_> {
                 })
                 .collect::<std::result::Result<Vec<_>, _>>()?;
             let gain = if config.unnamed_lighting {
-                exposure_gain(&renders, &held.images, &held.masks)
+                nelf_scene::metrics::exposure_gain(&renders, &held.images, &held.masks)
             } else {
                 1.0
             };
@@ -415,22 +415,6 @@ impl Capture<'_> {
         }
         Ok(rows)
     }
-}
-
-/// The one gain `g` minimising `Σ m (g·r − t)²` over every target's pixels and
-/// channels (renders `r`, truths `t`, masks `m`): the exposure of an asset whose
-/// lighting's scale is unknown. 1 when the renders are black.
-fn exposure_gain(renders: &[Vec<[f32; 3]>], truths: &[Vec<[f32; 3]>], masks: &[Vec<f32>]) -> f64 {
-    let (mut rt, mut rr) = (0.0f64, 0.0f64);
-    for ((render, truth), mask) in renders.iter().zip(truths).zip(masks) {
-        for ((r, t), m) in render.iter().zip(truth).zip(mask) {
-            for c in 0..3 {
-                rt += f64::from(*m) * f64::from(r[c]) * f64::from(t[c]);
-                rr += f64::from(*m) * f64::from(r[c]) * f64::from(r[c]);
-            }
-        }
-    }
-    if rr > 0.0 { rt / rr } else { 1.0 }
 }
 
 /// One target's scores, one line.

@@ -138,16 +138,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         renders.push((photo.rgb, truth_img.rgb));
     }
     let gain = if unnamed {
-        let (mut rt, mut rr) = (0.0f64, 0.0f64);
-        for (t, (photo, _)) in renders.iter().enumerate() {
-            for ((r, x), m) in photo.iter().zip(&held.images[t]).zip(&held.masks[t]) {
-                for c in 0..3 {
-                    rt += f64::from(*m * r[c] * x[c]);
-                    rr += f64::from(*m * r[c] * r[c]);
-                }
-            }
-        }
-        (rt / rr) as f32
+        let photos: Vec<Vec<[f32; 3]>> = renders.iter().map(|(photo, _)| photo.clone()).collect();
+        nelf_scene::metrics::exposure_gain(&photos, &held.images, &held.masks) as f32
     } else {
         1.0
     };

@@ -375,6 +375,24 @@ mod tests {
     use super::*;
 
     #[test]
+    fn the_exposure_gain_recovers_a_scale_inside_the_masks_only() {
+        let truth = vec![
+            vec![[0.2f32, 0.4, 0.6], [0.5, 0.5, 0.5]],
+            vec![[0.1, 0.1, 0.3], [9.0, 9.0, 9.0]],
+        ];
+        let renders: Vec<Vec<[f32; 3]>> = vec![
+            truth[0].iter().map(|p| p.map(|v| v / 2.5)).collect(),
+            vec![[0.04, 0.04, 0.12], [0.0, 0.0, 0.0]],
+        ];
+        // The last pixel is outside its mask: its mismatch must not count.
+        let masks = vec![vec![1.0f32, 1.0], vec![1.0, 0.0]];
+        let gain = exposure_gain(&renders, &truth, &masks);
+        assert!((gain - 2.5).abs() < 1e-5, "gain {gain}");
+        let black = vec![vec![[0.0f32; 3]; 2]; 2];
+        assert_eq!(exposure_gain(&black, &truth, &masks), 1.0);
+    }
+
+    #[test]
     fn srgb8_scores_compare_with_the_flat_colour_baseline() {
         // A 16 × 16 view: a 8 × 8 square of two colours (mean 0.3, 0.2, 0.1) on black.
         let (w, h) = (16u32, 16u32);
@@ -476,6 +494,22 @@ pub fn srgb8_values(image: &[[f32; 3]]) -> Vec<[f32; 3]> {
         .iter()
         .map(|c| c.map(|v| (crate::srgb::linear_to_srgb(v.clamp(0.0, 1.0)) * 255.0).round()))
         .collect()
+}
+
+/// The one gain `g` minimising `Σ m (g·r − t)²` over every target's pixels and
+/// channels (renders `r`, truths `t`, masks `m`): the exposure of an asset whose
+/// lighting's scale is unknown. 1 when the renders are black.
+pub fn exposure_gain(renders: &[Vec<[f32; 3]>], truths: &[Vec<[f32; 3]>], masks: &[Vec<f32>]) -> f64 {
+    let (mut rt, mut rr) = (0.0f64, 0.0f64);
+    for ((render, truth), mask) in renders.iter().zip(truths).zip(masks) {
+        for ((r, t), m) in render.iter().zip(truth).zip(mask) {
+            for c in 0..3 {
+                rt += f64::from(*m) * f64::from(r[c]) * f64::from(t[c]);
+                rr += f64::from(*m) * f64::from(r[c]) * f64::from(r[c]);
+            }
+        }
+    }
+    if rr > 0.0 { rt / rr } else { 1.0 }
 }
 
 /// The flat-colour baseline of `truth` (linear, premultiplied over black): the mean

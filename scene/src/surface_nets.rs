@@ -171,17 +171,14 @@ pub fn surface_net(grid: &GridSamples<'_>) -> SurfaceNet {
     SurfaceNet { positions, triangles }
 }
 
-/// Taubin's λ|μ smoothing (Taubin 1995): `iterations` pairs of a shrinking
-/// (`λ = 0.5`) and an inflating (`μ = −0.53`) umbrella step over the mesh's edge
-/// neighbours, which removes the grid's staircase without the shrinkage plain
-/// Laplacian smoothing causes. Vertices of no triangle stay where they are.
-pub fn taubin_smooth(positions: &mut [Vec3], triangles: &[[u32; 3]], iterations: usize) {
-    let n = positions.len();
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
+/// Each vertex's edge neighbours (sorted, each once), for `vertex_count` vertices;
+/// corners out of range are skipped.
+pub fn vertex_neighbours(vertex_count: usize, triangles: &[[u32; 3]]) -> Vec<Vec<u32>> {
+    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); vertex_count];
     for t in triangles {
         for i in 0..3 {
             let (a, b) = (t[i], t[(i + 1) % 3]);
-            if (a as usize) < n && (b as usize) < n {
+            if (a as usize) < vertex_count && (b as usize) < vertex_count {
                 neighbours[a as usize].push(b);
                 neighbours[b as usize].push(a);
             }
@@ -191,6 +188,15 @@ pub fn taubin_smooth(positions: &mut [Vec3], triangles: &[[u32; 3]], iterations:
         list.sort_unstable();
         list.dedup();
     }
+    neighbours
+}
+
+/// Taubin's λ|μ smoothing (Taubin 1995): `iterations` pairs of a shrinking
+/// (`λ = 0.5`) and an inflating (`μ = −0.53`) umbrella step over the mesh's edge
+/// neighbours, which removes the grid's staircase without the shrinkage plain
+/// Laplacian smoothing causes. Vertices of no triangle stay where they are.
+pub fn taubin_smooth(positions: &mut [Vec3], triangles: &[[u32; 3]], iterations: usize) {
+    let neighbours = vertex_neighbours(positions.len(), triangles);
     let mut next = positions.to_vec();
     for _ in 0..iterations {
         for factor in [0.5f32, -0.53] {

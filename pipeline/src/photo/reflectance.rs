@@ -27,6 +27,7 @@ use glam::Vec3;
 use nelf_bake::LoadedCapture;
 use nelf_format::conventions::{LT_DIM, LatLong, shade};
 use nelf_scene::mesh::{Albedo, Mesh};
+use nelf_scene::surface_nets::vertex_neighbours;
 use nelf_scene::tracer::{LtTracer, TraceSettings};
 use rayon::prelude::*;
 use serde::Serialize;
@@ -172,7 +173,11 @@ pub fn estimate_reflectance(
                 return (None, [0.0; 3]);
             }
             let (sum, total) = seen_colour(&tracer, capture, x, n, offset_m);
-            let colour = (total > 0.0).then(|| sum.map(|s| s / total));
+            if total <= 0.0 {
+                // No view sees it: its shading would go unused.
+                return (None, [0.0; 3]);
+            }
+            let colour = Some(sum.map(|s| s / total));
             let sp = nelf_scene::tracer::SurfacePoint {
                 position: x + n * offset_m,
                 geometric_normal: n,
@@ -254,16 +259,7 @@ pub fn estimate_reflectance(
 /// no round adds any; returns how many were filled.
 fn fill_from_neighbours(values: &mut [Option<[f32; 3]>], triangles: &[[u32; 3]]) -> usize {
     let n = values.len();
-    let mut neighbours: Vec<Vec<u32>> = vec![Vec::new(); n];
-    for t in triangles {
-        for i in 0..3 {
-            let (a, b) = (t[i] as usize, t[(i + 1) % 3] as usize);
-            if a < n && b < n {
-                neighbours[a].push(b as u32);
-                neighbours[b].push(a as u32);
-            }
-        }
-    }
+    let neighbours = vertex_neighbours(n, triangles);
     let mut filled = 0;
     loop {
         let updates: Vec<(usize, [f32; 3])> = (0..n)
