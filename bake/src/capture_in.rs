@@ -21,6 +21,12 @@
 //! are coverage in `[0, 1]` (8/16-bit PNG scaled to `[0, 1]`, EXR as is); a pixel
 //! is foreground when its mask value is > 0.5.
 //!
+//! **EXIF orientation** is not applied: pixels are used as the file stores them,
+//! as COLMAP does (its poses and intrinsics are in the stored frame), and a view
+//! whose JPEG carries a turn or a flip gets a note in [`LoadedCapture::notes`]. An
+//! image or mask turned a quarter from its camera's size (a photo turned upright
+//! by a viewer, a mask made from the turned photo) is an error that says so.
+//!
 //! **Checks**, each an error naming the file: a missing image or mask, an image
 //! whose size is not the camera's, a mask whose size is not the image's, a
 //! non-finite pixel, a mask with no foreground, a camera that is not finite or not
@@ -32,7 +38,8 @@
 use std::path::{Component, Path, PathBuf};
 
 use glam::DVec3;
-use image::DynamicImage;
+use image::metadata::Orientation;
+use image::{DynamicImage, ImageDecoder as _};
 use nelf_format::capture::{CAPTURE_FILE_NAME, Capture};
 use nelf_format::colmap::read_colmap_text;
 use nelf_format::conventions::PinholeCamera;
@@ -106,6 +113,9 @@ pub struct LoadedCapture {
     pub masks: Vec<Vec<f32>>,
     /// Estimated head centre (least-squares point nearest every optical axis), metres.
     pub head_centre_m: DVec3,
+    /// What the loader noticed and worked around (e.g. an EXIF orientation it did
+    /// not apply), one sentence each naming the file.
+    pub notes: Vec<String>,
 }
 
 impl LoadedCapture {
@@ -223,8 +233,9 @@ pub fn load_capture(dir: impl AsRef<Path>, options: &CaptureLoadOptions) -> Resu
     let mut image_files = Vec::with_capacity(views.len());
     let mut images = Vec::with_capacity(views.len());
     let mut masks = Vec::with_capacity(views.len());
+    let mut notes = Vec::new();
     for v in views {
-        let (image, mask) = load_view(&v)?;
+        let (image, mask) = load_view(&v, &mut notes)?;
         names.push(v.name);
         image_files.push(v.image);
         images.push(image);
@@ -240,6 +251,7 @@ pub fn load_capture(dir: impl AsRef<Path>, options: &CaptureLoadOptions) -> Resu
         images,
         masks,
         head_centre_m,
+        notes,
     })
 }
 
@@ -271,22 +283,28 @@ fn colmap_mask_candidates(dir: &Path, relative: &Path) -> Vec<PathBuf> {
 
 pub use nelf_format::conventions::nearest_point_to_axes as head_centre;
 
-fn decode(path: &Path, what: &str) -> Result<DynamicImage> {
+/// Decodes an image file, with the orientation its EXIF data asks for (not applied).
+fn decode(path: &Path, what: &str) -> Result<(DynamicImage, Orientation)> {
     if !path.is_file() {
         return Err(BakeError::MissingFile {
             path: path.to_path_buf(),
             what: what.to_string(),
         });
     }
-    image::ImageReader::open(path)
+    let image_error = |source| BakeError::Image {
+        path: path.to_path_buf(),
+        source,
+    };
+    let mut decoder = image::ImageReader::open(path)
         .with_path(path)?
         .with_guessed_format()
         .with_path(path)?
-        .decode()
-        .map_err(|source| BakeError::Image {
-            path: path.to_path_buf(),
-            source,
-        })
+        .into_decoder()
+        .map_err(image_error)?;
+    // Unreadable EXIF data is no reason to refuse the pixels.
+    let orientation = decoder.orientation().unwrap_or(Orientation::NoTransforms);
+    let image = DynamicImage::from_decoder(decoder).map_err(image_error)?;
+    Ok((image, orientation))
 }
 
 fn is_exr(path: &Path) -> bool {
@@ -296,13 +314,14 @@ fn is_exr(path: &Path) -> bool {
 }
 
 /// Decodes one view's image (linear RGB) and mask, checking sizes and values.
-fn load_view(view: &ViewFiles) -> Result<(Vec<[f32; 3]>, Vec<f32>)> {
+fn load_view(view: &ViewFiles, notes: &mut Vec<String>) -> Result<(Vec<[f32; 3]>, Vec<f32>)> {
     let (w, h) = (view.camera.width, view.camera.height);
-    let image = decode(&view.image, &format!("image of view {:?}", view.name))?;
+    let (image, orientation) = decode(&view.image, &format!("image of view {:?}", view.name))?;
     let check_size = |img: &DynamicImage, path: &Path, what: &str| {
         if img.width() == w && img.height() == h {
             Ok(())
         } else {
+            let turned = w != h && img.width() == h && img.height() == w;
             Err(BakeError::SizeMismatch {
                 path: path.to_path_buf(),
                 what: what.to_string(),
@@ -310,6 +329,14 @@ fn load_view(view: &ViewFiles) -> Result<(Vec<[f32; 3]>, Vec<f32>)> {
                 expected_h: h,
                 found_w: img.width(),
                 found_h: img.height(),
+                hint: if turned {
+                    "; it is the camera's size turned a quarter: was it turned upright from its \
+                     EXIF orientation? Poses (COLMAP's too) are in the frame the camera stored the \
+                     pixels in; give the image and its mask in that frame"
+                        .into()
+                } else {
+                    String::new()
+                },
             })
         }
     };
@@ -318,6 +345,12 @@ fn load_view(view: &ViewFiles) -> Result<(Vec<[f32; 3]>, Vec<f32>)> {
         &view.image,
         &format!("the image of view {:?} (camera size)", view.name),
     )?;
+    if orientation != Orientation::NoTransforms {
+        notes.push(format!(
+            "{}: EXIF orientation {orientation:?} not applied (pixels used as stored, as COLMAP does)",
+            view.image.display()
+        ));
+    }
     let linear = is_exr(&view.image);
     let rgba = image.to_rgba32f();
     let mut rgb = Vec::with_capacity((w * h) as usize);
@@ -337,7 +370,7 @@ fn load_view(view: &ViewFiles) -> Result<(Vec<[f32; 3]>, Vec<f32>)> {
         });
     }
     let (mask, mask_file) = if let Some(path) = &view.mask {
-        let m = decode(path, &format!("mask of view {:?}", view.name))?;
+        let (m, _) = decode(path, &format!("mask of view {:?}", view.name))?;
         check_size(
             &m,
             path,

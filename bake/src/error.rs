@@ -67,7 +67,7 @@ pub enum BakeError {
         count: usize,
     },
     /// An image or mask does not have the size the camera (or the image) says.
-    #[error("{path}: {what} is {found_w}×{found_h} pixels but must be {expected_w}×{expected_h}")]
+    #[error("{path}: {what} is {found_w}×{found_h} pixels but must be {expected_w}×{expected_h}{hint}")]
     SizeMismatch {
         /// The image or mask file.
         path: PathBuf,
@@ -81,6 +81,8 @@ pub enum BakeError {
         found_w: u32,
         /// Height found.
         found_h: u32,
+        /// What may have happened (empty, or a sentence starting with a separator).
+        hint: String,
     },
     /// A view has no mask file and its image has no alpha channel.
     #[error("{path}: view {view:?} has no mask (no mask file, and the image has no alpha channel)")]

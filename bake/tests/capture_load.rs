@@ -308,3 +308,66 @@ fn broken_colmap_models_name_the_file() {
     assert!(matches!(err, BakeError::MissingFile { .. }), "{err}");
     assert_names(&err, "IMG_2.png");
 }
+
+/// A little-endian EXIF (TIFF) chunk holding one entry: orientation `value`.
+fn exif_orientation(value: u16) -> Vec<u8> {
+    let mut chunk = vec![0x49, 0x49, 42, 0, 8, 0, 0, 0, 1, 0];
+    chunk.extend_from_slice(&0x0112u16.to_le_bytes()); // Orientation
+    chunk.extend_from_slice(&3u16.to_le_bytes()); // SHORT
+    chunk.extend_from_slice(&1u32.to_le_bytes()); // one value
+    chunk.extend_from_slice(&value.to_le_bytes());
+    chunk.extend_from_slice(&[0, 0, 0, 0, 0, 0]); // padding, no next IFD
+    chunk
+}
+
+#[test]
+fn an_exif_turn_is_noted_not_applied_and_a_turned_file_is_an_error_that_says_so() {
+    use image::ImageEncoder as _;
+    // A phone's JPEG: stored pixels as the camera (and COLMAP) saw them, EXIF asking
+    // viewers to turn it a quarter (orientation 6).
+    let tmp = tempfile::tempdir().unwrap();
+    let mut capture = json_capture(tmp.path());
+    let cam = capture.views[1].camera;
+    let mask = sphere_mask(&cam);
+    let rgb: Vec<u8> = mask
+        .iter()
+        .flat_map(|&m| COLOUR.map(|c| (255.0 * nelf_scene::srgb::linear_to_srgb(c * m)).round() as u8))
+        .collect();
+    let file = std::fs::File::create(tmp.path().join("images/view_001.jpg")).unwrap();
+    let mut encoder = image::codecs::jpeg::JpegEncoder::new_with_quality(file, 100);
+    encoder.set_exif_metadata(exif_orientation(6)).unwrap();
+    encoder
+        .write_image(&rgb, SIZE, SIZE, image::ExtendedColorType::Rgb8)
+        .unwrap();
+    capture.views[1].image = "images/view_001.jpg".into();
+    capture.save(tmp.path()).unwrap();
+    let loaded = load(tmp.path()).unwrap();
+    assert_eq!(loaded.notes.len(), 1, "{:?}", loaded.notes);
+    assert!(
+        loaded.notes[0].contains("view_001.jpg") && loaded.notes[0].contains("Rotate90"),
+        "{:?}",
+        loaded.notes
+    );
+    // The pixels are the stored ones: the sphere's centre pixel is the colour.
+    let centre = loaded.images[1][(SIZE / 2 * SIZE + SIZE / 2) as usize];
+    for (got, want) in centre.iter().zip(COLOUR) {
+        assert!((got - want).abs() < 0.03, "{centre:?}");
+    }
+
+    // A non-square view whose mask was made from the photo turned upright.
+    let tmp = tempfile::tempdir().unwrap();
+    let mut capture = json_capture(tmp.path());
+    let cam = &mut capture.views[2].camera;
+    cam.height = SIZE - 6;
+    cam.cy -= 3.0;
+    let cam = *cam;
+    let mask = sphere_mask(&cam);
+    let rgb: Vec<[f32; 3]> = mask.iter().map(|&m| COLOUR.map(|c| c * m)).collect();
+    write_exr(&tmp.path().join("images/view_002.exr"), SIZE, SIZE - 6, &rgb);
+    write_mask(&tmp.path().join("masks/view_002.png"), SIZE - 6, SIZE, &mask);
+    capture.save(tmp.path()).unwrap();
+    let err = load(tmp.path()).unwrap_err();
+    assert!(matches!(err, BakeError::SizeMismatch { .. }), "{err}");
+    assert_names(&err, "masks/view_002.png");
+    assert_names(&err, "turned a quarter");
+}

@@ -6,10 +6,15 @@
 //! bake (8-bit sRGB PSNR, foreground and whole image, at the held-aside targets)
 //! beside the ground-truth bake and the flat colour.
 //!
-//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [hull]`
+//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [hull] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform]`
 //! (a synthetic capture with `synth_config.json` and targets, e.g. `nelf demo`'s
 //! `out/demo/capture`). `unnamed` reconstructs as if the capture named no lighting
-//! and scores after one exposure gain; `hull` keeps the visual hull uncarved.
+//! and scores after one exposure gain; `hull` keeps the visual hull uncarved;
+//! `depth` scores the stereo depth maps against the truth's, by origin;
+//! `mesh=truth` runs the reflectance stage on the true surface and `albedo=truth`
+//! puts the true albedo on the reconstructed one (each stage's own error);
+//! `highlight`, `texel_samples`, `bounces`, `light=uniform` rerun the reflectance
+//! stage with those settings.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -20,7 +25,7 @@ use nelf_bake::{
     BakeConfig, CaptureLoadOptions, GroundTruth, Progress, ViewChoice, bake_capture, load_capture,
 };
 use nelf_pipeline::PipelineConfig;
-use nelf_pipeline::photo::{bake_photographs, write_reconstruction};
+use nelf_pipeline::photo::{reconstruct, write_reconstruction};
 use nelf_render::{MarchSettings, render_asset};
 use nelf_scene::bvh::Bvh;
 use nelf_scene::mesh::Mesh;
@@ -60,43 +65,128 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if unnamed && let nelf_bake::capture_in::CaptureSource::CamerasJson(d) = &mut photographs.source {
         d.envmap = None;
     }
+    let option = |key: &str| args.iter().find_map(|a| a.strip_prefix(key)?.strip_prefix('='));
+    let settings = nelf_pipeline::config::PhotoSettings {
+        photo_hull_only: args.iter().any(|a| a == "hull"),
+        photo_smoothing: option("smoothing").map_or(Ok(30), str::parse)?,
+        photo_blur_mm: option("blur").map_or(Ok(nelf_pipeline::config::DEFAULT_PHOTO_BLUR_MM), str::parse)?,
+        ..Default::default()
+    };
+    if args.iter().any(|a| a == "depth") {
+        depth_error(&photographs, &truth_mesh, config.bake.max_hull_radius_m)?;
+    }
     let t = Instant::now();
-    let baked = bake_photographs(
+    // `albedo=truth`: the true albedo on the reconstructed surface (geometry's own error).
+    // The reflectance stage again, on the true surface (`mesh=truth`: its own error)
+    // or with other settings or lighting (`light=uniform`: a white ambient light).
+    let mut reconstruction = reconstruct(&photographs, None, &settings, config.bake.max_hull_radius_m)?;
+    let rerun = ["mesh", "light", "texel_samples", "bounces", "highlight"]
+        .iter()
+        .any(|k| option(k).is_some());
+    if rerun {
+        let geometry = if option("mesh") == Some("truth") {
+            truth_mesh.clone()
+        } else {
+            reconstruction.mesh.clone()
+        };
+        let (light, named) = if option("light") == Some("uniform") {
+            (
+                nelf_format::conventions::LatLong::constant(16, 8, [1.0; 3]),
+                false,
+            )
+        } else {
+            let (light, report) = nelf_pipeline::photo::lighting::capture_lighting(&photographs, None)?;
+            (light, report.named)
+        };
+        let (albedo, report) = nelf_pipeline::photo::reflectance::estimate_reflectance(
+            &geometry,
+            &photographs,
+            &light,
+            &nelf_pipeline::photo::reflectance::ReflectanceSettings {
+                texel_samples: option("texel_samples").map_or(Ok(1), str::parse)?,
+                bounces: option("bounces").map_or(Ok(0), str::parse)?,
+                highlight_tolerance: match option("highlight") {
+                    Some("off") => None,
+                    Some(t) => Some(t.parse()?),
+                    None => Some(0.1),
+                },
+                normalise_to: (!named).then_some(0.9),
+                ..Default::default()
+            },
+            1.5e-3,
+        )?;
+        if option("mesh") == Some("truth") {
+            albedo_error(&albedo, &truth_mesh, &capture.cameras);
+        }
+        reconstruction.report.reflectance = report;
+        reconstruction.mesh = Mesh {
+            albedo: nelf_scene::mesh::Albedo::PerVertex(albedo),
+            ..geometry
+        };
+    }
+    if option("albedo") == Some("truth") {
+        let bvh_t = Bvh::new(&truth_mesh.positions, &truth_mesh.triangles);
+        let albedo = reconstruction
+            .mesh
+            .positions
+            .iter()
+            .map(|p| {
+                bvh_t.closest_point(*p, f32::INFINITY).map_or([0.5; 3], |c| {
+                    truth_mesh.albedo_at(c.triangle as usize, c.b1, c.b2)
+                })
+            })
+            .collect();
+        reconstruction.mesh.albedo = nelf_scene::mesh::Albedo::PerVertex(albedo);
+    }
+    let reconstruct_secs = t.elapsed().as_secs_f64();
+    let description = serde_json::to_value(&reconstruction.report)?;
+    let output = bake_capture(
         &photographs,
-        None,
-        &nelf_pipeline::config::PhotoSettings {
-            photo_hull_only: args.iter().any(|a| a == "hull"),
-            ..Default::default()
+        &GroundTruth::Reconstructed {
+            mesh: Box::new(reconstruction.mesh.clone()),
+            description,
         },
-        &config,
-        Progress::hidden(),
+        &config.bake,
+        &Progress::hidden(),
     )?;
     let photo_secs = t.elapsed().as_secs_f64();
     println!(
-        "reconstruction {:.1} s, bake total {photo_secs:.1} s\n{}",
-        baked.reconstruct_secs,
-        serde_json::to_string_pretty(&baked.reconstruction.report)?
+        "reconstruction {reconstruct_secs:.1} s, bake total {photo_secs:.1} s (truth mesh {} vertices)\n{}",
+        truth_mesh.positions.len(),
+        serde_json::to_string_pretty(&reconstruction.report)?
     );
-    println!(
-        "bake stages: {}",
-        serde_json::to_string(&baked.output.report.timings)?
-    );
+    println!("bake stages: {}", serde_json::to_string(&output.report.timings)?);
+    let baked = (output, reconstruction);
     let out = dir.with_file_name("photos_bench");
-    write_reconstruction(&baked.reconstruction, &out.join("reconstruction"))?;
-    geometry_error(&baked.reconstruction.mesh, &truth_mesh, &capture.cameras);
+    write_reconstruction(&baked.1, &out.join("reconstruction"))?;
+    geometry_error(&baked.1.mesh, &truth_mesh, &capture.cameras);
     // The reconstruction re-rendered at each source view under the source lighting
     // (direct light only): the reflectance stage's own check.
     if let Some(path) = capture.source_envmap_path() {
         let env = nelf_scene::envmap::load_envmap(&path)?;
         let basis = nelf_format::conventions::project_envmap(&env, DMat3::IDENTITY)?;
         let tracer = nelf_scene::tracer::LtTracer::new(
-            &baked.reconstruction.mesh,
+            &baked.1.mesh,
             nelf_scene::tracer::TraceSettings {
                 bounces: 0,
                 texel_samples: 1,
                 ..Default::default()
             },
         )?;
+        // Albedo × ambient occlusion (uniform white light): truth beside reconstruction.
+        let white = nelf_format::conventions::LatLong::constant(16, 8, [1.0; 3]);
+        let truth_tracer = nelf_scene::tracer::LtTracer::new(&truth_mesh, truth.trace_settings())?;
+        for v in [0, capture.len() - 1] {
+            let a = nelf_scene::render::render_lt_image(&truth_tracer, &capture.cameras[v], &white, None)?;
+            let b = nelf_scene::render::render_lt_image(&tracer, &capture.cameras[v], &white, None)?;
+            nelf_pipeline::demo::side_by_side(
+                &out.join(format!("albedo_{v}.png")),
+                &capture.cameras[v],
+                &a.rgb,
+                &b.rgb,
+                0.0,
+            )?;
+        }
         for v in 0..capture.len() {
             let image = nelf_scene::render::render_lt_image(&tracer, &capture.cameras[v], &basis, None)?;
             let exposure = (0.6 / nelf_bake::eval::data_range(&capture.images[v])).log2();
@@ -120,7 +210,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut renders = Vec::new();
     for t in 0..held.len() {
         let photo = render_asset(
-            &baked.output.asset,
+            &baked.0.asset,
             &held.cameras[t],
             &held.envs[t],
             DMat3::IDENTITY,
@@ -167,6 +257,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &out.join(format!("compare_{}.png", held.names[t])),
             &held.cameras[t],
             &held.images[t],
+            &photo,
+            exposure,
+        )?;
+        nelf_pipeline::demo::side_by_side(
+            &out.join(format!("vs_truth_bake_{}.png", held.names[t])),
+            &held.cameras[t],
+            truth_img,
             &photo,
             exposure,
         )?;
@@ -220,4 +317,100 @@ fn geometry_error(reconstructed: &Mesh, truth: &Mesh, cameras: &[nelf_format::co
         "geometry: reconstructed→truth mean {d_rt:.2} mm (p90 {p_rt:.2}), normals {a_rt:.1}° over {n_rt} points; truth→reconstructed {d_tr:.2} mm (p90 {p_tr:.2}), {a_tr:.1}° over {n_tr}; Chamfer {:.2} mm",
         0.5 * (d_rt + d_tr)
     );
+}
+
+/// Mean absolute error (linear, per channel) and mean ratio of an estimated
+/// per-vertex albedo of `truth`'s own vertices against its albedo there.
+fn albedo_error(albedo: &[[f32; 3]], truth: &Mesh, cameras: &[nelf_format::conventions::PinholeCamera]) {
+    let mut corner_albedo = vec![None; truth.positions.len()];
+    for (t, tri) in truth.triangles.iter().enumerate() {
+        for (k, &v) in tri.iter().enumerate() {
+            let (b1, b2) = [(0.0, 0.0), (1.0, 0.0), (0.0, 1.0)][k];
+            corner_albedo[v as usize].get_or_insert_with(|| truth.albedo_at(t, b1, b2));
+        }
+    }
+    let normals = truth.vertex_normals();
+    let (mut abs, mut est, mut tru, mut count) = ([0.0f64; 3], [0.0f64; 3], [0.0f64; 3], 0.0f64);
+    for ((a, t), (p, n)) in albedo
+        .iter()
+        .zip(&corner_albedo)
+        .zip(truth.positions.iter().zip(&normals))
+    {
+        let Some(t) = t else { continue };
+        // Vertices facing every camera (the front of the head).
+        if !cameras
+            .iter()
+            .all(|c| n.dot((c.centre().as_vec3() - *p).normalize()) > 0.3)
+        {
+            continue;
+        }
+        for ch in 0..3 {
+            abs[ch] += f64::from((a[ch] - t[ch]).abs());
+            est[ch] += f64::from(a[ch]);
+            tru[ch] += f64::from(t[ch]);
+        }
+        count += 1.0;
+    }
+    let r = |v: [f64; 3]| v.map(|v| (v / count * 1e3).round() / 1e3);
+    println!(
+        "albedo on the true surface (front): mean |error| {:?}, mean estimate {:?}, mean truth {:?} over {count} vertices",
+        r(abs),
+        r(est),
+        r(tru)
+    );
+}
+
+/// The stereo stage's depth maps against the true surface's depths, per view:
+/// median and 90th-percentile error (mm) and the share off by more than 5 mm.
+fn depth_error(
+    capture: &nelf_bake::LoadedCapture,
+    truth: &Mesh,
+    max_radius_m: f64,
+) -> Result<(), Box<dyn std::error::Error>> {
+    use nelf_pipeline::photo::geometry::{SurfaceSettings, hull_surface};
+    use nelf_pipeline::photo::stereo::{DepthOrigin, StereoSettings, depth_maps};
+    let (hull, _) = hull_surface(
+        capture,
+        &SurfaceSettings {
+            spacing_m: 1.5e-3,
+            smoothing_iterations: 0,
+            blur_m: 0.0,
+            max_radius_m,
+            stereo: None,
+        },
+    )?;
+    let (maps, report) = depth_maps(capture, &hull, &StereoSettings::default());
+    println!("stereo: {}", serde_json::to_string(&report)?);
+    let bvh = Bvh::new(&truth.positions, &truth.triangles);
+    for (v, camera) in capture.cameras.iter().enumerate() {
+        let w = camera.width as usize;
+        for kind in [DepthOrigin::Stereo, DepthOrigin::Filled] {
+            let mut errors = Vec::new();
+            for (i, d) in maps[v].depth_m.iter().enumerate() {
+                if !d.is_finite() || maps[v].origin[i] != kind {
+                    continue;
+                }
+                let dir = camera.ray_direction(glam::DVec2::new((i % w) as f64 + 0.5, (i / w) as f64 + 0.5));
+                if let Some(hit) =
+                    bvh.closest_hit(camera.centre().as_vec3(), dir.as_vec3(), 0.0, f32::INFINITY)
+                {
+                    errors.push(1e3 * f64::from(d - hit.t));
+                }
+            }
+            if errors.is_empty() {
+                continue;
+            }
+            let mut abs: Vec<f64> = errors.iter().map(|e| e.abs()).collect();
+            abs.sort_by(f64::total_cmp);
+            let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+            println!(
+                "view {v} {kind:?}: depth error median {:.2} mm, p90 {:.2} mm, > 5 mm {:.1} %, mean signed {mean:+.2} mm over {} pixels",
+                abs[abs.len() / 2],
+                abs[abs.len() * 9 / 10],
+                100.0 * abs.iter().filter(|&&e| e > 5.0).count() as f64 / abs.len() as f64,
+                abs.len()
+            );
+        }
+    }
+    Ok(())
 }

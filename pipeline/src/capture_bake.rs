@@ -135,6 +135,18 @@ pub fn bake_capture_dir(options: &CaptureBakeOptions, progress: Progress) -> Res
     };
     let capture =
         load_capture(dir, &load).with_context(|| format!("loading the capture in {}", dir.display()))?;
+    let mut baked = bake_loaded_capture(&capture, options, progress)?;
+    baked.output.report.notes.extend(capture.notes);
+    Ok(baked)
+}
+
+/// [`bake_capture_dir`] once the capture is loaded.
+fn bake_loaded_capture(
+    capture: &LoadedCapture,
+    options: &CaptureBakeOptions,
+    progress: Progress,
+) -> Result<CaptureBake> {
+    let dir = &options.dir;
     let synth_truth = || GroundTruth::from_synth_capture(dir);
     match chosen_source(options, || synth_truth().is_ok())? {
         Source::Network => {
@@ -142,7 +154,7 @@ pub fn bake_capture_dir(options: &CaptureBakeOptions, progress: Progress) -> Res
                 || nelf_field::shipped::SHIPPED_WEIGHTS_NAME.to_string(),
                 |w| w.display().to_string(),
             );
-            let output = bake_network(&capture, options.weights.as_deref(), &options.config, progress)
+            let output = bake_network(capture, options.weights.as_deref(), &options.config, progress)
                 .with_context(|| format!("baking {} with the network {name}", dir.display()))?;
             return Ok(CaptureBake {
                 output,
@@ -152,7 +164,7 @@ pub fn bake_capture_dir(options: &CaptureBakeOptions, progress: Progress) -> Res
         }
         Source::Photos => {
             let baked = bake_photographs(
-                &capture,
+                capture,
                 options.weights.as_deref(),
                 &options.photo,
                 &options.config,
@@ -182,7 +194,7 @@ pub fn bake_capture_dir(options: &CaptureBakeOptions, progress: Progress) -> Res
             )
         })?,
     };
-    bake_truth(&capture, &truth, options, progress)
+    bake_truth(capture, &truth, options, progress)
 }
 
 /// The ground truth's bake, or the choice among its bakes when one is asked for.

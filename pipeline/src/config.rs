@@ -92,6 +92,13 @@ pub const DEFAULT_PHOTO_SPACING_MM: f64 = 1.5;
 /// Default `--photo-smoothing`.
 pub const DEFAULT_PHOTO_SMOOTHING: usize = 30;
 
+/// Default `--photo-blur-mm`.
+pub const DEFAULT_PHOTO_BLUR_MM: f64 = 3.0;
+
+fn default_photo_blur_mm() -> f64 {
+    DEFAULT_PHOTO_BLUR_MM
+}
+
 fn default_photo_spacing_mm() -> f64 {
     DEFAULT_PHOTO_SPACING_MM
 }
@@ -113,6 +120,12 @@ pub struct PhotoSettings {
     #[arg(long, default_value_t = DEFAULT_PHOTO_SMOOTHING)]
     #[serde(default = "default_photo_smoothing")]
     pub photo_smoothing: usize,
+    /// Photographs: standard deviation of the Gaussian the fused signed distance is
+    /// blurred with before meshing, millimetres (0: none). Removes the stereo's
+    /// narrow grooves and spikes, which no vertex smoothing reaches.
+    #[arg(long, default_value_t = DEFAULT_PHOTO_BLUR_MM)]
+    #[serde(default = "default_photo_blur_mm")]
+    pub photo_blur_mm: f64,
     /// Photographs: interreflections in the shading the photographs are divided by
     /// to recover reflectance (0: direct light with shadows only).
     #[arg(long, default_value_t = 0)]
@@ -135,6 +148,12 @@ impl PhotoSettings {
                 self.photo_spacing_mm
             )));
         }
+        if !(self.photo_blur_mm.is_finite() && self.photo_blur_mm >= 0.0) {
+            return Err(PipelineError::Invalid(format!(
+                "invalid reconstruction settings: --photo-blur-mm {} must be zero or positive",
+                self.photo_blur_mm
+            )));
+        }
         Ok(())
     }
 }
@@ -144,6 +163,7 @@ impl Default for PhotoSettings {
         Self {
             photo_spacing_mm: DEFAULT_PHOTO_SPACING_MM,
             photo_smoothing: DEFAULT_PHOTO_SMOOTHING,
+            photo_blur_mm: DEFAULT_PHOTO_BLUR_MM,
             photo_shading_bounces: 0,
             photo_hull_only: false,
         }

@@ -120,6 +120,9 @@ pub fn describe_bake(out: &Path, r: &BakeReport) -> String {
         t.view_secs,
         t.write_secs
     );
+    for note in &r.notes {
+        let _ = writeln!(text, "  note: {note}");
+    }
     let _ = writeln!(text, "  settings and report: {}", sidecar_path(out).display());
     text
 }

@@ -74,6 +74,10 @@ pub struct BakeReport {
     /// The view-dependence stage (`None` when `--view-dependence off`).
     #[serde(default)]
     pub view: Option<ViewReport>,
+    /// What the capture's loader noticed and worked around (EXIF orientations
+    /// not applied, …), one sentence each.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub notes: Vec<String>,
 }
 
 /// A baked asset and its report.

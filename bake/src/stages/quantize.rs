@@ -91,6 +91,7 @@ pub(crate) fn asset_at_rank(
         timings: choice.timings,
         file_size: 0,
         view: None,
+        notes: Vec::new(),
     };
     let metadata = serde_json::json!({
         "generator": "nelf bake",

@@ -34,6 +34,9 @@ pub struct SurfaceSettings {
     pub spacing_m: f64,
     /// Taubin λ|μ smoothing iterations.
     pub smoothing_iterations: usize,
+    /// Standard deviation of the Gaussian the stereo-carved signed distance is
+    /// blurred with before meshing, metres (0: none).
+    pub blur_m: f64,
     /// Largest distance of the hull from the capture's head centre, metres (where
     /// the views leave the hull unbounded).
     pub max_radius_m: f64,
@@ -86,7 +89,7 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
             h * 1e3
         )));
     }
-    let sample = |field: &(dyn Fn(DVec3) -> f64 + Sync)| {
+    let sample = |field: &(dyn Fn(DVec3) -> f64 + Sync), blur_cells: f64| {
         let [nx, ny, nz] = dims;
         let mut values = vec![0.0f32; count];
         values.par_chunks_mut(nx * ny).enumerate().for_each(|(z, slab)| {
@@ -104,6 +107,9 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
                 }
             }
         });
+        if blur_cells > 0.0 {
+            gaussian_blur(&mut values, dims, blur_cells);
+        }
         surface_net(&GridSamples {
             values: &values,
             dims,
@@ -117,7 +123,7 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
             capture.camera_file.display()
         ))
     };
-    let mut net = sample(&|p| distance.distance_m(p));
+    let mut net = sample(&|p| distance.distance_m(p), 0.0);
     if net.triangles.is_empty() {
         return Err(empty());
     }
@@ -131,13 +137,16 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
         let (maps, report) = depth_maps(capture, &hull_mesh, stereo);
         stereo_report = Some(report);
         let tau = stereo.truncation_m;
-        net = sample(&|p| {
-            let hull = distance.distance_m(p);
-            match fused_distance(capture, &maps, p, tau) {
-                Some(fused) => hull.max(fused),
-                None => hull,
-            }
-        });
+        net = sample(
+            &|p| {
+                let hull = distance.distance_m(p);
+                match fused_distance(capture, &maps, p, tau) {
+                    Some(fused) => hull.max(fused),
+                    None => hull,
+                }
+            },
+            settings.blur_m / h,
+        );
         if net.triangles.is_empty() {
             return Err(empty());
         }
@@ -159,6 +168,46 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
         seconds: start.elapsed().as_secs_f64(),
     };
     Ok((mesh, report))
+}
+
+/// Blurs a grid of `dims` samples (x fastest) in place by a Gaussian of standard
+/// deviation `sigma_cells` along each axis in turn (separable); the kernel is cut
+/// at three deviations and renormalised at the grid's faces.
+fn gaussian_blur(values: &mut [f32], dims: [usize; 3], sigma_cells: f64) {
+    let radius = (3.0 * sigma_cells).ceil() as usize;
+    let kernel: Vec<f32> = (0..=radius)
+        .map(|k| (-0.5 * (k as f64 / sigma_cells).powi(2)).exp() as f32)
+        .collect();
+    let strides = [1, dims[0], dims[0] * dims[1]];
+    for axis in 0..3 {
+        let (n, stride) = (dims[axis], strides[axis]);
+        // Every line along `axis`: its first sample's index.
+        let starts: Vec<usize> = (0..values.len()).filter(|&i| (i / stride) % n == 0).collect();
+        let lines: Vec<Vec<f32>> = starts
+            .par_iter()
+            .map(|&start| {
+                (0..n)
+                    .map(|j| {
+                        let (mut sum, mut weight) = (0.0f32, 0.0f32);
+                        for (k, w) in kernel.iter().enumerate() {
+                            for side in [j.checked_sub(k), (k > 0).then_some(j + k)] {
+                                if let Some(m) = side.filter(|&m| m < n) {
+                                    sum += w * values[start + m * stride];
+                                    weight += w;
+                                }
+                            }
+                        }
+                        sum / weight
+                    })
+                    .collect()
+            })
+            .collect();
+        for (start, line) in starts.iter().zip(lines) {
+            for (j, v) in line.into_iter().enumerate() {
+                values[start + j * stride] = v;
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -230,6 +279,7 @@ pub(crate) mod tests {
             masks,
             cameras,
             head_centre_m: DVec3::ZERO,
+            notes: Vec::new(),
         }
     }
 
@@ -240,6 +290,7 @@ pub(crate) mod tests {
         let settings = SurfaceSettings {
             spacing_m: 0.005,
             smoothing_iterations: 5,
+            blur_m: 0.0,
             max_radius_m: 0.5,
             stereo: None,
         };
@@ -301,12 +352,14 @@ pub(crate) mod tests {
         let hull_settings = SurfaceSettings {
             spacing_m: 0.003,
             smoothing_iterations: 10,
+            blur_m: 0.0,
             max_radius_m: 0.5,
             stereo: None,
         };
         let (hull, _) = hull_surface(&capture, &hull_settings).expect("a hull");
         let stereo_settings = SurfaceSettings {
             stereo: Some(StereoSettings::default()),
+            blur_m: 0.003,
             ..hull_settings
         };
         let (carved, report) = hull_surface(&capture, &stereo_settings).expect("a carved hull");
@@ -318,11 +371,51 @@ pub(crate) mod tests {
     }
 
     #[test]
+    fn the_blur_keeps_constants_everywhere_and_planes_away_from_the_faces() {
+        let dims = [12, 10, 9];
+        let count = dims.iter().product::<usize>();
+        let index = |x: usize, y: usize, z: usize| (z * dims[1] + y) * dims[0] + x;
+        let mut constant = vec![0.25f32; count];
+        gaussian_blur(&mut constant, dims, 1.5);
+        assert!(constant.iter().all(|v| (v - 0.25).abs() < 1e-6));
+        // A signed distance to a tilted plane: linear, so a symmetric kernel keeps it
+        // where the kernel fits inside the grid (radius ⌈3σ⌉ = 3 cells).
+        let plane = |x: usize, y: usize, z: usize| 0.3 * x as f32 - 0.5 * y as f32 + 0.8 * z as f32 - 2.0;
+        let mut values = vec![0.0f32; count];
+        for z in 0..dims[2] {
+            for y in 0..dims[1] {
+                for x in 0..dims[0] {
+                    values[index(x, y, z)] = plane(x, y, z);
+                }
+            }
+        }
+        gaussian_blur(&mut values, dims, 1.0);
+        for z in 3..dims[2] - 3 {
+            for y in 3..dims[1] - 3 {
+                for x in 3..dims[0] - 3 {
+                    let got = values[index(x, y, z)];
+                    assert!((got - plane(x, y, z)).abs() < 1e-4, "({x}, {y}, {z}): {got}");
+                }
+            }
+        }
+        // A spike is spread out and keeps its sum (away from the faces).
+        let mut spike = vec![0.0f32; count];
+        spike[index(6, 5, 4)] = 1.0;
+        gaussian_blur(&mut spike, dims, 1.0);
+        let sum: f32 = spike.iter().sum();
+        assert!(
+            (sum - 1.0).abs() < 0.02 && spike[index(6, 5, 4)] < 0.1,
+            "sum {sum}"
+        );
+    }
+
+    #[test]
     fn a_bad_spacing_and_an_empty_hull_are_errors() {
         let capture = sphere_capture(0.1);
         let bad = SurfaceSettings {
             spacing_m: 0.0,
             smoothing_iterations: 0,
+            blur_m: 0.0,
             max_radius_m: 0.5,
             stereo: None,
         };

@@ -76,6 +76,7 @@ pub fn reconstruct(
         &SurfaceSettings {
             spacing_m,
             smoothing_iterations: settings.photo_smoothing,
+            blur_m: settings.photo_blur_mm * 1e-3,
             max_radius_m,
             stereo: (!settings.photo_hull_only).then(stereo::StereoSettings::default),
         },

@@ -49,6 +49,9 @@ pub struct ReflectanceSettings {
     /// When the lighting's scale is unknown (estimated, not named): scale every
     /// albedo so that the 98th percentile of the brightest channel is this value.
     pub normalise_to: Option<f32>,
+    /// Leave out views more than this fraction brighter than the median view at a
+    /// point (specular highlights); `None`: every view counts.
+    pub highlight_tolerance: Option<f32>,
 }
 
 impl Default for ReflectanceSettings {
@@ -59,6 +62,7 @@ impl Default for ReflectanceSettings {
             indirect_samples: 16,
             seed: 0,
             normalise_to: None,
+            highlight_tolerance: Some(0.1),
         }
     }
 }
@@ -85,16 +89,19 @@ pub struct ReflectanceReport {
     pub seconds: f64,
 }
 
-/// The weighted mean colour the views see at `x` (normal `n`), with its total weight.
+/// The colour the views see at `x` (normal `n`), with its total weight: the
+/// weighted mean over the views that see it, leaving out views more than
+/// `highlight_tolerance` brighter (luminance) than the weighted median when three
+/// or more see it — a specular highlight shows in one view and not the others.
 fn seen_colour(
     tracer: &LtTracer,
     capture: &LoadedCapture,
     x: Vec3,
     n: Vec3,
     offset_m: f32,
+    highlight_tolerance: Option<f32>,
 ) -> ([f64; 3], f64) {
-    let mut sum = [0.0f64; 3];
-    let mut total = 0.0f64;
+    let mut seen: Vec<([f32; 3], f32)> = Vec::with_capacity(capture.cameras.len());
     for (v, camera) in capture.cameras.iter().enumerate() {
         let eye = camera.centre();
         let to_eye = eye - x.as_dvec3();
@@ -123,11 +130,33 @@ fn seen_colour(
         let Some(colour) = bilinear_rgb(&capture.images[v], w, h, pixel) else {
             continue;
         };
-        let weight = f64::from(cosine * cosine);
-        for ch in 0..3 {
-            sum[ch] += weight * f64::from(colour[ch]);
+        seen.push((colour, cosine * cosine));
+    }
+    let luminance = |c: &[f32; 3]| (c[0] + c[1] + c[2]) / 3.0;
+    let ceiling = match highlight_tolerance {
+        Some(tolerance) if seen.len() >= 3 => {
+            let mut by_luminance: Vec<(f32, f32)> = seen.iter().map(|(c, w)| (luminance(c), *w)).collect();
+            by_luminance.sort_by(|a, b| a.0.total_cmp(&b.0));
+            let half = 0.5 * by_luminance.iter().map(|(_, w)| w).sum::<f32>();
+            let mut running = 0.0;
+            let median = by_luminance
+                .iter()
+                .find(|(_, w)| {
+                    running += w;
+                    running >= half
+                })
+                .map_or(f32::INFINITY, |(l, _)| *l);
+            median * (1.0 + tolerance)
         }
-        total += weight;
+        _ => f32::INFINITY,
+    };
+    let mut sum = [0.0f64; 3];
+    let mut total = 0.0f64;
+    for (colour, weight) in seen.iter().filter(|(c, _)| luminance(c) <= ceiling) {
+        for ch in 0..3 {
+            sum[ch] += f64::from(*weight) * f64::from(colour[ch]);
+        }
+        total += f64::from(*weight);
     }
     (sum, total)
 }
@@ -172,7 +201,7 @@ pub fn estimate_reflectance(
             if n == Vec3::ZERO {
                 return (None, [0.0; 3]);
             }
-            let (sum, total) = seen_colour(&tracer, capture, x, n, offset_m);
+            let (sum, total) = seen_colour(&tracer, capture, x, n, offset_m, settings.highlight_tolerance);
             if total <= 0.0 {
                 // No view sees it: its shading would go unused.
                 return (None, [0.0; 3]);
@@ -304,6 +333,7 @@ mod tests {
         let settings = SurfaceSettings {
             spacing_m: 0.005,
             smoothing_iterations: 5,
+            blur_m: 0.0,
             max_radius_m: 0.5,
             stereo: None,
         };
@@ -337,6 +367,51 @@ mod tests {
         let wrong = LatLong::constant(32, 16, [1.0; 3]);
         assert!(
             estimate_reflectance(&mesh, &capture, &wrong, &ReflectanceSettings::default(), 0.005).is_err()
+        );
+    }
+
+    #[test]
+    fn a_highlight_in_one_view_is_left_out_where_three_views_see_the_point() {
+        // Five views in a 35° cone of a sphere showing albedo 0.4 under uniform
+        // light; the first view (along +z) reads twice that about the centre.
+        let eyes: Vec<glam::DVec3> = [(0.0, 0.0), (0.6, 0.2), (-0.6, 0.2), (0.2, 0.6), (-0.2, -0.6)]
+            .iter()
+            .map(|&(x, y)| glam::DVec3::new(x, y, 1.0).normalize())
+            .collect();
+        let mut capture = crate::photo::geometry::tests::sphere_views(0.1, &eyes, 64, 0.3, |_| [0.4; 3]);
+        for (i, p) in capture.images[0].iter_mut().enumerate() {
+            let (x, y) = ((i % 64) as f64 - 31.5, (i / 64) as f64 - 31.5);
+            if x * x + y * y < 25.0 {
+                *p = p.map(|v| 2.0 * v);
+            }
+        }
+        let settings = SurfaceSettings {
+            spacing_m: 0.004,
+            smoothing_iterations: 5,
+            blur_m: 0.0,
+            max_radius_m: 0.5,
+            stereo: None,
+        };
+        let (mesh, _) = hull_surface(&capture, &settings).expect("a hull");
+        let light = LatLong::constant(16, 8, [1.0; 3]);
+        let front = |settings: &ReflectanceSettings| {
+            let (albedo, _) = estimate_reflectance(&mesh, &capture, &light, settings, 0.004).expect("albedo");
+            // The vertices nearest the +z axis, in front.
+            albedo
+                .iter()
+                .zip(&mesh.positions)
+                .filter(|(_, p)| p.z > 0.0 && p.x.hypot(p.y) < 0.004)
+                .map(|(a, _)| a[1])
+                .fold(0.0f32, f32::max)
+        };
+        let kept = front(&ReflectanceSettings::default());
+        let all_views = front(&ReflectanceSettings {
+            highlight_tolerance: None,
+            ..ReflectanceSettings::default()
+        });
+        assert!(
+            (kept - 0.4).abs() < 0.03 && all_views > 0.45,
+            "front albedo {kept} (every view: {all_views})"
         );
     }
 }
