@@ -98,8 +98,8 @@ pub struct NetworkEvalConfig {
     /// a mesh; `nelf_pipeline::photo`), scored as `photos_bake`.
     #[arg(long)]
     pub photos: bool,
-    /// With `--photos`: reconstruct as if the capture named no lighting (the network
-    /// estimates it; real photographs). The exposure of such an asset is then
+    /// With `--photos`: reconstruct as if the capture named no lighting (as real
+    /// photographs: it is fitted to their shading, `nelf bake --photo-lighting`). The exposure of such an asset is then
     /// unknowable, so its renders are scored after one gain for all of a capture's
     /// targets (least squares in linear light inside the true masks), reported beside it.
     #[arg(long)]

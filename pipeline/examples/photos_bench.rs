@@ -69,6 +69,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let settings = nelf_pipeline::config::PhotoSettings {
         photo_hull_only: args.iter().any(|a| a == "hull"),
         photo_smoothing: option("smoothing").map_or(Ok(30), str::parse)?,
+        photo_lighting: match option("lighting") {
+            Some("network") => nelf_pipeline::photo::lighting::UnnamedLighting::Network,
+            _ => nelf_pipeline::photo::lighting::UnnamedLighting::Fit,
+        },
         photo_blur_mm: option("blur").map_or(Ok(nelf_pipeline::config::DEFAULT_PHOTO_BLUR_MM), str::parse)?,
         ..Default::default()
     };
@@ -89,32 +93,42 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         } else {
             reconstruction.mesh.clone()
         };
+        let reflectance = nelf_pipeline::photo::reflectance::ReflectanceSettings {
+            texel_samples: option("texel_samples").map_or(Ok(1), str::parse)?,
+            bounces: option("bounces").map_or(Ok(0), str::parse)?,
+            highlight_tolerance: match option("highlight") {
+                Some("off") => None,
+                Some(t) => Some(t.parse()?),
+                None => Some(0.1),
+            },
+            ..Default::default()
+        };
+        let observations =
+            nelf_pipeline::photo::reflectance::observe(&geometry, &photographs, &reflectance, 1.5e-3)?;
         let (light, named) = if option("light") == Some("uniform") {
             (
                 nelf_format::conventions::LatLong::constant(16, 8, [1.0; 3]),
                 false,
             )
         } else {
-            let (light, report) = nelf_pipeline::photo::lighting::capture_lighting(&photographs, None)?;
+            let (light, report) = nelf_pipeline::photo::lighting::capture_lighting(
+                &photographs,
+                None,
+                settings.photo_lighting,
+                &observations,
+            )?;
             (light, report.named)
         };
-        let (albedo, report) = nelf_pipeline::photo::reflectance::estimate_reflectance(
-            &geometry,
-            &photographs,
+        let (albedo, report) = nelf_pipeline::photo::reflectance::albedo_from_observations(
+            &observations,
+            &geometry.triangles,
             &light,
             &nelf_pipeline::photo::reflectance::ReflectanceSettings {
-                texel_samples: option("texel_samples").map_or(Ok(1), str::parse)?,
-                bounces: option("bounces").map_or(Ok(0), str::parse)?,
-                highlight_tolerance: match option("highlight") {
-                    Some("off") => None,
-                    Some(t) => Some(t.parse()?),
-                    None => Some(0.1),
-                },
                 normalise_to: (!named).then_some(0.9),
-                ..Default::default()
+                ..reflectance
             },
-            1.5e-3,
         )?;
+        reconstruction.lighting = light;
         if option("mesh") == Some("truth") {
             albedo_error(&albedo, &truth_mesh, &capture.cameras);
         }
@@ -160,6 +174,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let out = dir.with_file_name("photos_bench");
     write_reconstruction(&baked.1, &out.join("reconstruction"))?;
     geometry_error(&baked.1.mesh, &truth_mesh, &capture.cameras);
+    if let Some(path) = capture.source_envmap_path() {
+        let truth_light = nelf_format::conventions::project_envmap(
+            &nelf_scene::envmap::load_envmap(&path)?,
+            DMat3::IDENTITY,
+        )?;
+        lighting_error(&baked.1.lighting, &truth_light);
+    }
     // The reconstruction re-rendered at each source view under the source lighting
     // (direct light only): the reflectance stage's own check.
     if let Some(path) = capture.source_envmap_path() {
@@ -413,4 +434,56 @@ fn depth_error(
         }
     }
     Ok(())
+}
+
+/// The lighting used against the truth's, both 8 × 16: relative RMS error after the
+/// best single gain (scale is unknowable without a named lighting), and after the
+/// best gain per channel (colour too).
+fn lighting_error(used: &nelf_format::conventions::LatLong, truth: &nelf_format::conventions::LatLong) {
+    let pairs: Vec<([f32; 3], [f32; 3])> = used
+        .texels()
+        .iter()
+        .copied()
+        .zip(truth.texels().iter().copied())
+        .collect();
+    let error = |gain: [f64; 3]| {
+        let (mut num, mut den) = (0.0f64, 0.0f64);
+        for (u, t) in &pairs {
+            for ch in 0..3 {
+                num += (gain[ch] * f64::from(u[ch]) - f64::from(t[ch])).powi(2);
+                den += f64::from(t[ch]).powi(2);
+            }
+        }
+        (num / den).sqrt()
+    };
+    let dot = |ch: Option<usize>| {
+        let (mut ut, mut uu) = (0.0f64, 0.0f64);
+        for (u, t) in &pairs {
+            for c in 0..3 {
+                if ch.is_none_or(|k| k == c) {
+                    ut += f64::from(u[c]) * f64::from(t[c]);
+                    uu += f64::from(u[c]).powi(2);
+                }
+            }
+        }
+        ut / uu.max(1e-30)
+    };
+    let one = dot(None);
+    for (name, map, gain) in [("used (x gain)", used, one), ("truth", truth, 1.0)] {
+        println!("{name}, luminance per texel (rows from +y down):");
+        for row in 0..8 {
+            let line: Vec<String> = (0..16)
+                .map(|col| {
+                    let t = map.get(row, col);
+                    format!("{:6.2}", gain * f64::from(t[0] + t[1] + t[2]) / 3.0)
+                })
+                .collect();
+            println!("  {}", line.join(""));
+        }
+    }
+    println!(
+        "lighting: relative error {:.3} after one gain, {:.3} after a gain per channel (8 x 16 texels)",
+        error([one; 3]),
+        error([dot(Some(0)), dot(Some(1)), dot(Some(2))])
+    );
 }

@@ -131,6 +131,10 @@ pub struct PhotoSettings {
     #[arg(long, default_value_t = 0)]
     #[serde(default)]
     pub photo_shading_bounces: u32,
+    /// Photographs: how the lighting is estimated when the capture names none.
+    #[arg(long, value_enum, default_value_t)]
+    #[serde(default)]
+    pub photo_lighting: crate::photo::lighting::UnnamedLighting,
     /// Photographs: keep the masks' visual hull as it is. By default it is carved by
     /// multi-view stereo (plane-sweep depth maps fused into a truncated signed
     /// distance, `nelf_pipeline::photo::stereo`).
@@ -165,6 +169,7 @@ impl Default for PhotoSettings {
             photo_smoothing: DEFAULT_PHOTO_SMOOTHING,
             photo_blur_mm: DEFAULT_PHOTO_BLUR_MM,
             photo_shading_bounces: 0,
+            photo_lighting: crate::photo::lighting::UnnamedLighting::default(),
             photo_hull_only: false,
         }
     }

@@ -7,7 +7,8 @@
 //! Stages, one file each, each output kept for inspection:
 //! 1. [`geometry`]: the masks' visual hull, carved by multi-view stereo
 //!    ([`stereo`]), as a smooth closed mesh.
-//! 2. [`lighting`]: the lighting the capture names, else the network's estimate.
+//! 2. [`lighting`]: the lighting the capture names, else fitted to the photographs'
+//!    shading on the surface (or the network's estimate).
 //! 3. [`reflectance`]: each vertex's colour in the views that see it divided by the
 //!    shading a white copy of the surface gets under that lighting.
 //! 4. The bake: the textured surface as a ground truth
@@ -35,7 +36,7 @@ use crate::config::{PhotoSettings, PipelineConfig};
 use crate::error::{Context as _, Result};
 use geometry::{SurfaceReport, SurfaceSettings, hull_surface};
 use lighting::{LightingReport, capture_lighting};
-use reflectance::{ReflectanceReport, ReflectanceSettings, estimate_reflectance};
+use reflectance::{ReflectanceReport, ReflectanceSettings, albedo_from_observations, observe};
 
 /// The albedo the brightest texels are scaled to when the lighting's scale is unknown.
 const NORMALISED_ALBEDO: f32 = 0.9;
@@ -45,6 +46,9 @@ const NORMALISED_ALBEDO: f32 = 0.9;
 pub struct Reconstruction {
     /// The surface with its per-vertex albedo, in the capture's world frame.
     pub mesh: Mesh,
+    /// The lighting the albedo was recovered under (8 × 16, world frame; named, or
+    /// estimated up to scale and colour).
+    pub lighting: nelf_format::conventions::LatLong,
     /// What each stage did.
     pub report: ReconstructionReport,
 }
@@ -81,17 +85,20 @@ pub fn reconstruct(
             stereo: (!settings.photo_hull_only).then(stereo::StereoSettings::default),
         },
     )?;
-    let (light, lighting) = capture_lighting(capture, weights)?;
-    let (albedo, reflectance) = estimate_reflectance(
-        &mesh,
-        capture,
+    let reflectance_settings = ReflectanceSettings {
+        bounces: settings.photo_shading_bounces,
+        ..ReflectanceSettings::default()
+    };
+    let observations = observe(&mesh, capture, &reflectance_settings, spacing_m as f32)?;
+    let (light, lighting) = capture_lighting(capture, weights, settings.photo_lighting, &observations)?;
+    let (albedo, reflectance) = albedo_from_observations(
+        &observations,
+        &mesh.triangles,
         &light,
         &ReflectanceSettings {
-            bounces: settings.photo_shading_bounces,
             normalise_to: (!lighting.named).then_some(NORMALISED_ALBEDO),
-            ..ReflectanceSettings::default()
+            ..reflectance_settings
         },
-        spacing_m as f32,
     )?;
     let mesh = Mesh {
         albedo: Albedo::PerVertex(albedo),
@@ -100,6 +107,7 @@ pub fn reconstruct(
     mesh.validate().context("the reconstructed surface")?;
     Ok(Reconstruction {
         mesh,
+        lighting: light,
         report: ReconstructionReport {
             surface,
             lighting,

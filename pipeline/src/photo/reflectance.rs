@@ -25,7 +25,7 @@ use std::time::Instant;
 
 use glam::Vec3;
 use nelf_bake::LoadedCapture;
-use nelf_format::conventions::{LT_DIM, LatLong, shade};
+use nelf_format::conventions::{ENV_TEXELS, LT_DIM, LatLong};
 use nelf_scene::mesh::{Albedo, Mesh};
 use nelf_scene::surface_nets::vertex_neighbours;
 use nelf_scene::tracer::{LtTracer, TraceSettings};
@@ -161,25 +161,50 @@ fn seen_colour(
     (sum, total)
 }
 
-/// The diffuse albedo of every vertex of `mesh` from `capture`'s photographs under
-/// `lighting` (an 8 × 16 map in the world frame, the photographs' units); see the
-/// module documentation. `offset_m` moves shadow-ray origins off the surface (about
+/// What the photographs show at each vertex of a surface, and how a white copy of
+/// it responds to each texel of the 8 × 16 light basis: all the reflectance and
+/// lighting stages need of the views and the geometry.
+#[derive(Debug, Clone)]
+pub struct Observations {
+    /// Per vertex: the colour the views see there (linear RGB, see [`seen_colour`]),
+    /// `None` where no view sees it.
+    pub colour: Vec<Option<[f32; 3]>>,
+    /// Per vertex seen: the outgoing radiance of a white surface there per unit
+    /// radiance of each light texel (`ENV_TEXELS` values, the same in every
+    /// channel); empty for vertices no view sees.
+    pub transport: Vec<Vec<f32>>,
+    /// Seconds.
+    pub seconds: f64,
+}
+
+impl Observations {
+    /// Vertices some view sees.
+    pub fn seen(&self) -> usize {
+        self.colour.iter().filter(|c| c.is_some()).count()
+    }
+
+    /// The shading of a white surface at vertex `i` under `lighting`.
+    pub fn shading(&self, i: usize, lighting: &LatLong) -> [f32; 3] {
+        let mut out = [0.0f32; 3];
+        for (t, l) in self.transport[i].iter().zip(lighting.texels()) {
+            for ch in 0..3 {
+                out[ch] += t * l[ch];
+            }
+        }
+        out
+    }
+}
+
+/// Observes every vertex of `mesh` in `capture`'s photographs (see
+/// [`Observations`]). `offset_m` moves shadow-ray origins off the surface (about
 /// the mesh's spacing).
-pub fn estimate_reflectance(
+pub fn observe(
     mesh: &Mesh,
     capture: &LoadedCapture,
-    lighting: &LatLong,
     settings: &ReflectanceSettings,
     offset_m: f32,
-) -> Result<(Vec<[f32; 3]>, ReflectanceReport)> {
+) -> Result<Observations> {
     let start = Instant::now();
-    if lighting.texels().len() * 3 != LT_DIM {
-        return Err(invalid(format!(
-            "the reflectance stage needs the lighting as an 8 × 16 map, not {} × {}",
-            lighting.width(),
-            lighting.height()
-        )));
-    }
     let white = Mesh {
         albedo: Albedo::Uniform([1.0; 3]),
         ..mesh.clone()
@@ -193,20 +218,18 @@ pub fn estimate_reflectance(
     };
     let tracer = LtTracer::new(&white, trace).context("tracing the reconstructed surface")?;
     let normals = mesh.vertex_normals();
-    // Per vertex: seen colour (weighted mean) and shading of a white surface.
-    let per_vertex: Vec<(Option<[f64; 3]>, [f32; 3])> = (0..mesh.positions.len())
+    let (colour, transport): (Vec<Option<[f32; 3]>>, Vec<Vec<f32>>) = (0..mesh.positions.len())
         .into_par_iter()
         .map(|i| {
             let (x, n) = (mesh.positions[i], normals[i]);
             if n == Vec3::ZERO {
-                return (None, [0.0; 3]);
+                return (None, Vec::new());
             }
             let (sum, total) = seen_colour(&tracer, capture, x, n, offset_m, settings.highlight_tolerance);
             if total <= 0.0 {
                 // No view sees it: its shading would go unused.
-                return (None, [0.0; 3]);
+                return (None, Vec::new());
             }
-            let colour = Some(sum.map(|s| s / total));
             let sp = nelf_scene::tracer::SurfacePoint {
                 position: x + n * offset_m,
                 geometric_normal: n,
@@ -216,8 +239,58 @@ pub fn estimate_reflectance(
             let mut rng = tracer.rng(i as u64);
             let mut lt = [0.0f32; LT_DIM];
             tracer.light_transport_averaged(&sp, &[], &mut rng, &mut lt);
-            (colour, shade(&lt, lighting))
+            (Some(sum.map(|s| (s / total) as f32)), lt[..ENV_TEXELS].to_vec())
         })
+        .unzip();
+    if colour.iter().all(Option::is_none) {
+        return Err(invalid(format!(
+            "{}: no view sees the reconstructed surface (do the masks and cameras agree?)",
+            capture.camera_file.display()
+        )));
+    }
+    Ok(Observations {
+        colour,
+        transport,
+        seconds: start.elapsed().as_secs_f64(),
+    })
+}
+
+/// The diffuse albedo of every vertex of `mesh` from `capture`'s photographs under
+/// `lighting` (an 8 × 16 map in the world frame, the photographs' units): [`observe`]
+/// then [`albedo_from_observations`].
+pub fn estimate_reflectance(
+    mesh: &Mesh,
+    capture: &LoadedCapture,
+    lighting: &LatLong,
+    settings: &ReflectanceSettings,
+    offset_m: f32,
+) -> Result<(Vec<[f32; 3]>, ReflectanceReport)> {
+    let observations = observe(mesh, capture, settings, offset_m)?;
+    albedo_from_observations(&observations, &mesh.triangles, lighting, settings)
+}
+
+/// The albedo of every vertex: its observed colour divided by its shading under
+/// `lighting`, unseen vertices filled from their neighbours (see the module
+/// documentation). `triangles` are the surface's.
+pub fn albedo_from_observations(
+    observations: &Observations,
+    triangles: &[[u32; 3]],
+    lighting: &LatLong,
+    settings: &ReflectanceSettings,
+) -> Result<(Vec<[f32; 3]>, ReflectanceReport)> {
+    let start = Instant::now();
+    if lighting.texels().len() * 3 != LT_DIM {
+        return Err(invalid(format!(
+            "the reflectance stage needs the lighting as an 8 × 16 map, not {} × {}",
+            lighting.width(),
+            lighting.height()
+        )));
+    }
+    let per_vertex: Vec<(Option<[f32; 3]>, [f32; 3])> = observations
+        .colour
+        .iter()
+        .enumerate()
+        .map(|(i, c)| (*c, c.map_or([0.0; 3], |_| observations.shading(i, lighting))))
         .collect();
     let mut shading_lum: Vec<f32> = per_vertex
         .iter()
@@ -225,19 +298,14 @@ pub fn estimate_reflectance(
         .map(|(_, s)| (s[0] + s[1] + s[2]) / 3.0)
         .collect();
     if shading_lum.is_empty() {
-        return Err(invalid(format!(
-            "{}: no view sees the reconstructed surface (do the masks and cameras agree?)",
-            capture.camera_file.display()
-        )));
+        return Err(invalid("no view sees the reconstructed surface".to_string()));
     }
     let mid = shading_lum.len() / 2;
     let (_, median, _) = shading_lum.select_nth_unstable_by(mid, f32::total_cmp);
     let floor = (0.02 * *median).max(1e-12);
     let raw: Vec<Option<[f32; 3]>> = per_vertex
         .iter()
-        .map(|(colour, s)| {
-            colour.map(|c| std::array::from_fn(|ch| (c[ch] as f32 / s[ch].max(floor)).max(0.0)))
-        })
+        .map(|(colour, s)| colour.map(|c| std::array::from_fn(|ch| (c[ch] / s[ch].max(floor)).max(0.0))))
         .collect();
     let albedo_gain = match settings.normalise_to {
         Some(target) => {
@@ -269,7 +337,7 @@ pub fn estimate_reflectance(
         }
     }
     let mean = mean.map(|m| m as f32);
-    let filled = fill_from_neighbours(&mut albedo, &mesh.triangles);
+    let filled = fill_from_neighbours(&mut albedo, triangles);
     let defaulted = albedo.iter().filter(|a| a.is_none()).count();
     let albedo = albedo.into_iter().map(|a| a.unwrap_or(mean)).collect();
     let report = ReflectanceReport {
@@ -279,7 +347,7 @@ pub fn estimate_reflectance(
         clamped_vertices: clamped,
         albedo_gain,
         mean_albedo: mean,
-        seconds: start.elapsed().as_secs_f64(),
+        seconds: observations.seconds + start.elapsed().as_secs_f64(),
     };
     Ok((albedo, report))
 }
