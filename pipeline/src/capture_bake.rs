@@ -26,8 +26,9 @@ pub enum SourceChoice {
     /// The NeLF network from the capture's own images.
     Network,
     /// A surface and its reflectance reconstructed from the capture's photographs
-    /// (`nelf_pipeline::photo`: the masks' visual hull, its albedo from the views),
-    /// baked as a mesh. Experimental: measured in `docs/measurements/2026-12-06-photographs.md`.
+    /// (`nelf_pipeline::photo`: the masks' visual hull carved by stereo, the
+    /// lighting, the albedo from the views), baked as a mesh. Experimental: measured
+    /// in `docs/measurements/2026-12-06-photographs.md`.
     Photos,
     /// The ground-truth mesh.
     Truth,
@@ -39,8 +40,9 @@ pub struct CaptureBakeOptions {
     /// The capture folder.
     pub dir: PathBuf,
     /// Which field to bake: `truth` (the ground-truth mesh), `network` (the NeLF
-    /// network evaluated from the capture's own images) or `auto` (the truth when
-    /// there is one, else the network).
+    /// network evaluated from the capture's own images), `photos` (a surface and its
+    /// reflectance reconstructed from the photographs, baked as a mesh;
+    /// experimental) or `auto` (the truth when there is one, else the network).
     #[arg(long, value_enum, default_value_t)]
     pub source: SourceChoice,
     /// The network's weights (safetensors with the official checkpoint's key names,

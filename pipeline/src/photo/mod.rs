@@ -188,3 +188,129 @@ pub fn write_reconstruction(reconstruction: &Reconstruction, dir: &Path) -> Resu
     write("reconstruction.json", json.as_bytes())?;
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::photo::geometry::tests::sphere_views;
+    use glam::{DMat3, DVec3};
+
+    /// Five views in a 35° cone of a textured sphere of radius 0.1 m, at `size`².
+    fn textured_sphere(size: u32) -> LoadedCapture {
+        let eyes: Vec<DVec3> = [(0.0, 0.0), (0.6, 0.2), (-0.6, 0.2), (0.2, 0.6), (-0.2, -0.6)]
+            .iter()
+            .map(|&(x, y)| DVec3::new(x, y, 1.0).normalize())
+            .collect();
+        sphere_views(0.1, &eyes, size, 0.3, |p| {
+            let v = 0.5 + 0.4 * ((p.x * 150.0).sin() * (p.y * 130.0).cos()) as f32;
+            [v, 0.6 * v + 0.2, 1.0 - v]
+        })
+    }
+
+    /// Every mask pixel replaced by the minimum (`erode`) or maximum over the
+    /// `(2r+1)²` square around it.
+    fn morph(mask: &[f32], size: usize, r: i64, erode: bool) -> Vec<f32> {
+        (0..size * size)
+            .map(|i| {
+                let (x, y) = ((i % size) as i64, (i / size) as i64);
+                let mut out = if erode { 1.0f32 } else { 0.0 };
+                for dy in -r..=r {
+                    for dx in -r..=r {
+                        let (u, v) = (x + dx, y + dy);
+                        let m = if u < 0 || v < 0 || u >= size as i64 || v >= size as i64 {
+                            0.0
+                        } else {
+                            mask[v as usize * size + u as usize]
+                        };
+                        out = if erode { out.min(m) } else { out.max(m) };
+                    }
+                }
+                out
+            })
+            .collect()
+    }
+
+    fn settings() -> PhotoSettings {
+        PhotoSettings {
+            photo_spacing_mm: 4.0,
+            ..PhotoSettings::default()
+        }
+    }
+
+    /// The reconstruction is a valid surface whose front (the views' side; the back
+    /// is left open by a 35° cone of views) lies near the sphere's, with a finite
+    /// albedo in [0, 1] that is not black.
+    fn assert_sane(what: &str, reconstruction: &Reconstruction) {
+        let mesh = &reconstruction.mesh;
+        assert!(mesh.validate().is_ok(), "{what}");
+        let front = mesh.positions.iter().map(|p| p.z).fold(f32::NEG_INFINITY, f32::max);
+        let widest = mesh.positions.iter().map(|p| p.x.hypot(p.y)).fold(0.0f32, f32::max);
+        assert!(
+            (0.085..0.125).contains(&front) && (0.08..0.13).contains(&widest),
+            "{what}: front at z = {front} m, widest {widest} m from the axis (sphere: 0.1)"
+        );
+        let Albedo::PerVertex(albedo) = &mesh.albedo else {
+            panic!("{what}: no per-vertex albedo");
+        };
+        assert!(
+            albedo.iter().flatten().all(|a| a.is_finite() && (0.0..=1.0).contains(a)),
+            "{what}: albedo out of range"
+        );
+        let mean = albedo.iter().map(|a| a.iter().sum::<f32>() / 3.0).sum::<f32>() / albedo.len() as f32;
+        assert!(mean > 0.1, "{what}: mean albedo {mean}");
+        assert!(reconstruction.report.reflectance.seen_vertices > 0, "{what}");
+    }
+
+    #[test]
+    fn the_defects_of_real_photographs_give_a_sane_surface_or_a_clear_error() {
+        let size = 64;
+        let clean = textured_sphere(size);
+        let reconstruct_it = |capture: &LoadedCapture| reconstruct(capture, None, &settings(), 0.5);
+        assert_sane("clean", &reconstruct_it(&clean).expect("clean"));
+        // The lighting is not named: it was fitted.
+        let fitted = reconstruct_it(&clean).expect("clean");
+        assert!(!fitted.report.lighting.named && fitted.report.lighting.fit.is_some());
+
+        // Masks eroded and dilated by 4 pixels (a matting tool's soft edge thresholded
+        // differently).
+        for erode in [true, false] {
+            let mut capture = clean.clone();
+            for m in &mut capture.masks {
+                *m = morph(m, size as usize, 4, erode);
+            }
+            let what = if erode { "eroded masks" } else { "dilated masks" };
+            assert_sane(what, &reconstruct_it(&capture).expect(what));
+        }
+
+        // One camera's pose off by 1° (a poor registration): the views disagree.
+        let mut capture = clean.clone();
+        let turn = DMat3::from_axis_angle(DVec3::new(1.0, 1.0, 0.0).normalize(), 1f64.to_radians());
+        capture.cameras[2].rotation = turn * capture.cameras[2].rotation;
+        capture.cameras[2].translation = turn * capture.cameras[2].translation;
+        assert_sane("1° pose error", &reconstruct_it(&capture).expect("1° pose error"));
+
+        // Views of different sizes (one photographed at 48² with the same field).
+        let small = textured_sphere(48);
+        let mut capture = clean.clone();
+        capture.cameras[3] = small.cameras[3];
+        capture.images[3] = small.images[3].clone();
+        capture.masks[3] = small.masks[3].clone();
+        assert_sane("mixed sizes", &reconstruct_it(&capture).expect("mixed sizes"));
+
+        // A view that sees nothing of the head: its empty mask empties the hull,
+        // which is an error that says so (the loader refuses such a mask first).
+        let mut capture = clean;
+        capture.masks[1].fill(0.0);
+        let err = reconstruct_it(&capture).expect_err("an empty view");
+        let mut chain = err.to_string();
+        let mut source = std::error::Error::source(&err);
+        while let Some(e) = source {
+            chain += &format!(": {e}");
+            source = e.source();
+        }
+        assert!(
+            chain.contains("visual hull") && chain.contains("check poses and masks"),
+            "{chain}"
+        );
+    }
+}
