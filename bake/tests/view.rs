@@ -171,7 +171,7 @@ fn a_known_lobe_is_reproduced() {
     let report = out.report.view.as_ref().unwrap();
     let view = out.asset.view.as_ref().unwrap();
     eprintln!(
-        "residual ratio {:.4}, lobes {}, view rank {}",
+        "residual ratio {:?}, lobes {}, view rank {}",
         report.residual_ratio,
         view.lobe_count(),
         view.rank()
@@ -251,6 +251,49 @@ impl FieldSource for GlossySphere {
         let r = Vec3::splat(SPHERE_RADIUS as f32);
         (SPHERE_CENTRE.as_vec3() - r, SPHERE_CENTRE.as_vec3() + r)
     }
+}
+
+#[test]
+fn auto_with_no_views_to_judge_at_fits_nothing() {
+    // A strongly view-dependent field, but no held-aside targets and no reference
+    // images (a photographed capture): `auto` could keep nothing, so it fits nothing.
+    let field = LobeField::new(7);
+    let (lo, hi) = field.bounds();
+    let geometry = geometry_for_box(lo.as_dvec3(), hi.as_dvec3(), 0.01).unwrap();
+    let cameras = five_cameras(48);
+    let job = FieldBake {
+        field: &field,
+        plan: plan_all_bricks(geometry),
+        cameras: cameras.clone(),
+        view_policy: ViewPolicy::AverageTowardPoints(cameras.iter().map(|c| c.centre().as_vec3()).collect()),
+        reference: Reference::AssumedSnrDb(40.0),
+        provenance: serde_json::json!({ "test": "nothing to judge at" }),
+        held: nelf_bake::eval::HeldAside::default(),
+    };
+    let config = BakeConfig {
+        render_size: 48,
+        rank: Some(2),
+        view_dependence: ViewChoice::Auto,
+        ..BakeConfig::default()
+    };
+    let out = bake_field(&job, &config, &Progress::hidden(), StageTimings::default()).unwrap();
+    let report = out.report.view.as_ref().unwrap();
+    assert_eq!(report.chosen, ViewChoice::Off);
+    assert_eq!(report.judged_at, "none");
+    assert!(
+        report.residual_ratio.is_none() && report.candidates.is_empty(),
+        "{report:?}"
+    );
+    assert!(out.asset.view.is_none() && out.asset.reflection.is_none());
+    // The same field with the part asked for explicitly is fitted (and kept unjudged).
+    let explicit = BakeConfig {
+        view_dependence: ViewChoice::Sh2,
+        view_rank: Some(2),
+        ..config
+    };
+    let out = bake_field(&job, &explicit, &Progress::hidden(), StageTimings::default()).unwrap();
+    assert!(out.report.view.as_ref().unwrap().residual_ratio.is_some());
+    assert!(out.asset.view.is_some());
 }
 
 #[test]
@@ -474,7 +517,7 @@ fn sheen_gains() {
         let out = bake_tiny(w);
         let r = out.report.view.as_ref().unwrap();
         eprintln!(
-            "weight {w}: base {:?} ratio {:.3} secs {:.1} probe {:?}",
+            "weight {w}: base {:?} ratio {:?} secs {:.1} probe {:?}",
             r.base_psnr_db,
             r.residual_ratio,
             r.secs,

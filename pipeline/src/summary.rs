@@ -92,11 +92,11 @@ pub fn describe_bake(out: &Path, r: &BakeReport) -> String {
                         "fitted on {} of {} band voxels, the best candidate would gain about {:+.3} dB over the whole band at {}, below a quarter of --view-min-gain-db; the band was not fitted",
                         p.voxels, p.band_voxels, p.best_extrapolated_gain_db, v.judged_at
                     )
+                } else if let (true, Some(residual)) = (v.candidates.is_empty(), v.residual_ratio) {
+                    format!("residual {residual:.1e} of the transport, nothing to fit")
                 } else if v.candidates.is_empty() {
-                    format!(
-                        "residual {:.1e} of the transport, nothing to fit or no views to judge at",
-                        v.residual_ratio
-                    )
+                    "not fitted: no views to judge a candidate at (no held-aside targets, no named lighting)"
+                        .to_string()
                 } else {
                     let best = v.best_gain_db();
                     format!(

@@ -51,8 +51,9 @@ pub struct ViewReport {
     /// Index of the kept candidate in [`Self::candidates`].
     pub chosen_index: Option<usize>,
     /// Relative RMS of the residual `T(ω) − T̄` over the directions each voxel is seen
-    /// from, on the basis subsample.
-    pub residual_ratio: f64,
+    /// from, on the basis subsample; `None` when nothing was fitted (`auto` with no
+    /// views to judge at: whatever it fitted would be dropped).
+    pub residual_ratio: Option<f64>,
     /// Mean PSNR of the view-independent asset at the judging views, dB.
     pub base_psnr_db: Option<f64>,
     /// Bytes of the view-independent asset.
@@ -296,13 +297,30 @@ pub fn choose_view(
             progress,
         )
     };
-    let mut fit = fit_in(if probing { FitScope::Sample } else { FitScope::Band })?;
     let base_bytes = crate::eval::encoded_bytes(asset)?;
+    if settings.choice == ViewChoice::Off || (!explicit && views.is_empty()) {
+        // `auto` keeps a candidate only when it gains at judging views: with none
+        // (a photographed capture: no held-aside targets, no named lighting to compare
+        // its own views under), fitting would cost the stage's time for nothing.
+        return Ok(ViewReport {
+            requested: settings.choice,
+            chosen: ViewChoice::Off,
+            chosen_index: None,
+            residual_ratio: None,
+            base_psnr_db: None,
+            base_bytes,
+            candidates: Vec::new(),
+            judged_at: judged_at.to_string(),
+            probe: None,
+            secs: start.elapsed().as_secs_f64(),
+        });
+    }
+    let mut fit = fit_in(if probing { FitScope::Sample } else { FitScope::Band })?;
     let mut report = ViewReport {
         requested: settings.choice,
         chosen: ViewChoice::Off,
         chosen_index: None,
-        residual_ratio: fit.residual_ratio,
+        residual_ratio: Some(fit.residual_ratio),
         base_psnr_db: None,
         base_bytes,
         candidates: Vec::new(),

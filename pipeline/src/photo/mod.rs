@@ -243,8 +243,16 @@ mod tests {
     fn assert_sane(what: &str, reconstruction: &Reconstruction) {
         let mesh = &reconstruction.mesh;
         assert!(mesh.validate().is_ok(), "{what}");
-        let front = mesh.positions.iter().map(|p| p.z).fold(f32::NEG_INFINITY, f32::max);
-        let widest = mesh.positions.iter().map(|p| p.x.hypot(p.y)).fold(0.0f32, f32::max);
+        let front = mesh
+            .positions
+            .iter()
+            .map(|p| p.z)
+            .fold(f32::NEG_INFINITY, f32::max);
+        let widest = mesh
+            .positions
+            .iter()
+            .map(|p| p.x.hypot(p.y))
+            .fold(0.0f32, f32::max);
         assert!(
             (0.085..0.125).contains(&front) && (0.08..0.13).contains(&widest),
             "{what}: front at z = {front} m, widest {widest} m from the axis (sphere: 0.1)"
@@ -253,7 +261,10 @@ mod tests {
             panic!("{what}: no per-vertex albedo");
         };
         assert!(
-            albedo.iter().flatten().all(|a| a.is_finite() && (0.0..=1.0).contains(a)),
+            albedo
+                .iter()
+                .flatten()
+                .all(|a| a.is_finite() && (0.0..=1.0).contains(a)),
             "{what}: albedo out of range"
         );
         let mean = albedo.iter().map(|a| a.iter().sum::<f32>() / 3.0).sum::<f32>() / albedo.len() as f32;
