@@ -313,12 +313,13 @@ mod tests {
         let mut capture = clean;
         capture.masks[1].fill(0.0);
         let err = reconstruct_it(&capture).expect_err("an empty view");
-        let mut chain = err.to_string();
+        let mut chain = vec![err.to_string()];
         let mut source = std::error::Error::source(&err);
         while let Some(e) = source {
-            chain += &format!(": {e}");
+            chain.push(e.to_string());
             source = e.source();
         }
+        let chain = chain.join(": ");
         assert!(
             chain.contains("visual hull") && chain.contains("check poses and masks"),
             "{chain}"
