@@ -50,6 +50,12 @@ fn demo_writes_capture_asset_turntables_and_comparisons() {
         "turntable/capture_light/frame_001.png",
         "turntable/env_seed_5/frame_000.png",
         "compare_target_000.png",
+        "head_network.nelf",
+        "compare_network_target_000.png",
+        "head_photos.nelf",
+        "head_photos.reconstruction/reconstruction.obj",
+        "demo_photos.json",
+        "compare_photos_target_000.png",
     ] {
         assert!(out.join(rel).is_file(), "missing {rel}");
     }

@@ -6,7 +6,7 @@
 //! bake (8-bit sRGB PSNR, foreground and whole image, at the held-aside targets)
 //! beside the ground-truth bake and the flat colour.
 //!
-//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [hull] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform]`
+//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform]`
 //! (a synthetic capture with `synth_config.json` and targets, e.g. `nelf demo`'s
 //! `out/demo/capture`). `unnamed` reconstructs as if the capture named no lighting
 //! and scores after one exposure gain; `hull` keeps the visual hull uncarved;
@@ -38,7 +38,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .ok_or("usage: photos_bench CAPTURE_DIR [RESOLUTION] [unnamed]")?,
     );
     let resolution: u32 = args.get(2).map_or(Ok(64), |r| r.parse())?;
-    let unnamed = args.iter().any(|a| a == "unnamed");
+    // `jpeg`: the capture written as JPEG + masks + COLMAP (no lighting named) first.
+    let jpeg = args.iter().any(|a| a == "jpeg");
+    let unnamed = jpeg || args.iter().any(|a| a == "unnamed");
     if !dir.exists() {
         // The demo's capture (`nelf demo`'s defaults) at 256².
         let synth = nelf_scene::synth::SynthConfig {
@@ -64,6 +66,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut photographs = capture.clone();
     if unnamed && let nelf_bake::capture_in::CaptureSource::CamerasJson(d) = &mut photographs.source {
         d.envmap = None;
+    }
+    if jpeg {
+        // As a camera and COLMAP give it: JPEG, PNG masks, a COLMAP text model, no lighting.
+        let photographed = dir.with_file_name("photographed");
+        let written =
+            nelf_pipeline::photo::as_photographs::write_as_photographs(&capture, &photographed, 90)?;
+        println!(
+            "photographed as JPEG + COLMAP in {} (exposure gain {:.3})",
+            photographed.display(),
+            written.exposure_gain
+        );
+        photographs = load_capture(
+            &photographed,
+            &CaptureLoadOptions {
+                format: nelf_bake::CaptureFormat::Colmap,
+                ..CaptureLoadOptions::default()
+            },
+        )?;
     }
     let option = |key: &str| args.iter().find_map(|a| a.strip_prefix(key)?.strip_prefix('='));
     let settings = nelf_pipeline::config::PhotoSettings {

@@ -15,6 +15,10 @@
 //!    (`nelf_field::shipped`; no view-dependent part: the network's transport is
 //!    evaluated toward the mean camera), scored at the same targets beside the
 //!    ground-truth bake ([`NetworkDemo`], `demo_network.json`).
+//! 6. Unless left out, the same capture baked from its photographs by reconstruction
+//!    (`--source photos`, [`crate::photo`]: a surface carved from the masks' hull by
+//!    stereo, its albedo from the views under the capture's lighting, baked as a
+//!    mesh), scored the same way ([`PhotosDemo`], `demo_photos.json`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -37,9 +41,11 @@ use nelf_bake::{
     bake_capture, load_capture,
 };
 
+use crate::config::PhotoSettings;
 use crate::config::{PipelineConfig, write_bake};
 use crate::error::{Context as _, PipelineError, Result};
 use crate::network_bake::bake_network;
+use crate::photo::{bake_photographs, write_reconstruction};
 
 /// Settings of `nelf demo`; saved as `demo_config.json` in the output folder.
 #[derive(Debug, Clone, PartialEq, clap::Args, Serialize, Deserialize)]
@@ -193,6 +199,25 @@ pub struct DemoRun {
     pub report: DemoReport,
     /// Step 5 (`demo_network.json`); `None` when left out.
     pub network: Option<NetworkDemo>,
+    /// Step 6 (`demo_photos.json`); `None` when left out.
+    pub photos: Option<PhotosDemo>,
+}
+
+/// The demo's capture baked from its photographs by reconstruction, scored at the targets.
+#[derive(Debug, Clone)]
+pub struct PhotosDemo {
+    /// The asset.
+    pub asset: PathBuf,
+    /// The reconstruction (OBJ with vertex colours, `reconstruction.json`).
+    pub reconstruction: PathBuf,
+    /// Its bake's report.
+    pub bake: BakeReport,
+    /// Seconds reconstructing, baking and writing it.
+    pub bake_secs: f64,
+    /// Side-by-side images at the target views (ground truth | photographs' bake | |diff|×4).
+    pub comparisons: Vec<PathBuf>,
+    /// Its scores at the target views.
+    pub scores: Vec<ViewScore>,
 }
 
 /// The demo's capture baked with the shipped network, scored at the targets.
@@ -212,16 +237,39 @@ pub struct NetworkDemo {
     pub scores: Vec<ViewScore>,
 }
 
-/// Runs the demo into `out_dir`, the network's step too when `network`. Progress
-/// bars go to standard error when `progress` is visible.
-pub fn run_demo(config: &DemoConfig, out_dir: &Path, progress: Progress, network: bool) -> Result<DemoRun> {
+/// Which of the demo's last steps run.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct DemoSteps {
+    /// Step 5: the shipped network's bake.
+    pub network: bool,
+    /// Step 6: the photographs' reconstruction and its bake.
+    pub photos: bool,
+}
+
+/// Runs the demo into `out_dir`, with the last steps `steps` asks for. Progress bars
+/// go to standard error when `progress` is visible.
+pub fn run_demo(
+    config: &DemoConfig,
+    out_dir: &Path,
+    progress: Progress,
+    steps: DemoSteps,
+) -> Result<DemoRun> {
     let report = run_ground_truth(config, out_dir, progress)?;
-    let network = if network {
+    let network = if steps.network {
         Some(network_step(config, &report, progress)?)
     } else {
         None
     };
-    Ok(DemoRun { report, network })
+    let photos = if steps.photos {
+        Some(photos_step(config, &report, progress)?)
+    } else {
+        None
+    };
+    Ok(DemoRun {
+        report,
+        network,
+        photos,
+    })
 }
 
 /// Steps 1-4: capture, the ground truth's bake, turntables, comparisons.
@@ -371,7 +419,7 @@ fn network_step(config: &DemoConfig, report: &DemoReport, progress: Progress) ->
         .with_context(|| format!("writing {}", asset_path.display()))?;
     let bake_secs = start.elapsed().as_secs_f64();
     let asset = read_asset(&asset_path).with_context(|| format!("reading {}", asset_path.display()))?;
-    let (comparisons, scores) = network_comparisons(&capture, &asset, report)?;
+    let (comparisons, scores) = target_comparisons(&capture, &asset, report, "network")?;
     let weights = nelf_field::shipped::SHIPPED_WEIGHTS_NAME;
     let summary = serde_json::json!({
         "weights": weights,
@@ -392,11 +440,56 @@ fn network_step(config: &DemoConfig, report: &DemoReport, progress: Progress) ->
     })
 }
 
-/// The network's asset at the capture's targets: side-by-sides and scores.
-fn network_comparisons(
+/// Step 6: the demo's capture baked from its photographs by reconstruction (under
+/// the lighting the capture names), scored at the targets beside the ground-truth
+/// bake; `demo_photos.json` records it.
+fn photos_step(config: &DemoConfig, report: &DemoReport, progress: Progress) -> Result<PhotosDemo> {
+    let start = Instant::now();
+    let capture = load_capture(&report.capture_dir, &CaptureLoadOptions::default())
+        .with_context(|| format!("loading {}", report.capture_dir.display()))?;
+    let config = PipelineConfig::from(BakeConfig {
+        resolution: config.resolution,
+        view_dependence: ViewChoice::Off,
+        ..BakeConfig::default()
+    });
+    let baked = bake_photographs(&capture, None, &PhotoSettings::default(), &config, progress)
+        .context("baking the demo's capture from its photographs")?;
+    let mut output = baked.output;
+    let asset_path = report.out_dir.join("head_photos.nelf");
+    write_bake(&mut output, &config, &asset_path)
+        .with_context(|| format!("writing {}", asset_path.display()))?;
+    let reconstruction = asset_path.with_extension("reconstruction");
+    write_reconstruction(&baked.reconstruction, &reconstruction)?;
+    let bake_secs = start.elapsed().as_secs_f64();
+    let asset = read_asset(&asset_path).with_context(|| format!("reading {}", asset_path.display()))?;
+    let (comparisons, scores) = target_comparisons(&capture, &asset, report, "photos")?;
+    let summary = serde_json::json!({
+        "asset": asset_path,
+        "reconstruction": reconstruction,
+        "reconstruction_report": baked.reconstruction.report,
+        "bake": output.report,
+        "bake_secs": bake_secs,
+        "scores": scores,
+        "ground_truth_bake_scores": report.scores,
+    });
+    write_json(&report.out_dir.join("demo_photos.json"), &summary)?;
+    Ok(PhotosDemo {
+        asset: asset_path,
+        reconstruction,
+        bake: output.report,
+        bake_secs,
+        comparisons,
+        scores,
+    })
+}
+
+/// An asset at the capture's targets: side-by-sides (`compare_<label>_<target>.png`)
+/// and scores.
+fn target_comparisons(
     capture: &LoadedCapture,
     asset: &nelf_format::Asset,
     report: &DemoReport,
+    label: &str,
 ) -> Result<(Vec<PathBuf>, Vec<ViewScore>)> {
     let (mut comparisons, mut scores) = (Vec::new(), Vec::new());
     if let Some(description) = capture.description() {
@@ -406,7 +499,7 @@ fn network_comparisons(
             let (score, image) = score_view(asset, &target.camera, &env, &truth, &target.name)?;
             let path = report
                 .out_dir
-                .join(format!("compare_network_{}.png", target.name));
+                .join(format!("compare_{label}_{}.png", target.name));
             side_by_side(
                 &path,
                 &target.camera,

@@ -1,13 +1,13 @@
 //! `nelf demo`: capture → bake → relit turntable → comparison with ground truth,
 //! on a built-in procedural head (no files needed); then the same capture baked with
-//! the shipped NeLF network, scored at the same targets beside the ground-truth bake
-//! (`nelf_pipeline::run_demo`).
+//! the shipped NeLF network, and from its photographs by reconstruction, each scored
+//! at the same targets beside the ground-truth bake (`nelf_pipeline::run_demo`).
 
 use std::path::PathBuf;
 
 use anyhow::Context;
 use nelf_bake::progress::Progress;
-use nelf_pipeline::{DemoConfig, run_demo};
+use nelf_pipeline::{DemoConfig, DemoSteps, run_demo};
 
 /// Options of `nelf demo`.
 #[derive(Debug, clap::Args)]
@@ -18,9 +18,12 @@ pub struct DemoArgs {
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
-    /// Skip the last step (the capture baked with the shipped network).
+    /// Skip the step that bakes the capture with the shipped network.
     #[arg(long)]
     pub no_network: bool,
+    /// Skip the step that bakes the capture from its photographs by reconstruction.
+    #[arg(long)]
+    pub no_photos: bool,
     #[command(flatten)]
     pub config: DemoConfig,
 }
@@ -31,7 +34,11 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
     } else {
         Progress::stderr()
     };
-    let run = run_demo(&args.config, &args.out, progress, !args.no_network)
+    let steps = DemoSteps {
+        network: !args.no_network,
+        photos: !args.no_photos,
+    };
+    let run = run_demo(&args.config, &args.out, progress, steps)
         .with_context(|| format!("running the demo into {}", args.out.display()))?;
     let report = &run.report;
     let bake = &report.bake;
@@ -82,6 +89,26 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         {
             println!(
                 "compare    {}  (ground truth | network bake | |diff|×4; PSNR {:.2} dB, SSIM {:.4}; ground-truth bake {:.2} dB, {:.4})",
+                path.display(),
+                score.psnr_db,
+                score.ssim,
+                truth.psnr_db,
+                truth.ssim
+            );
+        }
+    }
+    if let Some(photos) = &run.photos {
+        println!(
+            "photos     {}  ({} bytes, rank {}, reconstruction and bake {:.1} s; surface and albedo in {})",
+            photos.asset.display(),
+            photos.bake.file_size,
+            photos.bake.rank,
+            photos.bake_secs,
+            photos.reconstruction.display()
+        );
+        for ((path, score), truth) in photos.comparisons.iter().zip(&photos.scores).zip(&report.scores) {
+            println!(
+                "compare    {}  (ground truth | photographs' bake | |diff|×4; PSNR {:.2} dB, SSIM {:.4}; ground-truth bake {:.2} dB, {:.4})",
                 path.display(),
                 score.psnr_db,
                 score.ssim,

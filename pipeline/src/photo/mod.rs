@@ -18,6 +18,7 @@
 //! [`write_reconstruction`] saves the reconstruction (an OBJ with per-vertex
 //! colours) and a JSON report of each stage for inspection.
 
+pub mod as_photographs;
 pub mod geometry;
 pub mod lighting;
 mod pixels;
