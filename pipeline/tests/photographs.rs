@@ -94,7 +94,7 @@ fn a_scanned_head_photographed_as_jpeg_and_colmap_bakes_above_a_flat_colour() {
         &MarchSettings::default(),
     )
     .unwrap();
-    let gain = exposure_gain(&[render.rgb.clone()], &held.images, &held.masks) as f32;
+    let gain = exposure_gain(std::slice::from_ref(&render.rgb), &held.images, &held.masks) as f32;
     let scaled: Vec<[f32; 3]> = render.rgb.iter().map(|p| p.map(|v| v * gain)).collect();
     let (w, h) = (held.cameras[0].width, held.cameras[0].height);
     let scores = srgb8_scores(&scaled, &held.images[0], &held.masks[0], w, h).unwrap();
