@@ -179,7 +179,7 @@ fn bake_capture_with_network_weights() {
 /// A capture with no ground truth bakes with the shipped network by default;
 /// `--source` chooses explicitly, and impossible choices are refused.
 #[test]
-fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
+fn a_capture_without_ground_truth_bakes_from_its_photographs_or_with_the_shipped_network() {
     let dir = tempfile::tempdir().unwrap();
     let cap = tiny_capture(dir.path(), 64, 0, &["--head-cells", "40"]);
     // A synthetic capture carries its ground truth (synth_config.json); without
@@ -206,7 +206,23 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
         succeed(&args);
         (read_asset(&path).unwrap(), path)
     };
-    let (asset, asset_path) = bake_shipped("shipped.nelf", &[]);
+    // By default (`--source auto`) such a capture is reconstructed from its
+    // photographs and the surface baked; the reconstruction is written beside it.
+    let (photos, photos_path) = bake_shipped("photos.nelf", &[]);
+    let truth = &photos.metadata["source"]["source"]["ground_truth"];
+    assert_eq!(truth["kind"], "reconstructed-mesh", "{}", photos.metadata);
+    assert_eq!(
+        truth["reconstruction"]["surface"]["geometry"], "network",
+        "{truth}"
+    );
+    assert!(photos.voxel_count() > 0);
+    assert!(
+        photos_path
+            .with_extension("reconstruction")
+            .join("reconstruction.obj")
+            .is_file()
+    );
+    let (asset, asset_path) = bake_shipped("shipped.nelf", &["--source", "network"]);
     let source = &asset.metadata["source"]["source"];
     assert_eq!(source["kind"], "nelf-network", "{}", asset.metadata);
     assert!(
@@ -256,7 +272,7 @@ fn a_capture_without_ground_truth_bakes_with_the_shipped_network() {
 
     // --shading-prior-mm 0: the one-gain calibration instead, the transport divided by
     // the source lighting's power and scaled by the gain.
-    let (gain, _) = bake_shipped("gain.nelf", &["--shading-prior-mm", "0"]);
+    let (gain, _) = bake_shipped("gain.nelf", &["--source", "network", "--shading-prior-mm", "0"]);
     let source = &gain.metadata["source"]["source"];
     assert_eq!(source["source_normalised"], false, "{source}");
     assert!(source["shading_prior"].is_null(), "{source}");

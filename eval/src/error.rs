@@ -32,6 +32,10 @@ pub enum EvalError {
     /// Writing a report failed.
     #[error(transparent)]
     Report(#[from] crate::report::ReportError),
+    /// A pipeline step (the photographs' reconstruction, the network) failed (boxed:
+    /// it is large).
+    #[error(transparent)]
+    Pipeline(Box<nelf_pipeline::error::PipelineError>),
     /// Reading or writing a file failed.
     #[error("{path}: {message}")]
     Io {
@@ -53,3 +57,9 @@ impl From<nelf_scene::shot::ShotError> for EvalError {
 
 /// Results of `nelf-eval`.
 pub type Result<T> = std::result::Result<T, EvalError>;
+
+impl From<nelf_pipeline::error::PipelineError> for EvalError {
+    fn from(e: nelf_pipeline::error::PipelineError) -> Self {
+        Self::Pipeline(Box::new(e))
+    }
+}

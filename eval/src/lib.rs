@@ -28,4 +28,4 @@ pub mod stability;
 pub use error::{EvalError, Result};
 pub use network::{NetworkEvalConfig, TargetScores, run_network};
 pub use pareto::{ParetoConfig, ParetoResults, run_pareto};
-pub use stability::{StabilityConfig, StabilityResults, run_stability};
+pub use stability::{StabilityConfig, StabilityResults, StabilitySource, run_stability};

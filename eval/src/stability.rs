@@ -89,6 +89,23 @@ pub struct StabilityConfig {
     /// No progress bars.
     #[arg(long)]
     pub quiet: bool,
+    /// What every point bakes: the ground truth of its synthesized capture, or a
+    /// surface reconstructed from its photographs (`nelf bake --source photos`; the
+    /// `rank` axis, which resamples the ground truth, is left out).
+    #[arg(long, value_enum, default_value_t)]
+    #[serde(default)]
+    pub source: StabilitySource,
+}
+
+/// What the points of `nelf eval stability` bake.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum StabilitySource {
+    /// The capture's ground-truth field.
+    #[default]
+    Truth,
+    /// The photographs' reconstruction (under the lighting the capture names).
+    Photos,
 }
 
 /// Every axis, in report order.
@@ -133,12 +150,22 @@ struct Context<'a> {
 
 impl StabilityConfig {
     fn axes(&self) -> Result<Vec<&'static str>> {
+        let photos = self.source == StabilitySource::Photos;
         if self.axes.is_empty() {
-            return Ok(AXES.to_vec());
+            return Ok(AXES
+                .iter()
+                .copied()
+                .filter(|a| !(photos && *a == "rank"))
+                .collect());
         }
         self.axes
             .iter()
             .map(|a| {
+                if photos && a == "rank" {
+                    return Err(EvalError::Input(
+                        "--axes rank resamples the ground truth's field: not with --source photos".into(),
+                    ));
+                }
                 AXES.iter().copied().find(|x| x == a).ok_or_else(|| {
                     EvalError::Input(format!("--axes: unknown axis {a:?} (known: {})", AXES.join(", ")))
                 })
@@ -246,8 +273,21 @@ impl Context<'_> {
 
     fn bake(&self, capture_dir: &Path) -> Result<Asset> {
         let capture = load_capture(capture_dir, &CaptureLoadOptions::default())?;
-        let truth = GroundTruth::from_synth_capture(capture_dir)?;
-        Ok(bake_capture(&capture, &truth, &self.bake, &Progress::hidden())?.asset)
+        match self.config.source {
+            StabilitySource::Truth => {
+                let truth = GroundTruth::from_synth_capture(capture_dir)?;
+                Ok(bake_capture(&capture, &truth, &self.bake, &Progress::hidden())?.asset)
+            }
+            StabilitySource::Photos => Ok(nelf_pipeline::photo::bake_photographs(
+                &capture,
+                None,
+                &nelf_pipeline::config::PhotoSettings::default(),
+                &nelf_pipeline::PipelineConfig::from(self.bake.clone()),
+                Progress::hidden(),
+            )?
+            .output
+            .asset),
+        }
     }
 
     fn point(

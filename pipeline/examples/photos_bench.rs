@@ -6,7 +6,7 @@
 //! bake (8-bit sRGB PSNR, foreground and whole image, at the held-aside targets)
 //! beside the ground-truth bake and the flat colour.
 //!
-//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform]`
+//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [geometry=stereo|network] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform]`
 //! (a synthetic capture with `synth_config.json` and targets, e.g. `nelf demo`'s
 //! `out/demo/capture`). `unnamed` reconstructs as if the capture named no lighting
 //! and scores after one exposure gain; `hull` keeps the visual hull uncarved;
@@ -87,7 +87,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     }
     let option = |key: &str| args.iter().find_map(|a| a.strip_prefix(key)?.strip_prefix('='));
     let settings = nelf_pipeline::config::PhotoSettings {
-        photo_hull_only: args.iter().any(|a| a == "hull"),
+        photo_geometry: match option("geometry") {
+            Some("stereo") => nelf_pipeline::config::PhotoGeometry::Stereo,
+            Some("network") => nelf_pipeline::config::PhotoGeometry::Network,
+            _ if args.iter().any(|a| a == "hull") => nelf_pipeline::config::PhotoGeometry::Hull,
+            _ => nelf_pipeline::config::PhotoGeometry::default(),
+        },
         photo_smoothing: option("smoothing").map_or(Ok(30), str::parse)?,
         photo_lighting: match option("lighting") {
             Some("network") => nelf_pipeline::photo::lighting::UnnamedLighting::Network,
@@ -108,10 +113,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .iter()
         .any(|k| option(k).is_some());
     if rerun {
-        let geometry = if option("mesh") == Some("truth") {
-            truth_mesh.clone()
-        } else {
-            reconstruction.mesh.clone()
+        let geometry = match option("mesh") {
+            Some("truth") => truth_mesh.clone(),
+            Some(level) if level.starts_with("network") => {
+                network_surface(&photographs, &config, level.strip_prefix("network").unwrap_or(""))?
+            }
+            _ => reconstruction.mesh.clone(),
         };
         let reflectance = nelf_pipeline::photo::reflectance::ReflectanceSettings {
             texel_samples: option("texel_samples").map_or(Ok(1), str::parse)?,
@@ -419,6 +426,7 @@ fn depth_error(
             max_radius_m,
             stereo: None,
         },
+        None,
     )?;
     let (maps, report) = depth_maps(capture, &hull, &StereoSettings::default());
     println!("stereo: {}", serde_json::to_string(&report)?);
@@ -506,4 +514,61 @@ fn lighting_error(used: &nelf_format::conventions::LatLong, truth: &nelf_format:
         error([one; 3]),
         error([dot(Some(0)), dot(Some(1)), dot(Some(2))])
     );
+}
+
+/// The shipped network's density (its bake at the bench's resolution, trilinear)
+/// as a surface: the level where a voxel's opacity is one half (`σ = ln 2 / h`),
+/// times the factor after `network` in `mesh=networkF` (default 1).
+fn network_surface(
+    capture: &nelf_bake::LoadedCapture,
+    config: &PipelineConfig,
+    factor: &str,
+) -> Result<Mesh, Box<dyn std::error::Error>> {
+    let factor: f32 = if factor.is_empty() { 1.0 } else { factor.parse()? };
+    let output = nelf_pipeline::bake_network(capture, None, config, Progress::hidden())?;
+    let asset = &output.asset;
+    let grid = nelf_render::grid::BrickGrid::from_asset(asset)?;
+    let voxel = grid.geometry().voxel_size_m;
+    let level = factor * std::f32::consts::LN_2 / voxel as f32;
+    let h = 1.5e-3;
+    let (lo, hi) = (grid.bbox_min(), grid.bbox_max());
+    let dims = ((hi - lo) / h).to_array().map(|e| e.ceil() as usize + 1);
+    let mut values = vec![0.0f32; dims.iter().product()];
+    let mut corners = [(0usize, 0.0f32); 8];
+    // Clipped to the masks' visual hull, so that the silhouettes stay the masks'.
+    let hull = nelf_bake::HullDistance::new(&capture.cameras, &capture.masks, 0.0)?;
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                let p = lo + glam::DVec3::new(x as f64, y as f64, z as f64) * h;
+                let n = grid.trilinear(p, &mut corners);
+                let sigma: f32 = corners[..n].iter().map(|&(v, w)| w * asset.density_at(v)).sum();
+                let face =
+                    x == 0 || y == 0 || z == 0 || x + 1 == dims[0] || y + 1 == dims[1] || z + 1 == dims[2];
+                let outside_hull = hull.distance_m(p) > 0.0;
+                values[(z * dims[1] + y) * dims[0] + x] = if face || outside_hull {
+                    1.0
+                } else {
+                    (level - sigma) / level
+                };
+            }
+        }
+    }
+    let net = nelf_scene::surface_nets::surface_net(&nelf_scene::surface_nets::GridSamples {
+        values: &values,
+        dims,
+        origin_m: lo,
+        spacing_m: h,
+    });
+    let mut positions = net.positions;
+    nelf_scene::surface_nets::taubin_smooth(&mut positions, &net.triangles, 10);
+    println!(
+        "network surface at sigma {level:.0} /m ({} vertices)",
+        positions.len()
+    );
+    Ok(Mesh {
+        positions,
+        triangles: net.triangles,
+        albedo: nelf_scene::mesh::Albedo::Uniform([0.5; 3]),
+    })
 }

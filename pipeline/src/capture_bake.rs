@@ -20,15 +20,16 @@ use crate::photo::{Reconstruction, bake_photographs};
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
 pub enum SourceChoice {
     /// The ground truth when the capture has one (`--mesh` or a synthetic capture's
-    /// `synth_config.json`), else the network.
+    /// `synth_config.json`), else the photographs' reconstruction (the network when
+    /// `--weights` are given).
     #[default]
     Auto,
     /// The NeLF network from the capture's own images.
     Network,
     /// A surface and its reflectance reconstructed from the capture's photographs
-    /// (`nelf_pipeline::photo`: the masks' visual hull carved by stereo, the
-    /// lighting, the albedo from the views), baked as a mesh. Experimental: measured
-    /// in `docs/measurements/2026-12-06-photographs.md`.
+    /// (`nelf_pipeline::photo`: the masks' visual hull refined by the network's
+    /// density or by stereo, the lighting, the albedo from the views), baked as a
+    /// mesh; measured in `docs/measurements/2026-12-06-photographs.md`.
     Photos,
     /// The ground-truth mesh.
     Truth,
@@ -41,8 +42,7 @@ pub struct CaptureBakeOptions {
     pub dir: PathBuf,
     /// Which field to bake: `truth` (the ground-truth mesh), `network` (the NeLF
     /// network evaluated from the capture's own images), `photos` (a surface and its
-    /// reflectance reconstructed from the photographs, baked as a mesh;
-    /// experimental) or `auto` (the truth when there is one, else the network).
+    /// reflectance reconstructed from the photographs, baked as a mesh) or `auto` (the truth when there is one, else the photographs).
     #[arg(long, value_enum, default_value_t)]
     pub source: SourceChoice,
     /// The network's weights (safetensors with the official checkpoint's key names,
@@ -98,9 +98,10 @@ enum Source {
 }
 
 /// Which field `options` bake, checked against the options that only one of them
-/// reads. `auto`: the ground truth when there is one and no `--weights` are given,
-/// else the network (the photographs' reconstruction is not yet better than the
-/// network: `docs/measurements/2026-12-06-photographs.md`).
+/// reads. `auto`: the ground truth when there is one and no `--weights` are given;
+/// else the network when `--weights` are given; else the photographs'
+/// reconstruction, which beats the network's bake on every capture measured
+/// (`docs/measurements/2026-12-06-photographs.md`).
 fn chosen_source(options: &CaptureBakeOptions, synth_truth: impl Fn() -> bool) -> Result<Source> {
     let source = match options.source {
         SourceChoice::Truth => Source::Truth,
@@ -108,6 +109,7 @@ fn chosen_source(options: &CaptureBakeOptions, synth_truth: impl Fn() -> bool) -
         SourceChoice::Auto if options.weights.is_none() && (options.mesh.is_some() || synth_truth()) => {
             Source::Truth
         }
+        SourceChoice::Auto if options.weights.is_none() => Source::Photos,
         SourceChoice::Network | SourceChoice::Auto => Source::Network,
     };
     if source != Source::Truth && options.mesh.is_some() {

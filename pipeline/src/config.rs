@@ -107,6 +107,22 @@ fn default_photo_smoothing() -> usize {
     DEFAULT_PHOTO_SMOOTHING
 }
 
+/// How the surface of a photographed head is made from the masks' visual hull.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum PhotoGeometry {
+    /// Intersected with the solid where the NeLF network's density (the shipped
+    /// network, or `--weights`) exceeds half a voxel's opacity: the network's learned
+    /// shape where the photographs have too little texture for stereo.
+    #[default]
+    Network,
+    /// Carved by multi-view stereo (plane-sweep depth maps fused into a truncated
+    /// signed distance, `nelf_pipeline::photo::stereo`): needs texture.
+    Stereo,
+    /// The hull as it is.
+    Hull,
+}
+
 /// How a capture without ground truth is reconstructed before its bake
 /// (`--source photos`): the masks' visual hull as a mesh, its reflectance from the
 /// photographs, then a mesh bake.
@@ -135,12 +151,10 @@ pub struct PhotoSettings {
     #[arg(long, value_enum, default_value_t)]
     #[serde(default)]
     pub photo_lighting: crate::photo::lighting::UnnamedLighting,
-    /// Photographs: keep the masks' visual hull as it is. By default it is carved by
-    /// multi-view stereo (plane-sweep depth maps fused into a truncated signed
-    /// distance, `nelf_pipeline::photo::stereo`).
-    #[arg(long)]
+    /// Photographs: how the masks' visual hull is refined into the surface.
+    #[arg(long, value_enum, default_value_t)]
     #[serde(default)]
-    pub photo_hull_only: bool,
+    pub photo_geometry: PhotoGeometry,
 }
 
 impl PhotoSettings {
@@ -170,7 +184,7 @@ impl Default for PhotoSettings {
             photo_blur_mm: DEFAULT_PHOTO_BLUR_MM,
             photo_shading_bounces: 0,
             photo_lighting: crate::photo::lighting::UnnamedLighting::default(),
-            photo_hull_only: false,
+            photo_geometry: PhotoGeometry::default(),
         }
     }
 }

@@ -16,6 +16,7 @@ use std::time::Instant;
 use glam::DVec3;
 use nelf_bake::hull::{HullCarver, hull_bounds};
 use nelf_bake::{HullDistance, LoadedCapture};
+use nelf_scene::field::FieldSource;
 use nelf_scene::mesh::{Albedo, Mesh};
 use nelf_scene::surface_nets::{GridSamples, surface_net, taubin_smooth};
 use rayon::prelude::*;
@@ -57,13 +58,41 @@ pub struct SurfaceReport {
     pub triangles: usize,
     /// The stereo stage, when it ran.
     pub stereo: Option<StereoReport>,
+    /// Points inside the hull where the density was evaluated (0: no density).
+    pub density_points: usize,
+    /// How the hull was refined (set by the caller, [`crate::photo::reconstruct`]).
+    pub geometry: crate::config::PhotoGeometry,
+    /// Why it was not refined as asked, when it was not.
+    pub note: Option<String>,
     /// Seconds: sampling the distance, meshing and smoothing.
     pub seconds: f64,
 }
 
+/// A density field whose surface refines the hull ([`hull_surface`]): the solid is
+/// where `σ ≥ level_per_m` (the NeLF network's density, `--photo-geometry network`).
+pub struct DensitySurface<'a> {
+    /// The field (only [`FieldSource::evaluate_density`] is called).
+    pub field: &'a dyn FieldSource,
+    /// The density at the surface, per metre.
+    pub level_per_m: f32,
+}
+
+impl std::fmt::Debug for DensitySurface<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DensitySurface")
+            .field("level_per_m", &self.level_per_m)
+            .finish_non_exhaustive()
+    }
+}
+
 /// The visual hull of `capture`'s masks as a closed mesh (albedo a uniform grey, to
-/// be replaced by the reflectance stage).
-pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Result<(Mesh, SurfaceReport)> {
+/// be replaced by the reflectance stage), carved by stereo when `settings.stereo`
+/// asks, else intersected with the solid of `density` when given.
+pub fn hull_surface(
+    capture: &LoadedCapture,
+    settings: &SurfaceSettings,
+    density: Option<&DensitySurface<'_>>,
+) -> Result<(Mesh, SurfaceReport)> {
     let start = Instant::now();
     if !(settings.spacing_m.is_finite() && settings.spacing_m > 0.0) {
         return Err(invalid(format!(
@@ -89,7 +118,11 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
             h * 1e3
         )));
     }
-    let sample = |field: &(dyn Fn(DVec3) -> f64 + Sync), blur_cells: f64| {
+    let point = |i: usize| {
+        let [nx, ny, _] = dims;
+        origin + DVec3::new((i % nx) as f64, ((i / nx) % ny) as f64, (i / (nx * ny)) as f64) * h
+    };
+    let values_of = |field: &(dyn Fn(DVec3) -> f64 + Sync)| {
         let [nx, ny, nz] = dims;
         let mut values = vec![0.0f32; count];
         values.par_chunks_mut(nx * ny).enumerate().for_each(|(z, slab)| {
@@ -107,6 +140,9 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
                 }
             }
         });
+        values
+    };
+    let mesh_of = |mut values: Vec<f32>, blur_cells: f64| {
         if blur_cells > 0.0 {
             gaussian_blur(&mut values, dims, blur_cells);
         }
@@ -117,17 +153,47 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
             spacing_m: h,
         })
     };
+    let sample =
+        |field: &(dyn Fn(DVec3) -> f64 + Sync), blur_cells: f64| mesh_of(values_of(field), blur_cells);
     let empty = || {
         invalid(format!(
             "{}: the masks' visual hull is empty (do the masks and cameras agree?)",
             capture.camera_file.display()
         ))
     };
-    let mut net = sample(&|p| distance.distance_m(p), 0.0);
+    let hull_values = values_of(&|p| distance.distance_m(p));
+    let mut net = mesh_of(hull_values.clone(), 0.0);
     if net.triangles.is_empty() {
         return Err(empty());
     }
     let mut stereo_report = None;
+    let mut density_points = 0;
+    if let (None, Some(surface)) = (&settings.stereo, density) {
+        // max(hull, density band): the hull's solid intersected with the field's,
+        // the field's term `h·(level − σ)/level` clamped to one cell either side so
+        // that the blur treats it like a truncated distance.
+        let inside: Vec<usize> = (0..count).filter(|&i| hull_values[i] < 0.0).collect();
+        let points: Vec<glam::Vec3> = inside.iter().map(|&i| point(i).as_vec3()).collect();
+        let mut sigma = vec![0.0f32; points.len()];
+        surface
+            .field
+            .evaluate_density(&points, &mut sigma)
+            .map_err(|e| invalid(format!("the density of the surface: {e}")))?;
+        let mut values = hull_values;
+        let level = surface.level_per_m.max(f32::MIN_POSITIVE);
+        for (&i, s) in inside.iter().zip(&sigma) {
+            let band = (h as f32 * (level - s) / level).clamp(-(h as f32), h as f32);
+            values[i] = values[i].max(band);
+        }
+        density_points = points.len();
+        net = mesh_of(values, settings.blur_m / h);
+        if net.triangles.is_empty() {
+            return Err(invalid(format!(
+                "{}: the network's density leaves nothing inside the masks' visual hull",
+                capture.camera_file.display()
+            )));
+        }
+    }
     if let Some(stereo) = &settings.stereo {
         let hull_mesh = Mesh {
             positions: net.positions.clone(),
@@ -165,6 +231,15 @@ pub fn hull_surface(capture: &LoadedCapture, settings: &SurfaceSettings) -> Resu
         vertices: mesh.positions.len(),
         triangles: mesh.triangles.len(),
         stereo: stereo_report,
+        density_points,
+        geometry: if settings.stereo.is_some() {
+            crate::config::PhotoGeometry::Stereo
+        } else if density.is_some() {
+            crate::config::PhotoGeometry::Network
+        } else {
+            crate::config::PhotoGeometry::Hull
+        },
+        note: None,
         seconds: start.elapsed().as_secs_f64(),
     };
     Ok((mesh, report))
@@ -294,7 +369,7 @@ pub(crate) mod tests {
             max_radius_m: 0.5,
             stereo: None,
         };
-        let (mesh, report) = hull_surface(&capture, &settings).expect("a hull");
+        let (mesh, report) = hull_surface(&capture, &settings, None).expect("a hull");
         assert!(report.triangles > 1000, "{report:?}");
         // The hull holds the sphere and lies inside the three cylinders' intersection,
         // whose farthest points are at r·√(3/2); one pixel at the views' distance is
@@ -356,13 +431,13 @@ pub(crate) mod tests {
             max_radius_m: 0.5,
             stereo: None,
         };
-        let (hull, _) = hull_surface(&capture, &hull_settings).expect("a hull");
+        let (hull, _) = hull_surface(&capture, &hull_settings, None).expect("a hull");
         let stereo_settings = SurfaceSettings {
             stereo: Some(StereoSettings::default()),
             blur_m: 0.003,
             ..hull_settings
         };
-        let (carved, report) = hull_surface(&capture, &stereo_settings).expect("a carved hull");
+        let (carved, report) = hull_surface(&capture, &stereo_settings, None).expect("a carved hull");
         let (hull_error, carved_error) = (front_error(&hull), front_error(&carved));
         assert!(
             carved_error < 0.5 * hull_error,
@@ -419,7 +494,7 @@ pub(crate) mod tests {
             max_radius_m: 0.5,
             stereo: None,
         };
-        assert!(hull_surface(&capture, &bad).is_err());
+        assert!(hull_surface(&capture, &bad, None).is_err());
         let mut empty = capture;
         for m in &mut empty.masks {
             m.fill(0.0);
@@ -428,6 +503,6 @@ pub(crate) mod tests {
             spacing_m: 0.005,
             ..bad
         };
-        assert!(hull_surface(&empty, &settings).is_err());
+        assert!(hull_surface(&empty, &settings, None).is_err());
     }
 }

@@ -5,7 +5,8 @@
 //! shadows, interreflection, PCA, rank).
 //!
 //! Stages, one file each, each output kept for inspection:
-//! 1. [`geometry`]: the masks' visual hull, carved by multi-view stereo
+//! 1. [`geometry`]: the masks' visual hull intersected with the NeLF network's
+//!    solid (its density, `--photo-geometry network`) or carved by multi-view stereo
 //!    ([`stereo`]), as a smooth closed mesh.
 //! 2. [`lighting`]: the lighting the capture names, else fitted to the photographs'
 //!    shading on the surface (or the network's estimate).
@@ -33,11 +34,17 @@ use nelf_scene::mesh::{Albedo, Mesh};
 use nelf_scene::srgb::linear_to_srgb;
 use serde::Serialize;
 
-use crate::config::{PhotoSettings, PipelineConfig};
+use crate::config::{PhotoGeometry, PhotoSettings, PipelineConfig};
 use crate::error::{Context as _, Result};
-use geometry::{SurfaceReport, SurfaceSettings, hull_surface};
+use crate::network::{SourceFit, load_network, network_field};
+use geometry::{DensitySurface, SurfaceReport, SurfaceSettings, hull_surface};
 use lighting::{LightingReport, capture_lighting};
 use reflectance::{ReflectanceReport, ReflectanceSettings, albedo_from_observations, observe};
+
+/// The density at the surface of the network's solid (`--photo-geometry network`):
+/// a 3.5 mm voxel of it is half opaque (`ln 2 / 3.5 mm`; measured on four heads
+/// with the level of the demo's resolution-64 bake, 186–217 /m).
+pub const NETWORK_SURFACE_DENSITY_PER_M: f32 = 200.0;
 
 /// The albedo the brightest texels are scaled to when the lighting's scale is unknown.
 const NORMALISED_ALBEDO: f32 = 0.9;
@@ -76,6 +83,30 @@ pub fn reconstruct(
 ) -> Result<Reconstruction> {
     settings.validate()?;
     let spacing_m = settings.photo_spacing_mm * 1e-3;
+    // The network's density, where it can be had; else (mixed image sizes, …)
+    // stereo, with a note.
+    let mut geometry = settings.photo_geometry;
+    let mut geometry_note = None;
+    let network = match geometry {
+        PhotoGeometry::Network => {
+            match load_network(weights).and_then(|(model, _)| network_field(capture, model, SourceFit::None))
+            {
+                Ok((_, field)) => Some(field),
+                Err(e) => {
+                    geometry = PhotoGeometry::Stereo;
+                    geometry_note = Some(format!(
+                        "the network's density could not be used ({e}); the hull was carved by stereo instead"
+                    ));
+                    None
+                }
+            }
+        }
+        PhotoGeometry::Stereo | PhotoGeometry::Hull => None,
+    };
+    let density = network.as_ref().map(|field| DensitySurface {
+        field,
+        level_per_m: NETWORK_SURFACE_DENSITY_PER_M,
+    });
     let (mesh, surface) = hull_surface(
         capture,
         &SurfaceSettings {
@@ -83,9 +114,15 @@ pub fn reconstruct(
             smoothing_iterations: settings.photo_smoothing,
             blur_m: settings.photo_blur_mm * 1e-3,
             max_radius_m,
-            stereo: (!settings.photo_hull_only).then(stereo::StereoSettings::default),
+            stereo: (geometry == PhotoGeometry::Stereo).then(stereo::StereoSettings::default),
         },
+        density.as_ref(),
     )?;
+    let surface = SurfaceReport {
+        geometry,
+        note: geometry_note,
+        ..surface
+    };
     let reflectance_settings = ReflectanceSettings {
         bounces: settings.photo_shading_bounces,
         ..ReflectanceSettings::default()
@@ -231,17 +268,19 @@ mod tests {
             .collect()
     }
 
-    fn settings() -> PhotoSettings {
+    fn settings(geometry: PhotoGeometry) -> PhotoSettings {
         PhotoSettings {
             photo_spacing_mm: 4.0,
+            photo_geometry: geometry,
             ..PhotoSettings::default()
         }
     }
 
     /// The reconstruction is a valid surface whose front (the views' side; the back
     /// is left open by a 35° cone of views) lies near the sphere's, with a finite
-    /// albedo in [0, 1] that is not black.
-    fn assert_sane(what: &str, reconstruction: &Reconstruction) {
+    /// albedo in [0, 1] that is not black. The network's solid is a head's, not a
+    /// sphere's: with it the front may lie deeper.
+    fn assert_sane(what: &str, reconstruction: &Reconstruction, geometry: PhotoGeometry) {
         let mesh = &reconstruction.mesh;
         assert!(mesh.validate().is_ok(), "{what}");
         let front = mesh
@@ -254,8 +293,13 @@ mod tests {
             .iter()
             .map(|p| p.x.hypot(p.y))
             .fold(0.0f32, f32::max);
+        let nearest = if geometry == PhotoGeometry::Network {
+            0.06
+        } else {
+            0.085
+        };
         assert!(
-            (0.085..0.125).contains(&front) && (0.08..0.13).contains(&widest),
+            (nearest..0.125).contains(&front) && (0.08..0.13).contains(&widest),
             "{what}: front at z = {front} m, widest {widest} m from the axis (sphere: 0.1)"
         );
         let Albedo::PerVertex(albedo) = &mesh.albedo else {
@@ -277,37 +321,53 @@ mod tests {
     fn the_defects_of_real_photographs_give_a_sane_surface_or_a_clear_error() {
         let size = 64;
         let clean = textured_sphere(size);
-        let reconstruct_it = |capture: &LoadedCapture| reconstruct(capture, None, &settings(), 0.5);
-        assert_sane("clean", &reconstruct_it(&clean).expect("clean"));
-        // The lighting is not named: it was fitted.
-        let fitted = reconstruct_it(&clean).expect("clean");
-        assert!(!fitted.report.lighting.named && fitted.report.lighting.fit.is_some());
+        for geometry in [PhotoGeometry::Stereo, PhotoGeometry::Network] {
+            let reconstruct_it =
+                |capture: &LoadedCapture| reconstruct(capture, None, &settings(geometry), 0.5);
+            let fitted = reconstruct_it(&clean).expect("clean");
+            assert_sane("clean", &fitted, geometry);
+            // The lighting is not named: it was fitted.
+            assert!(!fitted.report.lighting.named && fitted.report.lighting.fit.is_some());
 
-        // Masks eroded and dilated by 4 pixels (a matting tool's soft edge thresholded
-        // differently).
-        for erode in [true, false] {
-            let mut capture = clean.clone();
-            for m in &mut capture.masks {
-                *m = morph(m, size as usize, 4, erode);
+            // Masks eroded and dilated by 4 pixels (a matting tool's soft edge
+            // thresholded differently).
+            for erode in [true, false] {
+                let mut capture = clean.clone();
+                for m in &mut capture.masks {
+                    *m = morph(m, size as usize, 4, erode);
+                }
+                let what = if erode { "eroded masks" } else { "dilated masks" };
+                assert_sane(what, &reconstruct_it(&capture).expect(what), geometry);
             }
-            let what = if erode { "eroded masks" } else { "dilated masks" };
-            assert_sane(what, &reconstruct_it(&capture).expect(what));
+
+            // One camera's pose off by 1° (a poor registration): the views disagree.
+            let mut capture = clean.clone();
+            let turn = DMat3::from_axis_angle(DVec3::new(1.0, 1.0, 0.0).normalize(), 1f64.to_radians());
+            capture.cameras[2].rotation = turn * capture.cameras[2].rotation;
+            capture.cameras[2].translation = turn * capture.cameras[2].translation;
+            assert_sane(
+                "1° pose error",
+                &reconstruct_it(&capture).expect("1° pose error"),
+                geometry,
+            );
+
+            // Views of different sizes (one photographed at 48² with the same field).
+            let small = textured_sphere(48);
+            let mut capture = clean.clone();
+            capture.cameras[3] = small.cameras[3];
+            capture.images[3] = small.images[3].clone();
+            capture.masks[3] = small.masks[3].clone();
+            // The network needs one size: its geometry falls back to stereo, noted.
+            let mixed = reconstruct_it(&capture).expect("mixed sizes");
+            assert_sane("mixed sizes", &mixed, PhotoGeometry::Stereo);
+            assert_eq!(mixed.report.surface.geometry, PhotoGeometry::Stereo);
+            assert_eq!(
+                mixed.report.surface.note.is_some(),
+                geometry == PhotoGeometry::Network
+            );
         }
-
-        // One camera's pose off by 1° (a poor registration): the views disagree.
-        let mut capture = clean.clone();
-        let turn = DMat3::from_axis_angle(DVec3::new(1.0, 1.0, 0.0).normalize(), 1f64.to_radians());
-        capture.cameras[2].rotation = turn * capture.cameras[2].rotation;
-        capture.cameras[2].translation = turn * capture.cameras[2].translation;
-        assert_sane("1° pose error", &reconstruct_it(&capture).expect("1° pose error"));
-
-        // Views of different sizes (one photographed at 48² with the same field).
-        let small = textured_sphere(48);
-        let mut capture = clean.clone();
-        capture.cameras[3] = small.cameras[3];
-        capture.images[3] = small.images[3].clone();
-        capture.masks[3] = small.masks[3].clone();
-        assert_sane("mixed sizes", &reconstruct_it(&capture).expect("mixed sizes"));
+        let reconstruct_it =
+            |capture: &LoadedCapture| reconstruct(capture, None, &settings(PhotoGeometry::Network), 0.5);
 
         // A view that sees nothing of the head: its empty mask empties the hull,
         // which is an error that says so (the loader refuses such a mask first).

@@ -405,7 +405,7 @@ mod tests {
             max_radius_m: 0.5,
             stereo: None,
         };
-        let (mesh, _) = hull_surface(&capture, &settings).expect("a hull");
+        let (mesh, _) = hull_surface(&capture, &settings, None).expect("a hull");
         let light = LatLong::constant(16, 8, [1.0; 3]);
         let (albedo, report) =
             estimate_reflectance(&mesh, &capture, &light, &ReflectanceSettings::default(), 0.005)
@@ -460,7 +460,7 @@ mod tests {
             max_radius_m: 0.5,
             stereo: None,
         };
-        let (mesh, _) = hull_surface(&capture, &settings).expect("a hull");
+        let (mesh, _) = hull_surface(&capture, &settings, None).expect("a hull");
         let light = LatLong::constant(16, 8, [1.0; 3]);
         let front = |settings: &ReflectanceSettings| {
             let (albedo, _) = estimate_reflectance(&mesh, &capture, &light, settings, 0.004).expect("albedo");
