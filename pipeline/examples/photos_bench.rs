@@ -95,8 +95,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
         photo_smoothing: option("smoothing").map_or(Ok(30), str::parse)?,
         photo_lighting: match option("lighting") {
-            Some("network") => nelf_pipeline::photo::lighting::UnnamedLighting::Network,
-            _ => nelf_pipeline::photo::lighting::UnnamedLighting::Fit,
+            Some("network") => nelf_pipeline::config::UnnamedLighting::Network,
+            _ => nelf_pipeline::config::UnnamedLighting::Fit,
         },
         photo_blur_mm: option("blur").map_or(Ok(nelf_pipeline::config::DEFAULT_PHOTO_BLUR_MM), str::parse)?,
         ..Default::default()

@@ -107,6 +107,17 @@ fn default_photo_smoothing() -> usize {
     DEFAULT_PHOTO_SMOOTHING
 }
 
+/// How the lighting of a capture that names none is estimated.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum UnnamedLighting {
+    /// Fitted to the photographs' shading on the reconstructed surface (`nelf_pipeline::photo::lighting::fit_lighting`).
+    #[default]
+    Fit,
+    /// The NeLF network's estimate from the photographs.
+    Network,
+}
+
 /// How the surface of a photographed head is made from the masks' visual hull.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
@@ -150,7 +161,7 @@ pub struct PhotoSettings {
     /// Photographs: how the lighting is estimated when the capture names none.
     #[arg(long, value_enum, default_value_t)]
     #[serde(default)]
-    pub photo_lighting: crate::photo::lighting::UnnamedLighting,
+    pub photo_lighting: UnnamedLighting,
     /// Photographs: how the masks' visual hull is refined into the surface.
     #[arg(long, value_enum, default_value_t)]
     #[serde(default)]
@@ -183,7 +194,7 @@ impl Default for PhotoSettings {
             photo_smoothing: DEFAULT_PHOTO_SMOOTHING,
             photo_blur_mm: DEFAULT_PHOTO_BLUR_MM,
             photo_shading_bounces: 0,
-            photo_lighting: crate::photo::lighting::UnnamedLighting::default(),
+            photo_lighting: UnnamedLighting::default(),
             photo_geometry: PhotoGeometry::default(),
         }
     }

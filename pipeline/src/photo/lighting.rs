@@ -14,8 +14,9 @@ use nalgebra::{DMatrix, DVector};
 use nelf_bake::LoadedCapture;
 use nelf_format::conventions::{ENV_H, ENV_TEXELS, ENV_W, LatLong, project_envmap};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
 
+use crate::config::UnnamedLighting;
 use crate::error::{Result, invalid};
 use crate::light::{LightRequest, estimate_light};
 use crate::network::capture_source_lighting;
@@ -34,17 +35,6 @@ pub struct LightingReport {
     pub fit: Option<LightingFitReport>,
     /// Seconds.
     pub seconds: f64,
-}
-
-/// How the lighting of a capture that names none is estimated.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize, clap::ValueEnum)]
-#[serde(rename_all = "kebab-case")]
-pub enum UnnamedLighting {
-    /// Fitted to the photographs' shading on the reconstructed surface ([`fit_lighting`]).
-    #[default]
-    Fit,
-    /// The NeLF network's estimate from the photographs.
-    Network,
 }
 
 /// The capture's lighting as an 8 × 16 world-frame map (see the module
