@@ -59,6 +59,14 @@ pub fn network_field(
     model: Model,
     fit: SourceFit,
 ) -> Result<(NetCapture, NelfField)> {
+    let (prepared, field) = encoded_field(capture, model)?;
+    let field = in_capture_light_units(field, capture.description(), &capture.dir, fit)?;
+    Ok((prepared, field))
+}
+
+/// The network over `capture`'s prepared views, its light transport in the
+/// network's own units: enough for its density (the photographs' geometry).
+pub fn encoded_field(capture: &LoadedCapture, model: Model) -> Result<(NetCapture, NelfField)> {
     let prepared = NetCapture::for_model(
         &model,
         &capture.cameras,
@@ -68,7 +76,6 @@ pub fn network_field(
         default_net_from_world(),
     )?;
     let field = NelfField::new(model, &prepared).context("encoding the capture's views")?;
-    let field = in_capture_light_units(field, capture.description(), &capture.dir, fit)?;
     Ok((prepared, field))
 }
 

@@ -36,7 +36,7 @@ use serde::Serialize;
 
 use crate::config::{PhotoGeometry, PhotoSettings, PipelineConfig};
 use crate::error::{Context as _, Result};
-use crate::network::{SourceFit, load_network, network_field};
+use crate::network::{encoded_field, load_network};
 use geometry::{DensitySurface, SurfaceReport, SurfaceSettings, hull_surface};
 use lighting::{LightingReport, capture_lighting};
 use reflectance::{ReflectanceReport, ReflectanceSettings, albedo_from_observations, observe};
