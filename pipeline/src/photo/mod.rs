@@ -89,8 +89,7 @@ pub fn reconstruct(
     let mut geometry_note = None;
     let network = match geometry {
         PhotoGeometry::Network => {
-            match load_network(weights).and_then(|(model, _)| network_field(capture, model, SourceFit::None))
-            {
+            match load_network(weights).and_then(|(model, _)| encoded_field(capture, model)) {
                 Ok((_, field)) => Some(field),
                 Err(e) => {
                     geometry = PhotoGeometry::Stereo;
