@@ -90,6 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         photo_geometry: match option("geometry") {
             Some("stereo") => nelf_pipeline::config::PhotoGeometry::Stereo,
             Some("network") => nelf_pipeline::config::PhotoGeometry::Network,
+            Some("fused") => nelf_pipeline::config::PhotoGeometry::Fused,
             _ if args.iter().any(|a| a == "hull") => nelf_pipeline::config::PhotoGeometry::Hull,
             _ => nelf_pipeline::config::PhotoGeometry::default(),
         },

@@ -130,6 +130,9 @@ pub enum PhotoGeometry {
     /// Carved by multi-view stereo (plane-sweep depth maps fused into a truncated
     /// signed distance, `nelf_pipeline::photo::stereo`): needs texture.
     Stereo,
+    /// Both: stereo where a second view confirms a depth, the network's density
+    /// elsewhere.
+    Fused,
     /// The hull as it is.
     Hull,
 }

@@ -86,8 +86,9 @@ impl std::fmt::Debug for DensitySurface<'_> {
 }
 
 /// The visual hull of `capture`'s masks as a closed mesh (albedo a uniform grey, to
-/// be replaced by the reflectance stage), carved by stereo when `settings.stereo`
-/// asks, else intersected with the solid of `density` when given.
+/// be replaced by the reflectance stage), intersected with the solid of `density`
+/// when given and carved by stereo when `settings.stereo` asks (with a density, only
+/// where a second view confirms a depth).
 pub fn hull_surface(
     capture: &LoadedCapture,
     settings: &SurfaceSettings,
@@ -153,8 +154,6 @@ pub fn hull_surface(
             spacing_m: h,
         })
     };
-    let sample =
-        |field: &(dyn Fn(DVec3) -> f64 + Sync), blur_cells: f64| mesh_of(values_of(field), blur_cells);
     let empty = || {
         invalid(format!(
             "{}: the masks' visual hull is empty (do the masks and cameras agree?)",
@@ -168,52 +167,71 @@ pub fn hull_surface(
     }
     let mut stereo_report = None;
     let mut density_points = 0;
-    if let (None, Some(surface)) = (&settings.stereo, density) {
-        // max(hull, density band): the hull's solid intersected with the field's,
-        // the field's term `h·(level − σ)/level` clamped to one cell either side so
-        // that the blur treats it like a truncated distance.
-        let inside: Vec<usize> = (0..count).filter(|&i| hull_values[i] < 0.0).collect();
-        let points: Vec<glam::Vec3> = inside.iter().map(|&i| point(i).as_vec3()).collect();
-        let mut sigma = vec![0.0f32; points.len()];
-        surface
-            .field
-            .evaluate_density(&points, &mut sigma)
-            .map_err(|e| invalid(format!("the density of the surface: {e}")))?;
-        let mut values = hull_values;
-        let level = surface.level_per_m.max(f32::MIN_POSITIVE);
-        for (&i, s) in inside.iter().zip(&sigma) {
-            let band = (h as f32 * (level - s) / level).clamp(-(h as f32), h as f32);
-            values[i] = values[i].max(band);
+    // max(hull, density band): the hull's solid intersected with the field's, the
+    // field's term `h·(level − σ)/level` clamped to one cell either side so that the
+    // blur treats it like a truncated distance.
+    let band_values = match density {
+        Some(surface) => {
+            let inside: Vec<usize> = (0..count).filter(|&i| hull_values[i] < 0.0).collect();
+            let points: Vec<glam::Vec3> = inside.iter().map(|&i| point(i).as_vec3()).collect();
+            let mut sigma = vec![0.0f32; points.len()];
+            surface
+                .field
+                .evaluate_density(&points, &mut sigma)
+                .map_err(|e| invalid(format!("the density of the surface: {e}")))?;
+            let mut values = hull_values.clone();
+            let level = surface.level_per_m.max(f32::MIN_POSITIVE);
+            for (&i, s) in inside.iter().zip(&sigma) {
+                let band = (h as f32 * (level - s) / level).clamp(-(h as f32), h as f32);
+                values[i] = values[i].max(band);
+            }
+            density_points = points.len();
+            Some(values)
         }
-        density_points = points.len();
-        net = mesh_of(values, settings.blur_m / h);
-        if net.triangles.is_empty() {
-            return Err(invalid(format!(
-                "{}: the network's density leaves nothing inside the masks' visual hull",
-                capture.camera_file.display()
-            )));
-        }
-    }
-    if let Some(stereo) = &settings.stereo {
+        None => None,
+    };
+    let refined = if let Some(stereo) = &settings.stereo {
         let hull_mesh = Mesh {
             positions: net.positions.clone(),
             triangles: net.triangles.clone(),
             albedo: Albedo::Uniform([0.5; 3]),
         };
-        let (maps, report) = depth_maps(capture, &hull_mesh, stereo);
+        // With a density to fall back on, only the depths a second view confirms
+        // vote; the rest is the density's.
+        let stereo = StereoSettings {
+            fill: band_values.is_none(),
+            ..*stereo
+        };
+        let (maps, report) = depth_maps(capture, &hull_mesh, &stereo);
         stereo_report = Some(report);
         let tau = stereo.truncation_m;
-        net = sample(
-            &|p| {
-                let hull = distance.distance_m(p);
-                match fused_distance(capture, &maps, p, tau) {
-                    Some(fused) => hull.max(fused),
-                    None => hull,
-                }
-            },
-            settings.blur_m / h,
-        );
-        if net.triangles.is_empty() {
+        let fused = values_of(&|p| {
+            fused_distance(capture, &maps, p, tau).map_or(f64::NAN, |fused| distance.distance_m(p).max(fused))
+        });
+        let fallback = band_values.as_ref().unwrap_or(&hull_values);
+        Some(
+            fused
+                .iter()
+                .zip(fallback)
+                .map(|(v, f)| if v.is_nan() { *f } else { *v })
+                .collect(),
+        )
+    } else {
+        band_values
+    };
+    let mut note = None;
+    if let Some(values) = refined {
+        let refined_net = mesh_of(values, settings.blur_m / h);
+        if !refined_net.triangles.is_empty() {
+            net = refined_net;
+        } else if density.is_some() {
+            // The density is low everywhere inside the hull (views that disagree,
+            // poses off by degrees): the hull, reported, rather than nothing.
+            note = Some(
+                "the density left nothing inside the masks' visual hull (do the poses and masks agree?): the hull as it is"
+                    .to_string(),
+            );
+        } else {
             return Err(empty());
         }
     }
@@ -232,14 +250,16 @@ pub fn hull_surface(
         triangles: mesh.triangles.len(),
         stereo: stereo_report,
         density_points,
-        geometry: if settings.stereo.is_some() {
+        geometry: if settings.stereo.is_some() && density.is_some() {
+            crate::config::PhotoGeometry::Fused
+        } else if settings.stereo.is_some() {
             crate::config::PhotoGeometry::Stereo
         } else if density.is_some() {
             crate::config::PhotoGeometry::Network
         } else {
             crate::config::PhotoGeometry::Hull
         },
-        note: None,
+        note,
         seconds: start.elapsed().as_secs_f64(),
     };
     Ok((mesh, report))
@@ -481,6 +501,84 @@ pub(crate) mod tests {
         assert!(
             (sum - 1.0).abs() < 0.02 && spike[index(6, 5, 4)] < 0.1,
             "sum {sum}"
+        );
+    }
+
+    /// σ = `sigma` where `z < below_z`, 0 elsewhere.
+    struct Slab {
+        sigma: f32,
+        below_z: f32,
+    }
+
+    impl FieldSource for Slab {
+        fn evaluate(
+            &self,
+            points: &[glam::Vec3],
+            _view: &nelf_scene::field::ViewPolicy,
+            density: &mut [f32],
+            lt: &mut [f32],
+        ) -> std::result::Result<(), nelf_scene::field::FieldError> {
+            for (p, d) in points.iter().zip(density.iter_mut()) {
+                *d = if p.z < self.below_z { self.sigma } else { 0.0 };
+            }
+            lt.fill(0.0);
+            Ok(())
+        }
+
+        fn bounds(&self) -> (glam::Vec3, glam::Vec3) {
+            (glam::Vec3::splat(-1.0), glam::Vec3::splat(1.0))
+        }
+    }
+
+    #[test]
+    fn a_density_cuts_the_hull_or_leaves_it_with_a_note() {
+        let capture = sphere_capture(0.1);
+        let settings = SurfaceSettings {
+            spacing_m: 0.005,
+            smoothing_iterations: 0,
+            blur_m: 0.0,
+            max_radius_m: 0.5,
+            stereo: None,
+        };
+        // A solid below z = 0.05 m: the hull (about the sphere) is cut there.
+        let slab = Slab {
+            sigma: 1000.0,
+            below_z: 0.05,
+        };
+        let density = DensitySurface {
+            field: &slab,
+            level_per_m: 200.0,
+        };
+        let (cut, report) = hull_surface(&capture, &settings, Some(&density)).expect("a cut hull");
+        let top = cut
+            .positions
+            .iter()
+            .map(|p| p.z)
+            .fold(f32::NEG_INFINITY, f32::max);
+        assert!((top - 0.05).abs() < 0.006, "top at {top} m");
+        assert!(report.density_points > 0 && report.note.is_none(), "{report:?}");
+        // A density that is nowhere above the level: the hull, with a note.
+        let empty = Slab {
+            sigma: 10.0,
+            below_z: 1.0,
+        };
+        let density = DensitySurface {
+            field: &empty,
+            level_per_m: 200.0,
+        };
+        let (hull, report) = hull_surface(&capture, &settings, Some(&density)).expect("the hull");
+        let top = hull
+            .positions
+            .iter()
+            .map(|p| p.z)
+            .fold(f32::NEG_INFINITY, f32::max);
+        assert!(top > 0.09, "top at {top} m");
+        assert!(
+            report
+                .note
+                .as_deref()
+                .is_some_and(|n| n.contains("the hull as it is")),
+            "{report:?}"
         );
     }
 

@@ -88,7 +88,7 @@ pub fn reconstruct(
     let mut geometry = settings.photo_geometry;
     let mut geometry_note = None;
     let network = match geometry {
-        PhotoGeometry::Network => {
+        PhotoGeometry::Network | PhotoGeometry::Fused => {
             match load_network(weights).and_then(|(model, _)| encoded_field(capture, model)) {
                 Ok((_, field)) => Some(field),
                 Err(e) => {
@@ -113,13 +113,14 @@ pub fn reconstruct(
             smoothing_iterations: settings.photo_smoothing,
             blur_m: settings.photo_blur_mm * 1e-3,
             max_radius_m,
-            stereo: (geometry == PhotoGeometry::Stereo).then(stereo::StereoSettings::default),
+            stereo: matches!(geometry, PhotoGeometry::Stereo | PhotoGeometry::Fused)
+                .then(stereo::StereoSettings::default),
         },
         density.as_ref(),
     )?;
     let surface = SurfaceReport {
         geometry,
-        note: geometry_note,
+        note: geometry_note.or(surface.note),
         ..surface
     };
     let reflectance_settings = ReflectanceSettings {

@@ -55,6 +55,9 @@ pub struct StereoSettings {
     pub truncation_m: f64,
     /// Half-width of the depth maps' median filter, pixels.
     pub median_radius: i64,
+    /// Give foreground pixels without a confirmed depth their neighbours' (else
+    /// they stay unknown and the view does not vote there).
+    pub fill: bool,
 }
 
 impl Default for StereoSettings {
@@ -65,6 +68,7 @@ impl Default for StereoSettings {
             min_ncc: 0.7,
             truncation_m: 0.008,
             median_radius: 7,
+            fill: true,
         }
     }
 }
@@ -302,6 +306,9 @@ pub fn depth_maps(
         let mut unknown: Vec<usize> = (0..w * h)
             .filter(|&i| mask[i] >= 0.5 && !depth[i].is_finite() && results[i].1.is_some())
             .collect();
+        if !settings.fill {
+            unknown.clear();
+        }
         while !unknown.is_empty() {
             let updates: Vec<(usize, f32)> = unknown
                 .iter()
