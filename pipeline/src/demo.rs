@@ -14,11 +14,11 @@
 //! 5. Unless left out, the same capture baked with the shipped NeLF network
 //!    (`nelf_field::shipped`; no view-dependent part: the network's transport is
 //!    evaluated toward the mean camera), scored at the same targets beside the
-//!    ground-truth bake ([`NetworkDemo`], `demo_network.json`).
+//!    ground-truth bake ([`ImagesBakeDemo`], `demo_network.json`).
 //! 6. Unless left out, the same capture baked from its photographs by reconstruction
 //!    (`--source photos`, [`crate::photo`]: a surface carved from the masks' hull by
 //!    stereo, its albedo from the views under the capture's lighting, baked as a
-//!    mesh), scored the same way ([`PhotosDemo`], `demo_photos.json`).
+//!    mesh), scored the same way (`demo_photos.json`).
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -37,7 +37,7 @@ use serde::{Deserialize, Serialize};
 
 use nelf_bake::eval::{ViewScore, data_range, read_linear_rgb, score_view};
 use nelf_bake::{
-    BakeConfig, BakeReport, CaptureLoadOptions, GroundTruth, LoadedCapture, Progress, ViewChoice,
+    BakeConfig, BakeOutput, BakeReport, CaptureLoadOptions, GroundTruth, LoadedCapture, Progress, ViewChoice,
     bake_capture, load_capture,
 };
 
@@ -198,40 +198,24 @@ pub struct DemoRun {
     /// Steps 1-4 (`demo_report.json`).
     pub report: DemoReport,
     /// Step 5 (`demo_network.json`); `None` when left out.
-    pub network: Option<NetworkDemo>,
+    pub network: Option<ImagesBakeDemo>,
     /// Step 6 (`demo_photos.json`); `None` when left out.
-    pub photos: Option<PhotosDemo>,
+    pub photos: Option<ImagesBakeDemo>,
 }
 
-/// The demo's capture baked from its photographs by reconstruction, scored at the targets.
+/// The demo's capture baked from its five images alone (steps 5 and 6), scored at
+/// the targets.
 #[derive(Debug, Clone)]
-pub struct PhotosDemo {
+pub struct ImagesBakeDemo {
     /// The asset.
     pub asset: PathBuf,
-    /// The reconstruction (OBJ with vertex colours, `reconstruction.json`).
-    pub reconstruction: PathBuf,
     /// Its bake's report.
     pub bake: BakeReport,
-    /// Seconds reconstructing, baking and writing it.
+    /// Seconds from the loaded capture to the written asset (a reconstruction's too).
     pub bake_secs: f64,
-    /// Side-by-side images at the target views (ground truth | photographs' bake | |diff|×4).
-    pub comparisons: Vec<PathBuf>,
-    /// Its scores at the target views.
-    pub scores: Vec<ViewScore>,
-}
-
-/// The demo's capture baked with the shipped network, scored at the targets.
-#[derive(Debug, Clone)]
-pub struct NetworkDemo {
-    /// The network's asset.
-    pub asset: PathBuf,
-    /// Its bake's report.
-    pub bake: BakeReport,
-    /// Seconds loading, baking and writing it.
-    pub bake_secs: f64,
-    /// The weights' name.
-    pub weights: &'static str,
-    /// Side-by-side images at the target views (ground truth | network bake | |diff|×4).
+    /// What else made it: the network's weights, or where the reconstruction went.
+    pub made_by: String,
+    /// Side-by-side images at the target views (ground truth | this bake | |diff|×4).
     pub comparisons: Vec<PathBuf>,
     /// Its scores at the target views (the ground-truth bake's are the report's).
     pub scores: Vec<ViewScore>,
@@ -255,16 +239,22 @@ pub fn run_demo(
     steps: DemoSteps,
 ) -> Result<DemoRun> {
     let report = run_ground_truth(config, out_dir, progress)?;
-    let network = if steps.network {
-        Some(network_step(config, &report, progress)?)
-    } else {
-        None
-    };
-    let photos = if steps.photos {
-        Some(photos_step(config, &report, progress)?)
-    } else {
-        None
-    };
+    let (mut network, mut photos) = (None, None);
+    if steps.network || steps.photos {
+        let capture = load_capture(&report.capture_dir, &CaptureLoadOptions::default())
+            .with_context(|| format!("loading {}", report.capture_dir.display()))?;
+        let bake_config = PipelineConfig::from(BakeConfig {
+            resolution: config.resolution,
+            view_dependence: ViewChoice::Off,
+            ..BakeConfig::default()
+        });
+        if steps.network {
+            network = Some(network_step(&capture, &bake_config, &report, progress)?);
+        }
+        if steps.photos {
+            photos = Some(photos_step(&capture, &bake_config, &report, progress)?);
+        }
+    }
     Ok(DemoRun {
         report,
         network,
@@ -403,81 +393,82 @@ fn run_ground_truth(config: &DemoConfig, out_dir: &Path, progress: Progress) -> 
 /// Step 5: the demo's capture baked with the shipped network (no view-dependent part:
 /// the network's transport is evaluated toward the mean camera), scored at the
 /// targets beside the ground-truth bake; `demo_network.json` records it.
-fn network_step(config: &DemoConfig, report: &DemoReport, progress: Progress) -> Result<NetworkDemo> {
-    let start = Instant::now();
-    let capture = load_capture(&report.capture_dir, &CaptureLoadOptions::default())
-        .with_context(|| format!("loading {}", report.capture_dir.display()))?;
-    let config = PipelineConfig::from(BakeConfig {
-        resolution: config.resolution,
-        view_dependence: ViewChoice::Off,
-        ..BakeConfig::default()
-    });
-    let mut output = bake_network(&capture, None, &config, progress)
-        .context("baking the demo's capture with the shipped network")?;
-    let asset_path = report.out_dir.join("head_network.nelf");
-    write_bake(&mut output, &config, &asset_path)
-        .with_context(|| format!("writing {}", asset_path.display()))?;
-    let bake_secs = start.elapsed().as_secs_f64();
-    let asset = read_asset(&asset_path).with_context(|| format!("reading {}", asset_path.display()))?;
-    let (comparisons, scores) = target_comparisons(&capture, &asset, report, "network")?;
+fn network_step(
+    capture: &LoadedCapture,
+    config: &PipelineConfig,
+    report: &DemoReport,
+    progress: Progress,
+) -> Result<ImagesBakeDemo> {
     let weights = nelf_field::shipped::SHIPPED_WEIGHTS_NAME;
-    let summary = serde_json::json!({
-        "weights": weights,
-        "asset": asset_path,
-        "bake": output.report,
-        "bake_secs": bake_secs,
-        "scores": scores,
-        "ground_truth_bake_scores": report.scores,
-    });
-    write_json(&report.out_dir.join("demo_network.json"), &summary)?;
-    Ok(NetworkDemo {
-        asset: asset_path,
-        bake: output.report,
-        bake_secs,
-        weights,
-        comparisons,
-        scores,
+    images_step(capture, config, report, "network", |_| {
+        let output = bake_network(capture, None, config, progress)
+            .context("baking the demo's capture with the shipped network")?;
+        Ok((
+            output,
+            serde_json::json!({ "weights": weights }),
+            weights.to_string(),
+        ))
     })
 }
 
 /// Step 6: the demo's capture baked from its photographs by reconstruction (under
 /// the lighting the capture names), scored at the targets beside the ground-truth
 /// bake; `demo_photos.json` records it.
-fn photos_step(config: &DemoConfig, report: &DemoReport, progress: Progress) -> Result<PhotosDemo> {
+fn photos_step(
+    capture: &LoadedCapture,
+    config: &PipelineConfig,
+    report: &DemoReport,
+    progress: Progress,
+) -> Result<ImagesBakeDemo> {
+    images_step(capture, config, report, "photos", |asset_path| {
+        let baked = bake_photographs(capture, None, &PhotoSettings::default(), config, progress)
+            .context("baking the demo's capture from its photographs")?;
+        let reconstruction = asset_path.with_extension("reconstruction");
+        write_reconstruction(&baked.reconstruction, &reconstruction)?;
+        let extra = serde_json::json!({
+            "reconstruction": reconstruction,
+            "reconstruction_report": baked.reconstruction.report,
+        });
+        let made_by = format!("surface and albedo in {}", reconstruction.display());
+        Ok((baked.output, extra, made_by))
+    })
+}
+
+/// One bake of the demo's capture from its images: `bake` makes it (given where the
+/// asset goes; it returns the bake, the fields it adds to the summary and what made
+/// it), then the asset is written to `head_<label>.nelf`, read back, scored at the
+/// targets (`compare_<label>_<target>.png`) and summed up in `demo_<label>.json`.
+fn images_step(
+    capture: &LoadedCapture,
+    config: &PipelineConfig,
+    report: &DemoReport,
+    label: &str,
+    bake: impl FnOnce(&Path) -> Result<(BakeOutput, serde_json::Value, String)>,
+) -> Result<ImagesBakeDemo> {
     let start = Instant::now();
-    let capture = load_capture(&report.capture_dir, &CaptureLoadOptions::default())
-        .with_context(|| format!("loading {}", report.capture_dir.display()))?;
-    let config = PipelineConfig::from(BakeConfig {
-        resolution: config.resolution,
-        view_dependence: ViewChoice::Off,
-        ..BakeConfig::default()
-    });
-    let baked = bake_photographs(&capture, None, &PhotoSettings::default(), &config, progress)
-        .context("baking the demo's capture from its photographs")?;
-    let mut output = baked.output;
-    let asset_path = report.out_dir.join("head_photos.nelf");
-    write_bake(&mut output, &config, &asset_path)
+    let asset_path = report.out_dir.join(format!("head_{label}.nelf"));
+    let (mut output, extra, made_by) = bake(&asset_path)?;
+    write_bake(&mut output, config, &asset_path)
         .with_context(|| format!("writing {}", asset_path.display()))?;
-    let reconstruction = asset_path.with_extension("reconstruction");
-    write_reconstruction(&baked.reconstruction, &reconstruction)?;
     let bake_secs = start.elapsed().as_secs_f64();
     let asset = read_asset(&asset_path).with_context(|| format!("reading {}", asset_path.display()))?;
-    let (comparisons, scores) = target_comparisons(&capture, &asset, report, "photos")?;
-    let summary = serde_json::json!({
+    let (comparisons, scores) = target_comparisons(capture, &asset, report, label)?;
+    let mut summary = serde_json::json!({
         "asset": asset_path,
-        "reconstruction": reconstruction,
-        "reconstruction_report": baked.reconstruction.report,
         "bake": output.report,
         "bake_secs": bake_secs,
         "scores": scores,
         "ground_truth_bake_scores": report.scores,
     });
-    write_json(&report.out_dir.join("demo_photos.json"), &summary)?;
-    Ok(PhotosDemo {
+    if let (Some(summary), serde_json::Value::Object(extra)) = (summary.as_object_mut(), extra) {
+        summary.extend(extra);
+    }
+    write_json(&report.out_dir.join(format!("demo_{label}.json")), &summary)?;
+    Ok(ImagesBakeDemo {
         asset: asset_path,
-        reconstruction,
         bake: output.report,
         bake_secs,
+        made_by,
         comparisons,
         scores,
     })

@@ -42,7 +42,7 @@ pub mod voxel_filter;
 
 pub use capture_bake::{CaptureBake, CaptureBakeOptions, SourceChoice, bake_capture_dir};
 pub use config::{DEFAULT_NETWORK_HULL_MARGIN_PX, DEFAULT_NETWORK_SKIN_MM, PipelineConfig, write_bake};
-pub use demo::{DemoConfig, DemoReport, DemoRun, DemoSteps, NetworkDemo, PhotosDemo, run_demo};
+pub use demo::{DemoConfig, DemoReport, DemoRun, DemoSteps, ImagesBakeDemo, run_demo};
 pub use error::{PipelineError, Result};
 pub use field_render::{FieldRender, FieldRenderRequest, render_field};
 pub use light::{LightEstimate, LightRequest, estimate_light};

@@ -6,8 +6,9 @@
 use std::path::PathBuf;
 
 use anyhow::Context;
+use nelf_bake::eval::ViewScore;
 use nelf_bake::progress::Progress;
-use nelf_pipeline::{DemoConfig, DemoSteps, run_demo};
+use nelf_pipeline::{DemoConfig, DemoSteps, ImagesBakeDemo, run_demo};
 
 /// Options of `nelf demo`.
 #[derive(Debug, clap::Args)]
@@ -73,50 +74,40 @@ pub fn run(args: &DemoArgs) -> anyhow::Result<()> {
         );
     }
     if let Some(network) = &run.network {
-        println!(
-            "network    {}  ({} bytes, rank {}, bake {:.1} s; {})",
-            network.asset.display(),
-            network.bake.file_size,
-            network.bake.rank,
-            network.bake_secs,
-            network.weights
-        );
-        for ((path, score), truth) in network
-            .comparisons
-            .iter()
-            .zip(&network.scores)
-            .zip(&report.scores)
-        {
-            println!(
-                "compare    {}  (ground truth | network bake | |diff|×4; PSNR {:.2} dB, SSIM {:.4}; ground-truth bake {:.2} dB, {:.4})",
-                path.display(),
-                score.psnr_db,
-                score.ssim,
-                truth.psnr_db,
-                truth.ssim
-            );
-        }
+        print_images_bake("network", "bake", "network bake", network, &report.scores);
     }
     if let Some(photos) = &run.photos {
-        println!(
-            "photos     {}  ({} bytes, rank {}, reconstruction and bake {:.1} s; surface and albedo in {})",
-            photos.asset.display(),
-            photos.bake.file_size,
-            photos.bake.rank,
-            photos.bake_secs,
-            photos.reconstruction.display()
+        print_images_bake(
+            "photos",
+            "reconstruction and bake",
+            "photographs' bake",
+            photos,
+            &report.scores,
         );
-        for ((path, score), truth) in photos.comparisons.iter().zip(&photos.scores).zip(&report.scores) {
-            println!(
-                "compare    {}  (ground truth | photographs' bake | |diff|×4; PSNR {:.2} dB, SSIM {:.4}; ground-truth bake {:.2} dB, {:.4})",
-                path.display(),
-                score.psnr_db,
-                score.ssim,
-                truth.psnr_db,
-                truth.ssim
-            );
-        }
     }
     println!("report     {}", report.out_dir.join("demo_report.json").display());
     Ok(())
+}
+
+/// One of the demo's bakes from the capture's images: the asset, then each target's
+/// comparison beside the ground-truth bake's scores (`truth`).
+fn print_images_bake(label: &str, timed: &str, what: &str, bake: &ImagesBakeDemo, truth: &[ViewScore]) {
+    println!(
+        "{label:<10} {}  ({} bytes, rank {}, {timed} {:.1} s; {})",
+        bake.asset.display(),
+        bake.bake.file_size,
+        bake.bake.rank,
+        bake.bake_secs,
+        bake.made_by
+    );
+    for ((path, score), truth) in bake.comparisons.iter().zip(&bake.scores).zip(truth) {
+        println!(
+            "compare    {}  (ground truth | {what} | |diff|×4; PSNR {:.2} dB, SSIM {:.4}; ground-truth bake {:.2} dB, {:.4})",
+            path.display(),
+            score.psnr_db,
+            score.ssim,
+            truth.psnr_db,
+            truth.ssim
+        );
+    }
 }
