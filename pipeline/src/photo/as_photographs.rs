@@ -6,11 +6,9 @@
 
 use std::path::Path;
 
-use image::codecs::jpeg::JpegEncoder;
-use image::{ExtendedColorType, ImageEncoder as _};
 use nelf_bake::LoadedCapture;
 use nelf_format::io_error::FileIoError;
-use nelf_scene::srgb::linear_to_srgb8;
+use nelf_scene::image_io::{write_jpeg_srgb, write_png_gray};
 
 use crate::error::{PipelineError, Result, invalid};
 
@@ -61,22 +59,13 @@ pub fn write_as_photographs(
     for (v, camera) in capture.cameras.iter().enumerate() {
         let name = format!("{}.jpg", capture.names[v]);
         let (w, h) = (camera.width, camera.height);
-        let rgb: Vec<u8> = capture.images[v]
+        let exposed: Vec<[f32; 3]> = capture.images[v]
             .iter()
-            .flat_map(|p| p.map(|c| linear_to_srgb8(c * exposure_gain)))
+            .map(|p| p.map(|c| c * exposure_gain))
             .collect();
-        let path = dir.join("images").join(&name);
-        let file = std::fs::File::create(&path).map_err(io(&path))?;
-        JpegEncoder::new_with_quality(std::io::BufWriter::new(file), jpeg_quality)
-            .write_image(&rgb, w, h, ExtendedColorType::Rgb8)
-            .map_err(|e| invalid(format!("{}: {e}", path.display())))?;
-        let mask: Vec<u8> = capture.masks[v]
-            .iter()
-            .map(|m| (m.clamp(0.0, 1.0) * 255.0).round() as u8)
-            .collect();
-        let path = dir.join("masks").join(format!("{}.png", capture.names[v]));
-        image::save_buffer(&path, &mask, w, h, ExtendedColorType::L8)
-            .map_err(|e| invalid(format!("{}: {e}", path.display())))?;
+        write_jpeg_srgb(dir.join("images").join(&name), w, h, &exposed, jpeg_quality)?;
+        let mask = dir.join("masks").join(format!("{}.png", capture.names[v]));
+        write_png_gray(mask, w, h, &capture.masks[v])?;
         views.push((name, *camera));
     }
     nelf_format::colmap::write_colmap_text(dir, &views).map_err(|e| PipelineError::Invalid(e.to_string()))?;
