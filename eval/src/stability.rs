@@ -575,17 +575,6 @@ impl Context<'_> {
 /// A point where no asset could be made: zero scores and the reason (a bake that
 /// refuses its input is where the method breaks, and is charted as such).
 fn failed_point(axis: &str, value: f64, label: String, error: &EvalError) -> StabilityPoint {
-    // The whole chain: a context alone ("reconstructing … from its photographs")
-    // does not say what broke.
-    let mut reasons = vec![error.to_string()];
-    let mut source = std::error::Error::source(error);
-    while let Some(e) = source {
-        let reason = e.to_string();
-        if reasons.last() != Some(&reason) {
-            reasons.push(reason);
-        }
-        source = e.source();
-    }
     StabilityPoint {
         axis: axis.to_string(),
         value,
@@ -593,7 +582,9 @@ fn failed_point(axis: &str, value: f64, label: String, error: &EvalError) -> Sta
         scores: crate::rows::Scores::default(),
         worst_psnr_db: 0.0,
         gallery: None,
-        failure: Some(reasons.join(": ")),
+        // The whole chain: a context alone ("reconstructing … from its photographs")
+        // does not say what broke.
+        failure: Some(nelf_scene::error::error_chain(error)),
     }
 }
 

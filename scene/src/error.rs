@@ -1,6 +1,7 @@
 //! Errors of the scene loaders (meshes, textures, environment maps): every
 //! variant names the file it is about, and parse errors name the line, so a
-//! user can fix the file without reading our code.
+//! user can fix the file without reading our code. [`error_chain`] puts any
+//! error and its causes on one line (for reports that keep only text).
 
 use std::path::PathBuf;
 
@@ -79,5 +80,43 @@ impl SceneError {
     /// An I/O error on `path`.
     pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
         Self::Io(FileIoError::new(path.to_path_buf(), source))
+    }
+}
+
+/// An error's message and those of its causes, joined by `": "` (a cause that
+/// repeats the message before it, as a transparent wrapper's does, is left out).
+pub fn error_chain(error: &dyn std::error::Error) -> String {
+    let mut messages = vec![error.to_string()];
+    let mut source = error.source();
+    while let Some(cause) = source {
+        let message = cause.to_string();
+        if messages.last() != Some(&message) {
+            messages.push(message);
+        }
+        source = cause.source();
+    }
+    messages.join(": ")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[derive(Debug, thiserror::Error)]
+    #[error("inner cause")]
+    struct Inner;
+
+    #[derive(Debug, thiserror::Error)]
+    enum Outer {
+        #[error("while doing it")]
+        Context(#[source] Inner),
+        #[error(transparent)]
+        Transparent(#[from] Inner),
+    }
+
+    #[test]
+    fn the_chain_names_every_cause_once() {
+        assert_eq!(error_chain(&Outer::Context(Inner)), "while doing it: inner cause");
+        assert_eq!(error_chain(&Outer::Transparent(Inner)), "inner cause");
     }
 }

@@ -606,17 +606,6 @@ mod tests {
             .collect()
     }
 
-    /// Every message in an error's chain, joined.
-    fn chain(error: &dyn std::error::Error) -> String {
-        let mut text = error.to_string();
-        let mut source = error.source();
-        while let Some(s) = source {
-            text = format!("{text}: {s}");
-            source = s.source();
-        }
-        text
-    }
-
     #[test]
     fn orbit_looks_at_the_box_centre_and_its_bounding_sphere_fits() {
         let (lo, hi) = BOX;
@@ -760,14 +749,16 @@ mod tests {
         std::fs::write(&path, "{\"width\": 4, \"height\": 4}").unwrap();
         let error = load_camera_file(&path).unwrap_err();
         assert!(matches!(error, ShotError::CameraLayout { .. }), "{error}");
-        assert!(chain(&error).contains("intrinsics"), "{}", chain(&error));
+        let chain = crate::error::error_chain(&error);
+        assert!(chain.contains("intrinsics"), "{chain}");
         let mut mirrored = json;
         mirrored.world_to_camera.rotation[2] =
             (-DVec3::from_array(mirrored.world_to_camera.rotation[2])).to_array();
         std::fs::write(&path, serde_json::to_string(&mirrored).unwrap()).unwrap();
         let error = load_camera_file(&path).unwrap_err();
         assert!(matches!(error, ShotError::InvalidCameraFile { .. }), "{error}");
-        assert!(chain(&error).contains("not a rotation"), "{}", chain(&error));
+        let chain = crate::error::error_chain(&error);
+        assert!(chain.contains("not a rotation"), "{chain}");
         let missing = dir.path().join("missing.json");
         let error = load_camera_file(&missing).unwrap_err();
         assert!(matches!(error, ShotError::ReadCamera { .. }), "{error}");

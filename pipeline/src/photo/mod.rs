@@ -119,7 +119,6 @@ pub fn reconstruct(
         density.as_ref(),
     )?;
     let surface = SurfaceReport {
-        geometry,
         note: geometry_note.or(surface.note),
         ..surface
     };
@@ -374,13 +373,7 @@ mod tests {
         let mut capture = clean;
         capture.masks[1].fill(0.0);
         let err = reconstruct_it(&capture).expect_err("an empty view");
-        let mut chain = vec![err.to_string()];
-        let mut source = std::error::Error::source(&err);
-        while let Some(e) = source {
-            chain.push(e.to_string());
-            source = e.source();
-        }
-        let chain = chain.join(": ");
+        let chain = nelf_scene::error::error_chain(&err);
         assert!(
             chain.contains("visual hull") && chain.contains("check poses and masks"),
             "{chain}"
