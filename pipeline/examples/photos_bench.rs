@@ -116,9 +116,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     if rerun {
         let geometry = match option("mesh") {
             Some("truth") => truth_mesh.clone(),
-            Some(level) if level.starts_with("network") => {
-                network_surface(&photographs, &config, level.strip_prefix("network").unwrap_or(""))?
-            }
             _ => reconstruction.mesh.clone(),
         };
         let reflectance = nelf_pipeline::photo::reflectance::ReflectanceSettings {
@@ -515,61 +512,4 @@ fn lighting_error(used: &nelf_format::conventions::LatLong, truth: &nelf_format:
         error([one; 3]),
         error([dot(Some(0)), dot(Some(1)), dot(Some(2))])
     );
-}
-
-/// The shipped network's density (its bake at the bench's resolution, trilinear)
-/// as a surface: the level where a voxel's opacity is one half (`σ = ln 2 / h`),
-/// times the factor after `network` in `mesh=networkF` (default 1).
-fn network_surface(
-    capture: &nelf_bake::LoadedCapture,
-    config: &PipelineConfig,
-    factor: &str,
-) -> Result<Mesh, Box<dyn std::error::Error>> {
-    let factor: f32 = if factor.is_empty() { 1.0 } else { factor.parse()? };
-    let output = nelf_pipeline::bake_network(capture, None, config, Progress::hidden())?;
-    let asset = &output.asset;
-    let grid = nelf_render::grid::BrickGrid::from_asset(asset)?;
-    let voxel = grid.geometry().voxel_size_m;
-    let level = factor * std::f32::consts::LN_2 / voxel as f32;
-    let h = 1.5e-3;
-    let (lo, hi) = (grid.bbox_min(), grid.bbox_max());
-    let dims = ((hi - lo) / h).to_array().map(|e| e.ceil() as usize + 1);
-    let mut values = vec![0.0f32; dims.iter().product()];
-    let mut corners = [(0usize, 0.0f32); 8];
-    // Clipped to the masks' visual hull, so that the silhouettes stay the masks'.
-    let hull = nelf_bake::HullDistance::new(&capture.cameras, &capture.masks, 0.0)?;
-    for z in 0..dims[2] {
-        for y in 0..dims[1] {
-            for x in 0..dims[0] {
-                let p = lo + glam::DVec3::new(x as f64, y as f64, z as f64) * h;
-                let n = grid.trilinear(p, &mut corners);
-                let sigma: f32 = corners[..n].iter().map(|&(v, w)| w * asset.density_at(v)).sum();
-                let face =
-                    x == 0 || y == 0 || z == 0 || x + 1 == dims[0] || y + 1 == dims[1] || z + 1 == dims[2];
-                let outside_hull = hull.distance_m(p) > 0.0;
-                values[(z * dims[1] + y) * dims[0] + x] = if face || outside_hull {
-                    1.0
-                } else {
-                    (level - sigma) / level
-                };
-            }
-        }
-    }
-    let net = nelf_scene::surface_nets::surface_net(&nelf_scene::surface_nets::GridSamples {
-        values: &values,
-        dims,
-        origin_m: lo,
-        spacing_m: h,
-    });
-    let mut positions = net.positions;
-    nelf_scene::surface_nets::taubin_smooth(&mut positions, &net.triangles, 10);
-    println!(
-        "network surface at sigma {level:.0} /m ({} vertices)",
-        positions.len()
-    );
-    Ok(Mesh {
-        positions,
-        triangles: net.triangles,
-        albedo: nelf_scene::mesh::Albedo::Uniform([0.5; 3]),
-    })
 }

@@ -60,7 +60,7 @@ pub struct SurfaceReport {
     pub stereo: Option<StereoReport>,
     /// Points inside the hull where the density was evaluated (0: no density).
     pub density_points: usize,
-    /// How the hull was refined (set by the caller, [`crate::photo::reconstruct`]).
+    /// How the hull was refined (what the settings and the density asked for).
     pub geometry: crate::config::PhotoGeometry,
     /// Why it was not refined as asked, when it was not.
     pub note: Option<String>,
