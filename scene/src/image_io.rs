@@ -76,19 +76,35 @@ impl RenderImageKind {
     }
 }
 
-/// Writes linear RGB radiance as a 32-bit float OpenEXR file.
+/// Writes linear RGB radiance as a 32-bit float OpenEXR file. Its blocks are
+/// compressed one after another (`non_parallel`): the `image` crate's encoder
+/// compresses them on several threads and stores them in the order they finish,
+/// so the same pixels gave different bytes from run to run.
 pub fn write_exr_rgb(
     path: impl AsRef<Path>,
     width: u32,
     height: u32,
     rgb: &[[f32; 3]],
 ) -> Result<(), SceneError> {
+    use exr::prelude::{Image, SpecificChannels, WritableImage};
     let path = path.as_ref();
-    let data: Vec<f32> = rgb.iter().flatten().copied().collect();
-    let buffer = ImageBuffer::<Rgb<f32>, _>::from_raw(width, height, data)
-        .ok_or_else(|| size_error(path, width, height, rgb.len()))?;
-    write_atomically(path, |w| {
-        buffer.write_to(w, ImageFormat::OpenExr).map_err(IoError::other)
+    if rgb.len() != width as usize * height as usize {
+        return Err(size_error(path, width, height, rgb.len()));
+    }
+    let w = width as usize;
+    let image = Image::from_channels(
+        (w, height as usize),
+        SpecificChannels::rgb(|p: exr::math::Vec2<usize>| {
+            let [r, g, b] = rgb[p.y() * w + p.x()];
+            (r, g, b)
+        }),
+    );
+    write_atomically(path, |out| {
+        image
+            .write()
+            .non_parallel()
+            .to_buffered(out)
+            .map_err(IoError::other)
     })
     .map_err(|e| image_write_error(path, e))
 }
