@@ -10,7 +10,7 @@ use std::path::PathBuf;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::TrainConfig;
-use crate::data::{DataConfig, generate};
+use crate::data::{DataConfig, generate_heads};
 use crate::error::TrainError;
 
 /// Options of `nelf train`.
@@ -131,8 +131,33 @@ pub struct DataArgs {
     /// Dataset folder (created; a rerun with the same settings resumes it).
     #[arg(short, long)]
     pub out: PathBuf,
+    /// Write only the heads with these ids (`8-15`, or one id): a shard of a batch
+    /// (`nelf batch plan train-data`); the dataset's settings are the same for every
+    /// shard, and together the shards write what one whole run writes.
+    #[arg(long, value_parser = parse_head_range)]
+    pub only_heads: Option<std::ops::RangeInclusive<u32>>,
+    /// No progress bar.
+    #[arg(long)]
+    pub quiet: bool,
     #[command(flatten)]
     pub config: DataConfig,
+}
+
+/// `A-B` or `A` as an inclusive range of head ids.
+fn parse_head_range(text: &str) -> Result<std::ops::RangeInclusive<u32>, String> {
+    let number = |t: &str| {
+        t.trim()
+            .parse::<u32>()
+            .map_err(|_| format!("{text:?} is not a head id range like 8-15"))
+    };
+    let (first, last) = match text.split_once('-') {
+        Some((a, b)) => (number(a)?, number(b)?),
+        None => (number(text)?, number(text)?),
+    };
+    if last < first {
+        return Err(format!("{text:?}: the range ends before it starts"));
+    }
+    Ok(first..=last)
 }
 
 /// Runs a `nelf train` subcommand, printing a summary.
@@ -255,8 +280,12 @@ fn run_eval(args: &EvalArgs) -> Result<(), TrainError> {
 }
 
 fn run_data(args: &DataArgs) -> Result<(), TrainError> {
-    let progress = ProgressBar::new(0);
-    let report = generate(&args.out, &args.config, &progress)?;
+    let progress = if args.quiet {
+        ProgressBar::hidden()
+    } else {
+        ProgressBar::new(0)
+    };
+    let report = generate_heads(&args.out, &args.config, args.only_heads.as_ref(), &progress)?;
     println!(
         "{} heads written, {} skipped (already finished) in {}: {:.1} s per written head, {:.1} s in all",
         report.written.len(),

@@ -79,6 +79,20 @@ pub fn generate(
     config: &DataConfig,
     progress: &ProgressBar,
 ) -> Result<GenerateReport, TrainError> {
+    generate_heads(dir, config, None, progress)
+}
+
+/// [`generate`] of only the heads with ids in `only` (a shard of a batch: several
+/// processes, on several machines, fill one dataset folder). Each head is written
+/// whole under a name of its own process and renamed into place, so shards and
+/// duplicate runs of one shard never see each other's parts; a shard leaves the
+/// folders of killed runs (`heads/.tmp-…`) for a whole run to remove.
+pub fn generate_heads(
+    dir: &Path,
+    config: &DataConfig,
+    only: Option<&std::ops::RangeInclusive<u32>>,
+    progress: &ProgressBar,
+) -> Result<GenerateReport, TrainError> {
     let start = Instant::now();
     config.validate()?;
     let dir = std::path::absolute(dir).map_err(|e| TrainError::io(dir, e))?;
@@ -101,9 +115,19 @@ pub fn generate(
     std::fs::create_dir_all(&heads).map_err(|e| TrainError::io(&heads, e))?;
     check_or_write_json(&dir.join(CONFIG_FILE), config)?;
     check_or_write_json(&dir.join(SPLIT_FILE), &split)?;
-    remove_leftovers(&heads)?;
+    if only.is_none() {
+        remove_leftovers(&heads)?;
+    }
+    let wanted = |id: u32| only.as_ref().is_none_or(|r| r.contains(&id));
+    let total = split.heads.iter().filter(|s| wanted(s.id)).count();
+    if total == 0 {
+        return Err(TrainError::Settings(format!(
+            "no head ids in {only:?}: the dataset has ids 0–{}",
+            split.heads.len().saturating_sub(1)
+        )));
+    }
 
-    progress.set_length(split.heads.len() as u64);
+    progress.set_length(total as u64);
     progress.set_style(
         ProgressStyle::with_template("{msg:>12} [{bar:40}] {pos}/{len} heads, {elapsed} (eta {eta})")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -116,7 +140,8 @@ pub fn generate(
         .heads
         .iter()
         .filter(|s| config.is_val(s.id))
-        .chain(split.heads.iter().filter(|s| !config.is_val(s.id)));
+        .chain(split.heads.iter().filter(|s| !config.is_val(s.id)))
+        .filter(|s| wanted(s.id));
     for spec in order {
         if head_dir(&dir, spec.id).is_dir() {
             skipped.push(spec.id);
@@ -124,9 +149,14 @@ pub fn generate(
             continue;
         }
         progress.set_message(format!("h{:05}", spec.id));
-        let timings = write_head(&dir, spec, config, &envs, scan_mesh.as_deref())?;
-        render_total += timings.total_secs;
-        written.push(spec.id);
+        match write_head(&dir, spec, config, &envs, scan_mesh.as_deref())? {
+            Some(timings) => {
+                render_total += timings.total_secs;
+                written.push(spec.id);
+            }
+            // Another process wrote the same head meanwhile.
+            None => skipped.push(spec.id),
+        }
         progress.inc(1);
     }
     progress.finish_and_clear();
@@ -321,17 +351,20 @@ pub fn depth_map(tracer: &LtTracer, camera: &PinholeCamera) -> Vec<f32> {
         .collect()
 }
 
-/// Renders head `spec` into a temporary folder and renames it into place.
+/// Renders head `spec` into a temporary folder and renames it into place; `None`
+/// when another process put the same head there first.
 fn write_head(
     dir: &Path,
     spec: &HeadSpec,
     config: &DataConfig,
     envs: &EnvCatalogue,
     scan_mesh: Option<&Path>,
-) -> Result<HeadTimings, TrainError> {
+) -> Result<Option<HeadTimings>, TrainError> {
     let start = Instant::now();
     let id = spec.id;
-    let tmp = dir.join(HEADS_DIR).join(format!(".tmp-h{id:05}"));
+    let tmp = dir
+        .join(HEADS_DIR)
+        .join(format!(".tmp-h{id:05}-{}", std::process::id()));
     if tmp.exists() {
         std::fs::remove_dir_all(&tmp).map_err(|e| TrainError::io(&tmp, e))?;
     }
@@ -395,6 +428,14 @@ fn write_head(
         serde_json::to_string_pretty(&record).map_err(|e| TrainError::file(&head_json, e.to_string()))?;
     write_bytes(&head_json, (text + "\n").as_bytes())?;
     let target = head_dir(dir, id);
-    std::fs::rename(&tmp, &target).map_err(|e| TrainError::io(&target, e))?;
-    Ok(timings)
+    match std::fs::rename(&tmp, &target) {
+        Ok(()) => Ok(Some(timings)),
+        // Another process (a duplicate run of the same shard) finished this head
+        // first: its folder is whole and, the draws being seeded, the same.
+        Err(_) if target.is_dir() => {
+            std::fs::remove_dir_all(&tmp).map_err(|e| TrainError::io(&tmp, e))?;
+            Ok(None)
+        }
+        Err(e) => Err(TrainError::io(&target, e)),
+    }
 }

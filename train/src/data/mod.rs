@@ -54,7 +54,7 @@ use serde::{Deserialize, Serialize};
 
 pub use config::DataConfig;
 pub use distill::Distill;
-pub use generate::{GenerateReport, HeadRecord, HeadTimings, generate};
+pub use generate::{GenerateReport, HeadRecord, HeadTimings, generate, generate_heads};
 pub use plan::{EnvCatalogue, HeadSpec, Identity, LightSource, LightSpec, Split, SplitRecord, plan_head};
 pub use read::{Dataset, TargetView, TrainingSample};
 
