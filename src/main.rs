@@ -35,6 +35,8 @@ enum Command {
     View(cmd::view::ViewArgs),
     /// Train the NeLF network on path-traced ground truth: `data` renders a dataset of training triplets, `run` trains on it.
     Train(cmd::train::TrainArgs),
+    /// Batches beyond one machine: `plan` many bakes, training heads or sweep points, `run` one index (Slurm array, Kubernetes Indexed Job, farm queue), `slurm`, `local`, `status`, `collect`.
+    Batch(cmd::batch::BatchArgs),
 }
 
 fn main() -> anyhow::Result<()> {
@@ -56,5 +58,6 @@ fn main() -> anyhow::Result<()> {
         Command::Export(args) => cmd::export::run(&args),
         Command::View(args) => cmd::view::run(&args),
         Command::Train(args) => cmd::train::run(&args),
+        Command::Batch(args) => cmd::batch::run(&args),
     }
 }

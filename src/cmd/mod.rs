@@ -1,6 +1,7 @@
 //! One module per subcommand: options (clap) and a `run` that calls the libraries.
 
 pub mod bake;
+pub mod batch;
 pub mod capture;
 pub mod demo;
 pub mod eval;

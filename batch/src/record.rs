@@ -1,0 +1,192 @@
+//! The record an item leaves in `plan.results/<id>.json` when it finishes: done or
+//! failed, the settings hash it ran with, seconds, host, its output files (bytes and
+//! an xxh3 of each) and its figures. A done record whose hash matches the item's
+//! settings, beside an existing output, is what makes a rerun skip the item.
+
+use std::path::{Path, PathBuf};
+
+use serde::{Deserialize, Serialize};
+
+use crate::error::{BatchError, Result};
+
+/// How an item ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ItemStatus {
+    /// Its command succeeded and its output is in place.
+    Done,
+    /// Its command failed (the record holds the error).
+    Failed,
+}
+
+/// One output file of a finished item.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct OutputFile {
+    /// Path relative to the item's output folder.
+    pub path: String,
+    /// Size in bytes.
+    pub bytes: u64,
+    /// xxh3-64 of the contents, hex.
+    pub xxh3: String,
+}
+
+/// `plan.results/<id>.json`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct ItemRecord {
+    /// The item's id.
+    pub id: String,
+    /// The item's kind.
+    pub kind: String,
+    /// The settings hash the item ran with.
+    pub hash: String,
+    /// Done or failed.
+    pub status: ItemStatus,
+    /// Wall seconds of the item's command.
+    pub secs: f64,
+    /// Wall seconds of the whole item, ours included (staging, rename, hashing).
+    pub item_secs: f64,
+    /// Host that ran it.
+    pub host: String,
+    /// Process id of the `nelf batch run` that ran it.
+    pub pid: u32,
+    /// When it finished, seconds since the Unix epoch.
+    pub finished_unix: u64,
+    /// The command's exit code (`None`: killed by a signal).
+    pub exit_code: Option<i32>,
+    /// For a failed item: the last lines the command wrote to stderr.
+    #[serde(default, skip_serializing_if = "String::is_empty")]
+    pub error: String,
+    /// The item's output folder.
+    pub output: PathBuf,
+    /// Its files (private outputs only; a shared output is listed by its own tool).
+    #[serde(default)]
+    pub outputs: Vec<OutputFile>,
+    /// Numbers the item's own report holds (a bake's size, rank, voxels …).
+    #[serde(default)]
+    pub figures: serde_json::Map<String, serde_json::Value>,
+}
+
+/// One line for a failed item's error: a Rust command's `Error: …` line followed
+/// by its causes (`Caused by: 0: … 1: …`), joined with `: `; otherwise the last
+/// line the command wrote.
+pub fn error_summary(text: &str) -> String {
+    let lines: Vec<&str> = text.lines().map(str::trim).filter(|l| !l.is_empty()).collect();
+    if let Some(start) = lines.iter().rposition(|l| l.starts_with("Error: ")) {
+        let mut parts = vec![lines[start].trim_start_matches("Error: ").to_string()];
+        for line in &lines[start + 1..] {
+            if *line == "Caused by:" {
+                continue;
+            }
+            // "0: message" → "message"
+            let cause = line
+                .split_once(": ")
+                .filter(|(n, _)| n.chars().all(|c| c.is_ascii_digit()))
+                .map_or(*line, |(_, rest)| rest);
+            if cause.starts_with("Stack backtrace") {
+                break;
+            }
+            parts.push(cause.to_string());
+        }
+        return parts.join(": ");
+    }
+    lines
+        .last()
+        .map_or_else(|| "(no message)".into(), |l| (*l).to_string())
+}
+
+/// The record file of item `id`.
+pub fn record_path(results_dir: &Path, id: &str) -> PathBuf {
+    results_dir.join(format!("{id}.json"))
+}
+
+/// The record of item `id`: `Ok(None)` when there is none, an error when one is
+/// there but cannot be read (a damaged record is reported, not silently rerun).
+pub fn read_record(results_dir: &Path, id: &str) -> Result<Option<ItemRecord>> {
+    let path = record_path(results_dir, id);
+    match std::fs::read(&path) {
+        Ok(bytes) => serde_json::from_slice(&bytes)
+            .map(Some)
+            .map_err(|e| BatchError::Io {
+                path,
+                message: format!("damaged record (delete it to rerun the item): {e}"),
+            }),
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
+        Err(e) => Err(BatchError::io(path, &e)),
+    }
+}
+
+/// Writes the record of `record.id` atomically.
+pub fn write_record(results_dir: &Path, record: &ItemRecord) -> Result<()> {
+    std::fs::create_dir_all(results_dir).map_err(|e| BatchError::io(results_dir, &e))?;
+    let path = record_path(results_dir, &record.id);
+    let text = serde_json::to_string_pretty(record).map_err(|e| BatchError::Io {
+        path: path.clone(),
+        message: e.to_string(),
+    })? + "\n";
+    nelf_format::atomic::write_bytes_atomically(&path, text.as_bytes()).map_err(|e| BatchError::io(&path, &e))
+}
+
+/// Every file under `dir`, sorted, with sizes and hashes.
+pub fn list_outputs(dir: &Path) -> Result<Vec<OutputFile>> {
+    let mut files = Vec::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(folder) = stack.pop() {
+        let entries = std::fs::read_dir(&folder).map_err(|e| BatchError::io(&folder, &e))?;
+        for entry in entries {
+            let path = entry.map_err(|e| BatchError::io(&folder, &e))?.path();
+            if path.is_dir() {
+                stack.push(path);
+            } else {
+                let bytes = std::fs::read(&path).map_err(|e| BatchError::io(&path, &e))?;
+                let relative = path.strip_prefix(dir).unwrap_or(&path);
+                files.push(OutputFile {
+                    path: relative.to_string_lossy().replace('\\', "/"),
+                    bytes: bytes.len() as u64,
+                    xxh3: format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&bytes)),
+                });
+            }
+        }
+    }
+    files.sort_by(|a, b| a.path.cmp(&b.path));
+    Ok(files)
+}
+
+/// The figures of an item's own report: the numeric fields of the `report` of each
+/// `*.bake.json` sidecar in `dir` (a bake's file size, rank, voxels, loss …), and
+/// the row count of an evaluation's `results.json`.
+pub fn read_figures(dir: &Path) -> serde_json::Map<String, serde_json::Value> {
+    let mut figures = serde_json::Map::new();
+    let Ok(entries) = std::fs::read_dir(dir) else {
+        return figures;
+    };
+    let mut names: Vec<PathBuf> = entries.filter_map(|e| e.ok().map(|e| e.path())).collect();
+    names.sort();
+    for path in names {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let Some(json) = std::fs::read(&path)
+            .ok()
+            .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
+        else {
+            continue;
+        };
+        if name.ends_with(".bake.json") {
+            if let Some(report) = json.get("report").and_then(serde_json::Value::as_object) {
+                for (key, value) in report {
+                    if value.is_number() || value.is_boolean() {
+                        figures.insert(key.clone(), value.clone());
+                    }
+                }
+            }
+        } else if name == "results.json" {
+            for key in ["rows", "points"] {
+                if let Some(rows) = json.get(key).and_then(serde_json::Value::as_array) {
+                    figures.insert(key.into(), rows.len().into());
+                }
+            }
+        }
+    }
+    figures
+}
