@@ -372,3 +372,105 @@ fn training_data_in_shards_equals_one_process() {
     assert!(ran.status.success(), "{}", String::from_utf8_lossy(&ran.stdout));
     assert_same_files(&whole, &data);
 }
+
+/// The rows of a CSV without the named (measured-time) columns.
+fn csv_without(path: &Path, skip: &[&str]) -> Vec<Vec<String>> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let keep: Vec<usize> = (0..header.len())
+        .filter(|i| !skip.contains(&header[*i]))
+        .collect();
+    std::iter::once(header.iter().map(|s| (*s).to_string()).collect::<Vec<_>>())
+        .chain(lines.map(|l| l.split(',').map(str::to_string).collect()))
+        .map(|row| keep.iter().map(|i| row[*i].clone()).collect())
+        .collect()
+}
+
+#[test]
+fn sweeps_run_in_parts_merge_into_the_report_one_machine_writes() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    // Pareto: one grid resolution per item.
+    let single = root.join("pareto_single");
+    succeed(&[
+        "eval",
+        "pareto",
+        "--quick",
+        "--no-gpu",
+        "--quiet",
+        "--out",
+        single.to_str().unwrap(),
+    ]);
+    let parts = root.join("pareto_parts");
+    let out = parts.to_str().unwrap();
+    succeed(&[
+        "batch",
+        "plan",
+        "pareto",
+        "head:0",
+        "--out",
+        out,
+        "--resolutions",
+        "24,40",
+        "--",
+        "--quick",
+        "--no-gpu",
+    ]);
+    let plan = parts.join("plan.jsonl");
+    succeed(&["batch", "local", plan.to_str().unwrap(), "-j", "2", "--quiet"]);
+    let printed = succeed(&["batch", "collect", plan.to_str().unwrap()]);
+    assert!(printed.contains("pareto report of 2 of 2 parts"), "{printed}");
+    assert!(parts.join("report/report.html").is_file());
+    let timings = ["bake_secs", "cpu_render_ms", "front_frame"];
+    assert_eq!(
+        csv_without(&parts.join("report/results.csv"), &timings),
+        csv_without(&single.join("results.csv"), &timings)
+    );
+
+    // Stability: one axis per item.
+    let small = ["--quick", "--image-size", "32", "--resolution", "16"];
+    let single = root.join("stability_single");
+    let mut args = vec![
+        "eval",
+        "stability",
+        "head:0",
+        "--axes",
+        "rank,sun_radius_deg",
+        "--quiet",
+    ];
+    args.extend(["--out", single.to_str().unwrap()]);
+    args.extend(small);
+    succeed(&args);
+    let parts = root.join("stability_parts");
+    let mut args = vec![
+        "batch",
+        "plan",
+        "stability",
+        "head:0",
+        "--out",
+        parts.to_str().unwrap(),
+    ];
+    args.extend(["--axes", "rank,sun_radius_deg", "--"]);
+    args.extend(small);
+    succeed(&args);
+    let plan = parts.join("plan.jsonl");
+    succeed(&["batch", "local", plan.to_str().unwrap(), "-j", "2", "--quiet"]);
+    let printed = succeed(&["batch", "collect", plan.to_str().unwrap()]);
+    assert!(printed.contains("stability report of 2 of 2 parts"), "{printed}");
+    assert_eq!(
+        std::fs::read_to_string(parts.join("report/stability.csv")).unwrap(),
+        std::fs::read_to_string(single.join("stability.csv")).unwrap()
+    );
+    let bad = nelf(&[
+        "batch",
+        "plan",
+        "stability",
+        "head:0",
+        "--out",
+        out,
+        "--axes",
+        "rank,no_such_axis",
+    ]);
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown axis \"no_such_axis\""));
+}

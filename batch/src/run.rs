@@ -331,7 +331,8 @@ pub fn run_item(plan: &Plan, item: &Item, options: &RunOptions) -> Result<ItemOu
         record.error = if stderr_tail.trim().is_empty() {
             format!("exit code {exit_code:?} and no message")
         } else {
-            stderr_tail
+            // Name the output the item writes, not the staging folder that is gone.
+            stderr_tail.replace(&*target.to_string_lossy(), &item.output.to_string_lossy())
         };
     }
     record.item_secs = start.elapsed().as_secs_f64();

@@ -9,6 +9,7 @@
 //!   ground truth on held-out captures (through `nelf-pipeline`).
 //! * [`error`]: the errors.
 //! * [`front`]: Pareto fronts of cost against quality.
+//! * [`merge`]: sweeps run in parts (`nelf batch`) merged into one report.
 //! * [`perturb`]: the stability axes' building blocks (pose noise, mask edits, a sun
 //!   of shrinking size, target views at an angle from the sources).
 //! * [`report`]: CSV, JSON, SVG charts and the self-contained HTML report.
@@ -18,6 +19,7 @@ pub mod error;
 pub mod front;
 pub mod input;
 pub mod measure;
+pub mod merge;
 pub mod network;
 pub mod pareto;
 pub mod perturb;

@@ -253,7 +253,7 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
                 done.csv.display(),
                 done.json.display()
             );
-            Ok(())
+            merge_sweeps(&plan, collect.out.as_deref())
         }
         BatchCommand::Commands(commands) => {
             let plan = read_plan(&commands.plan)?;
@@ -269,6 +269,53 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// For a plan of `nelf eval pareto` or `stability` parts: the report one machine's
+/// sweep writes, from the parts that are done, in `<plan folder>/report/` (or the
+/// collect folder's).
+fn merge_sweeps(plan: &Plan, out: Option<&Path>) -> anyhow::Result<()> {
+    let Some(kind) = plan.items.first().map(|i| i.kind.clone()) else {
+        return Ok(());
+    };
+    if kind != "pareto" && kind != "stability" {
+        return Ok(());
+    }
+    let mut parts = Vec::new();
+    for item in &plan.items {
+        if item.kind != kind {
+            bail!(
+                "{}: a sweep plan mixes {kind} and {} items",
+                plan.path.display(),
+                item.kind
+            );
+        }
+        if nelf_batch::run::is_done(plan, item)? {
+            parts.push(item.output.clone());
+        }
+    }
+    if parts.is_empty() {
+        println!("no {kind} part is done yet: no report");
+        return Ok(());
+    }
+    let dir = out
+        .map(Path::to_path_buf)
+        .or_else(|| plan.path.parent().map(|p| p.join("report")))
+        .context("the plan has no folder")?;
+    if kind == "pareto" {
+        nelf_eval::merge::merge_pareto(&parts, &dir)
+            .with_context(|| format!("merging {} Pareto parts into {}", parts.len(), dir.display()))?;
+    } else {
+        nelf_eval::merge::merge_stability(&parts, &dir)
+            .with_context(|| format!("merging {} stability parts into {}", parts.len(), dir.display()))?;
+    }
+    println!(
+        "{kind} report of {} of {} parts: {}",
+        parts.len(),
+        plan.items.len(),
+        dir.join("report.html").display()
+    );
+    Ok(())
 }
 
 fn plan(command: &PlanCommand) -> anyhow::Result<()> {
@@ -322,11 +369,12 @@ fn plan(command: &PlanCommand) -> anyhow::Result<()> {
             plan,
             extra,
         } => {
+            let known = nelf_eval::stability::AXES;
+            if let Some(bad) = axes.iter().find(|a| !known.contains(&a.as_str())) {
+                bail!("--axes: unknown axis {bad:?} (known: {})", known.join(", "));
+            }
             let axes: Vec<String> = if axes.is_empty() {
-                nelf_eval::stability::AXES
-                    .iter()
-                    .map(|a| (*a).to_string())
-                    .collect()
+                known.iter().map(|a| (*a).to_string()).collect()
             } else {
                 axes.clone()
             };
