@@ -223,6 +223,9 @@ ReturnToService=2
 # Small timeouts so that a lost node is noticed quickly and jobs stop fast:
 # measured, a stopped slurmd is DOWN after ~15 s with 5/5 (~26 s with the
 # defaults 300/10; MessageTimeout, not only SlurmdTimeout, sets the pace).
+# Schedule on every job's end, at once: measured, 8 one-second tasks on 2 CPUs ran
+# in 12.6 s with the defaults and 7.8 s with these (a 2 s cycle per wave, not 3).
+SchedulerParameters=sched_min_interval=0,batch_sched_delay=0,sched_interval=1
 SlurmdTimeout=$SLURMD_TIMEOUT
 MessageTimeout=$MESSAGE_TIMEOUT
 SlurmctldTimeout=10

@@ -15,55 +15,14 @@ use std::time::{Duration, Instant};
 
 use common::{nelf, succeed};
 
-/// Options that make a mesh bake take about a second.
-const SMALL_BAKE: [&str; 6] = [
-    "--resolution",
-    "16",
-    "--view-dependence",
-    "off",
-    "--render-size",
-    "32",
-];
-
-/// Three copies of the repository's head scan and one capture folder whose
-/// cameras.json is damaged; returns the inputs in plan order.
+/// Two copies of the repository's head scan, a capture folder whose cameras.json is
+/// damaged, a third copy; in plan order.
 fn inputs(dir: &Path) -> Vec<PathBuf> {
-    let mesh = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/meshes/head.off");
-    assert!(
-        mesh.is_file(),
-        "missing test data {} (see data/README.md)",
-        mesh.display()
-    );
-    let mut out = Vec::new();
-    for name in ["a", "b"] {
-        let copy = dir.join(format!("in/{name}.off"));
-        std::fs::create_dir_all(copy.parent().unwrap()).unwrap();
-        std::fs::copy(&mesh, &copy).unwrap();
-        out.push(copy);
-    }
-    let bad = dir.join("in/broken_capture");
-    std::fs::create_dir_all(bad.join("images")).unwrap();
-    std::fs::write(bad.join("cameras.json"), "{\"views\": [").unwrap();
-    out.push(bad);
-    let copy = dir.join("in/c.off");
-    std::fs::copy(&mesh, &copy).unwrap();
-    out.push(copy);
-    out
+    common::batch_inputs(dir, &["a", "b", "broken_capture", "c"])
 }
 
 fn plan_bakes(dir: &Path, inputs: &[PathBuf]) -> PathBuf {
-    let mut args: Vec<String> = vec!["batch".into(), "plan".into(), "bake".into()];
-    args.extend(inputs.iter().map(|p| p.to_string_lossy().into_owned()));
-    args.extend([
-        "--out".into(),
-        dir.join("out").to_string_lossy().into_owned(),
-        "--".into(),
-    ]);
-    args.extend(SMALL_BAKE.iter().map(|s| (*s).to_string()));
-    let printed = succeed(&args);
-    let expected = format!("{n} items in {n} array indices", n = inputs.len());
-    assert!(printed.contains(&expected), "{printed}");
-    dir.join("out/plan.jsonl")
+    common::plan_small_bakes(dir, inputs)
 }
 
 /// A JSON file with every `*_secs` number (measured time) removed.

@@ -77,6 +77,22 @@ impl Cluster {
             .unwrap()
     }
 
+    /// `nelf batch slurm PLAN --cpus 1 --mem 1G --submit` and `extra`.
+    fn submit(&self, plan: &Path, extra: &[&str]) -> String {
+        let mut args = vec![
+            "batch",
+            "slurm",
+            plan.to_str().unwrap(),
+            "--cpus",
+            "1",
+            "--mem",
+            "1G",
+            "--submit",
+        ];
+        args.extend(extra);
+        self.succeed(&args)
+    }
+
     fn succeed(&self, args: &[&str]) -> String {
         let out = self.nelf(args);
         assert!(
@@ -94,42 +110,10 @@ impl Drop for Cluster {
     }
 }
 
-/// Small bakes of the repository's head scan (`names`), plus a capture folder whose
-/// cameras.json is damaged when `bad`.
-fn plan(dir: &Path, names: &[&str], bad: bool) -> PathBuf {
-    let mesh = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/meshes/head.off");
-    assert!(
-        mesh.is_file(),
-        "missing test data {} (see data/README.md)",
-        mesh.display()
-    );
-    let mut inputs = Vec::new();
-    for name in names {
-        let copy = dir.join(format!("in/{name}.off"));
-        std::fs::create_dir_all(copy.parent().unwrap()).unwrap();
-        std::fs::copy(&mesh, &copy).unwrap();
-        inputs.push(copy.to_string_lossy().into_owned());
-    }
-    if bad {
-        let broken = dir.join("in/broken_capture");
-        std::fs::create_dir_all(&broken).unwrap();
-        std::fs::write(broken.join("cameras.json"), "{\"views\": [").unwrap();
-        inputs.push(broken.to_string_lossy().into_owned());
-    }
-    let out = dir.join("out");
-    let mut args = vec!["batch", "plan", "bake"];
-    args.extend(inputs.iter().map(String::as_str));
-    args.extend(["--out", out.to_str().unwrap(), "--"]);
-    args.extend([
-        "--resolution",
-        "16",
-        "--view-dependence",
-        "off",
-        "--render-size",
-        "32",
-    ]);
-    common::succeed(&args);
-    out.join("plan.jsonl")
+/// Small bakes of the repository's head scan (`names`; `broken_capture`: a capture
+/// whose cameras.json is damaged), planned in `dir/out/plan.jsonl`.
+fn plan(dir: &Path, names: &[&str]) -> PathBuf {
+    common::plan_small_bakes(dir, &common::batch_inputs(dir, names))
 }
 
 fn status(cluster: &Cluster, plan: &Path) -> serde_json::Value {
@@ -142,11 +126,9 @@ fn a_job_array_bakes_a_plan_and_a_lost_node_loses_nothing() {
     let work = tempfile::tempdir().unwrap();
 
     // A plan with a bad capture: the array runs, the bad item fails alone.
-    let first = plan(&work.path().join("one"), &["a", "b", "c"], true);
+    let first = plan(&work.path().join("one"), &["a", "b", "c", "broken_capture"]);
     let first_arg = first.to_str().unwrap();
-    let printed = cluster.succeed(&[
-        "batch", "slurm", first_arg, "--cpus", "1", "--mem", "1G", "--submit", "--wait",
-    ]);
+    let printed = cluster.submit(&first, &["--wait"]);
     assert!(printed.contains("3 done, 1 failed"), "{printed}");
     let state = status(&cluster, &first);
     assert_eq!(state["resubmit"], "3");
@@ -160,20 +142,8 @@ fn a_job_array_bakes_a_plan_and_a_lost_node_loses_nothing() {
     assert!(collected.contains("3 done, 1 failed"), "{collected}");
 
     // A node lost while the array runs one task at a time.
-    let second = plan(&work.path().join("two"), &["a", "b", "c", "d"], false);
-    let second_arg = second.to_str().unwrap();
-    cluster.succeed(&[
-        "batch",
-        "slurm",
-        second_arg,
-        "--cpus",
-        "1",
-        "--mem",
-        "1G",
-        "--max-parallel",
-        "1",
-        "--submit",
-    ]);
+    let second = plan(&work.path().join("two"), &["a", "b", "c", "d"]);
+    cluster.submit(&second, &["--max-parallel", "1"]);
     let out_dir = second.parent().unwrap();
     let start = Instant::now();
     // Wait until the second item is being written, then lose the node.
@@ -208,19 +178,7 @@ fn a_job_array_bakes_a_plan_and_a_lost_node_loses_nothing() {
 
     // The node comes back; the indices status printed are submitted again.
     cluster.script("start-node", &[]);
-    let printed = cluster.succeed(&[
-        "batch",
-        "slurm",
-        second_arg,
-        "--cpus",
-        "1",
-        "--mem",
-        "1G",
-        "--indices",
-        "1-3",
-        "--submit",
-        "--wait",
-    ]);
+    let printed = cluster.submit(&second, &["--indices", "1-3", "--wait"]);
     assert!(
         printed.contains("4 done, 0 failed") && printed.contains("all done"),
         "{printed}"

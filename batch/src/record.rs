@@ -61,14 +61,19 @@ pub struct ItemRecord {
     /// Its files (private outputs only; a shared output is listed by its own tool).
     #[serde(default)]
     pub outputs: Vec<OutputFile>,
+    /// For a shared output: which folder it filled ([`folder_identity`]), so that a record of
+    /// a folder since deleted and made again — by the first of the other shards to
+    /// start, say — does not count as done.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub output_folder: Option<u64>,
     /// Numbers the item's own report holds (a bake's size, rank, voxels …).
     #[serde(default)]
     pub figures: serde_json::Map<String, serde_json::Value>,
 }
 
 /// One line for a failed item's error: a Rust command's `Error: …` line followed
-/// by its causes (`Caused by: 0: … 1: …`), joined with `: `; otherwise the last
-/// line the command wrote.
+/// by its causes (`Caused by: 0: … 1: …`), joined with `: ` (a cause its message
+/// already ends with is left out); otherwise the last line the command wrote.
 pub fn error_summary(text: &str) -> String {
     let lines: Vec<&str> = text.lines().map(str::trim).filter(|l| !l.is_empty()).collect();
     if let Some(start) = lines.iter().rposition(|l| l.starts_with("Error: ")) {
@@ -85,13 +90,52 @@ pub fn error_summary(text: &str) -> String {
             if cause.starts_with("Stack backtrace") {
                 break;
             }
-            parts.push(cause.to_string());
+            // A message that quotes its cause is not followed by the cause again.
+            if !parts.last().is_some_and(|p| p.ends_with(cause)) {
+                parts.push(cause.to_string());
+            }
         }
         return parts.join(": ");
     }
     lines
         .last()
         .map_or_else(|| "(no message)".into(), |l| (*l).to_string())
+}
+
+/// Which folder `path` is: its inode number and creation time (nanoseconds since
+/// the epoch), hashed, or the inode alone where the file system keeps no creation
+/// time (a deleted folder's inode is often given to the next one at once); `None`
+/// where there is neither.
+pub fn folder_identity(path: &Path) -> Option<u64> {
+    let metadata = std::fs::metadata(path).ok()?;
+    let born = metadata
+        .created()
+        .ok()
+        .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+        .map(|d| d.as_nanos());
+    #[cfg(unix)]
+    let inode = {
+        use std::os::unix::fs::MetadataExt;
+        Some(metadata.ino())
+    };
+    #[cfg(not(unix))]
+    let inode: Option<u64> = None;
+    match (inode, born) {
+        (None, None) => None,
+        (inode, born) => Some(xxhash_rust::xxh3::xxh3_64(
+            format!("{inode:?} {born:?}").as_bytes(),
+        )),
+    }
+}
+
+/// Whether `record` says item `item` (with these settings) is done: a done record
+/// with the item's current settings hash, beside its output — for a shared output,
+/// the very folder the item filled.
+pub fn counts_as_done(item: &crate::manifest::Item, record: &ItemRecord) -> bool {
+    record.status == ItemStatus::Done
+        && record.hash == item.settings_hash()
+        && item.output.exists()
+        && (!item.shared_output || record.output_folder == folder_identity(&item.output))
 }
 
 /// The record file of item `id`.
@@ -126,8 +170,8 @@ pub fn write_record(results_dir: &Path, record: &ItemRecord) -> Result<()> {
     nelf_format::atomic::write_bytes_atomically(&path, text.as_bytes()).map_err(|e| BatchError::io(&path, &e))
 }
 
-/// Every file under `dir`, sorted, with sizes and hashes.
-pub fn list_outputs(dir: &Path) -> Result<Vec<OutputFile>> {
+/// Every file under `dir` (recursively), sorted.
+pub fn files_under(dir: &Path) -> Result<Vec<PathBuf>> {
     let mut files = Vec::new();
     let mut stack = vec![dir.to_path_buf()];
     while let Some(folder) = stack.pop() {
@@ -137,18 +181,28 @@ pub fn list_outputs(dir: &Path) -> Result<Vec<OutputFile>> {
             if path.is_dir() {
                 stack.push(path);
             } else {
-                let bytes = std::fs::read(&path).map_err(|e| BatchError::io(&path, &e))?;
-                let relative = path.strip_prefix(dir).unwrap_or(&path);
-                files.push(OutputFile {
-                    path: relative.to_string_lossy().replace('\\', "/"),
-                    bytes: bytes.len() as u64,
-                    xxh3: format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&bytes)),
-                });
+                files.push(path);
             }
         }
     }
-    files.sort_by(|a, b| a.path.cmp(&b.path));
+    files.sort();
     Ok(files)
+}
+
+/// Every file under `dir`, sorted, with sizes and hashes.
+pub fn list_outputs(dir: &Path) -> Result<Vec<OutputFile>> {
+    files_under(dir)?
+        .into_iter()
+        .map(|path| {
+            let bytes = std::fs::read(&path).map_err(|e| BatchError::io(&path, &e))?;
+            let relative = path.strip_prefix(dir).unwrap_or(&path);
+            Ok(OutputFile {
+                path: relative.to_string_lossy().replace('\\', "/"),
+                bytes: bytes.len() as u64,
+                xxh3: format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&bytes)),
+            })
+        })
+        .collect()
 }
 
 /// The figures of an item's own report: the numeric fields of the `report` of each
@@ -189,4 +243,20 @@ pub fn read_figures(dir: &Path) -> serde_json::Map<String, serde_json::Value> {
         }
     }
     figures
+}
+
+#[cfg(test)]
+mod tests {
+    use super::error_summary;
+
+    #[test]
+    fn an_error_chain_reads_as_one_line() {
+        let text = "progress\nError: loading the capture in /c\n\nCaused by:\n    0: /c/cameras.json: EOF at line 2\n    1: EOF at line 2\n";
+        assert_eq!(
+            error_summary(text),
+            "loading the capture in /c: /c/cameras.json: EOF at line 2"
+        );
+        assert_eq!(error_summary("warning\nsegfault\n"), "segfault");
+        assert_eq!(error_summary(""), "(no message)");
+    }
 }

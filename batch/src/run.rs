@@ -79,12 +79,9 @@ pub fn run_task(plan: &Plan, index: usize, options: &RunOptions) -> Result<Vec<I
         .collect()
 }
 
-/// Whether item `item` is done: a done record with its current settings hash and an
-/// existing output.
+/// Whether item `item` is done ([`crate::record::counts_as_done`]).
 pub fn is_done(plan: &Plan, item: &Item) -> Result<bool> {
-    Ok(read_record(&plan.results_dir(), &item.id)?
-        .is_some_and(|r| r.status == ItemStatus::Done && r.hash == item.settings_hash())
-        && item.output.exists())
+    Ok(read_record(&plan.results_dir(), &item.id)?.is_some_and(|r| crate::record::counts_as_done(item, &r)))
 }
 
 fn unix_now() -> u64 {
@@ -248,25 +245,16 @@ fn publish(plan: &Plan, item: &Item, staging: &Path, host: &str, pid: u32) -> Re
 fn relocate(staging: &Path, output: &Path) -> Result<()> {
     let from = staging.to_string_lossy().into_owned();
     let to = output.to_string_lossy().into_owned();
-    let mut stack = vec![staging.to_path_buf()];
-    while let Some(folder) = stack.pop() {
-        let entries = std::fs::read_dir(&folder).map_err(|e| BatchError::io(&folder, &e))?;
-        for entry in entries {
-            let path = entry.map_err(|e| BatchError::io(&folder, &e))?.path();
-            if path.is_dir() {
-                stack.push(path);
-                continue;
-            }
-            let bytes = std::fs::read(&path).map_err(|e| BatchError::io(&path, &e))?;
-            let Ok(text) = std::str::from_utf8(&bytes) else {
-                continue;
-            };
-            if text.contains('\0') || !text.contains(&from) {
-                continue;
-            }
-            nelf_format::atomic::write_bytes_atomically(&path, text.replace(&from, &to).as_bytes())
-                .map_err(|e| BatchError::io(&path, &e))?;
+    for path in crate::record::files_under(staging)? {
+        let bytes = std::fs::read(&path).map_err(|e| BatchError::io(&path, &e))?;
+        let Ok(text) = std::str::from_utf8(&bytes) else {
+            continue;
+        };
+        if text.contains('\0') || !text.contains(&from) {
+            continue;
         }
+        nelf_format::atomic::write_bytes_atomically(&path, text.replace(&from, &to).as_bytes())
+            .map_err(|e| BatchError::io(&path, &e))?;
     }
     Ok(())
 }
@@ -315,10 +303,13 @@ pub fn run_item(plan: &Plan, item: &Item, options: &RunOptions) -> Result<ItemOu
         error: String::new(),
         output: item.output.clone(),
         outputs: Vec::new(),
+        output_folder: None,
         figures: serde_json::Map::new(),
     };
     if succeeded {
-        if !item.shared_output {
+        if item.shared_output {
+            record.output_folder = crate::record::folder_identity(&item.output);
+        } else {
             relocate(&target, &item.output)?;
             record.outputs = list_outputs(&target)?;
             record.figures = read_figures(&target);

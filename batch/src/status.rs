@@ -19,7 +19,8 @@ pub enum ItemState {
     Done,
     /// Its last run failed (with its current settings).
     Failed,
-    /// Done or failed with other settings, or done but its output is gone.
+    /// Done or failed with other settings, or done but its output is gone (or, for
+    /// a shared output, is another folder than the one it filled).
     Changed,
     /// No record yet.
     Missing,
@@ -81,7 +82,7 @@ pub fn batch_status(plan: &Plan) -> Result<BatchStatus> {
                 status.failures.push((item.id.clone(), error_summary(&r.error)));
                 ItemState::Failed
             }
-            Some(_) if item.output.exists() => ItemState::Done,
+            Some(r) if crate::record::counts_as_done(item, &r) => ItemState::Done,
             Some(_) => ItemState::Changed,
         };
         match state {

@@ -264,3 +264,46 @@ fn an_edited_item_runs_again_and_the_others_are_kept() {
     assert!(leftovers(root).is_empty());
     assert!(batch_status(&plan).unwrap().complete());
 }
+
+#[test]
+fn a_shard_of_a_shared_folder_is_done_only_in_the_folder_it_filled() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = dir.path();
+    let shared = root.join("dataset");
+    let shard = |id: &str| {
+        let mut item = Item::new(
+            id.into(),
+            "command",
+            vec![],
+            shared.clone(),
+            vec![
+                "-c".into(),
+                format!("echo {id} > '{}/{id}.txt'", shared.display()),
+            ],
+        );
+        item.shared_output = true;
+        item.hash = item.settings_hash();
+        item
+    };
+    let plan = Plan::new(&root.join("plan.jsonl"), 1, vec![shard("s0"), shard("s1")]).unwrap();
+    assert!(matches!(
+        run_task(&plan, 0, &sh()).unwrap()[0],
+        ItemOutcome::Done(_)
+    ));
+    assert_eq!(run_task(&plan, 0, &sh()).unwrap(), vec![ItemOutcome::Skipped]);
+    // The dataset is deleted; the other shard makes the folder again.
+    std::fs::remove_dir_all(&shared).unwrap();
+    assert!(matches!(
+        run_task(&plan, 1, &sh()).unwrap()[0],
+        ItemOutcome::Done(_)
+    ));
+    let status = batch_status(&plan).unwrap();
+    assert_eq!(status.states[0], ("s0".to_string(), ItemState::Changed));
+    assert_eq!(status.resubmit, "0");
+    assert!(matches!(
+        run_task(&plan, 0, &sh()).unwrap()[0],
+        ItemOutcome::Done(_)
+    ));
+    assert!(shared.join("s0.txt").is_file() && shared.join("s1.txt").is_file());
+    assert!(batch_status(&plan).unwrap().complete());
+}

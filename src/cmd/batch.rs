@@ -489,9 +489,10 @@ fn write_slurm(args: &SlurmArgs) -> anyhow::Result<()> {
     let script = nelf_batch::slurm::write_script(&plan, &options)?;
     println!("sbatch script: {}", script.display());
     if args.submit {
-        let job = nelf_batch::slurm::submit(&script, args.wait)?;
+        let job = nelf_batch::slurm::submit(&script)?;
         println!("submitted job {job}; logs in {}", plan.logs_dir().display());
         if args.wait {
+            nelf_batch::slurm::wait_for(&job, std::time::Duration::from_secs(1))?;
             print_status(&StatusArgs {
                 plan: plan.path.clone(),
                 json: false,

@@ -96,3 +96,55 @@ pub fn tiny_capture(dir: &Path, size: u32, targets: u32, extra: &[&str]) -> Path
     succeed(&args);
     capture
 }
+
+/// Inputs of a batch of small bakes: a copy of the repository's head scan per name
+/// (`dir/in/<name>.off`) in order, or, for the name `broken_capture`, a capture folder
+/// whose cameras.json is damaged (its bake fails with the capture's own error).
+pub fn batch_inputs(dir: &Path, names: &[&str]) -> Vec<PathBuf> {
+    let mesh = Path::new(env!("CARGO_MANIFEST_DIR")).join("data/meshes/head.off");
+    assert!(
+        mesh.is_file(),
+        "missing test data {} (see data/README.md)",
+        mesh.display()
+    );
+    let inputs = dir.join("in");
+    std::fs::create_dir_all(&inputs).unwrap();
+    names
+        .iter()
+        .map(|name| {
+            if *name == "broken_capture" {
+                let broken = inputs.join(name);
+                std::fs::create_dir_all(broken.join("images")).unwrap();
+                std::fs::write(broken.join("cameras.json"), "{\"views\": [").unwrap();
+                broken
+            } else {
+                let copy = inputs.join(format!("{name}.off"));
+                std::fs::copy(&mesh, &copy).unwrap();
+                copy
+            }
+        })
+        .collect()
+}
+
+/// Options that make a mesh bake of the head scan take about a second.
+pub const SMALL_BAKE: [&str; 6] = [
+    "--resolution",
+    "16",
+    "--view-dependence",
+    "off",
+    "--render-size",
+    "32",
+];
+
+/// Writes `dir/out/plan.jsonl`: one small bake per input; returns its path.
+pub fn plan_small_bakes(dir: &Path, inputs: &[PathBuf]) -> PathBuf {
+    let out = dir.join("out");
+    let mut args: Vec<&OsStr> = vec!["batch".as_ref(), "plan".as_ref(), "bake".as_ref()];
+    args.extend(inputs.iter().map(|p| p.as_os_str()));
+    args.extend(["--out".as_ref(), out.as_os_str(), "--".as_ref()]);
+    args.extend(SMALL_BAKE.iter().map(OsStr::new));
+    let printed = succeed(&args);
+    let expected = format!("{n} items in {n} array indices", n = inputs.len());
+    assert!(printed.contains(&expected), "{printed}");
+    out.join("plan.jsonl")
+}
