@@ -120,6 +120,20 @@ fn fresh_sibling(output: &Path, tag: &str, host: &str, pid: u32, create: bool) -
     })
 }
 
+/// Whether process `pid` of this host is running: it has a `/proc` entry and is not
+/// a zombie (a killed runner whose parent died too may wait unreaped for as long as
+/// the machine's init leaves it).
+fn process_alive(pid: u32) -> bool {
+    let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else {
+        return false;
+    };
+    // `pid (command) state …`: the command may hold spaces and parentheses.
+    let state = stat
+        .rsplit_once(')')
+        .and_then(|(_, rest)| rest.trim_start().chars().next());
+    !matches!(state, Some('Z' | 'X'))
+}
+
 /// Removes staging and set-aside folders of `output` left by processes of this host
 /// that are gone (killed runs); another host's are left alone (`status` lists them).
 fn remove_stale(output: &Path, host: &str) -> Result<()> {
@@ -141,7 +155,7 @@ fn remove_stale(output: &Path, host: &str) -> Result<()> {
             else {
                 continue;
             };
-            if !Path::new("/proc").join(pid.to_string()).exists() {
+            if !process_alive(pid) {
                 let path = entry.path();
                 remove_any(&path)?;
             }
@@ -334,4 +348,28 @@ pub fn run_item(plan: &Plan, item: &Item, options: &RunOptions) -> Result<ItemOu
     } else {
         ItemOutcome::Failed(record)
     })
+}
+
+#[cfg(test)]
+mod tests {
+    #![allow(clippy::unwrap_used)]
+
+    use super::process_alive;
+
+    #[test]
+    fn a_zombie_counts_as_gone() {
+        assert!(process_alive(std::process::id()));
+        let mut child = std::process::Command::new("sleep").arg("30").spawn().unwrap();
+        assert!(process_alive(child.id()));
+        child.kill().unwrap();
+        // Killed but not yet reaped: a zombie with a /proc entry.
+        let start = std::time::Instant::now();
+        while process_alive(child.id()) && start.elapsed().as_secs() < 5 {
+            std::thread::sleep(std::time::Duration::from_millis(10));
+        }
+        assert!(!process_alive(child.id()));
+        assert!(std::path::Path::new(&format!("/proc/{}", child.id())).exists());
+        child.wait().unwrap();
+        assert!(!process_alive(u32::MAX));
+    }
 }
