@@ -216,12 +216,25 @@ fn a_capture_without_ground_truth_bakes_from_its_photographs_or_with_the_shipped
         "{truth}"
     );
     assert!(photos.voxel_count() > 0);
-    assert!(
-        photos_path
-            .with_extension("reconstruction")
-            .join("reconstruction.obj")
-            .is_file()
-    );
+    // The reconstruction opens as a textured OBJ (OBJ + MTL + atlas image), read back
+    // by the same loader as a scan's.
+    let reconstruction = photos_path.with_extension("reconstruction");
+    for file in [
+        "reconstruction.obj",
+        "reconstruction.mtl",
+        "reconstruction_albedo.jpg",
+        "reconstruction.json",
+    ] {
+        assert!(reconstruction.join(file).is_file(), "{file}");
+    }
+    let options = nelf_scene::mesh_io::LoadOptions {
+        fit_height_m: None,
+        orient_outward: false,
+        close_holes: false,
+        ..nelf_scene::mesh_io::LoadOptions::default()
+    };
+    let mesh = nelf_scene::mesh_io::load_mesh(reconstruction.join("reconstruction.obj"), &options).unwrap();
+    assert!(matches!(mesh.albedo, nelf_scene::mesh::Albedo::Texture { .. }));
     let (asset, asset_path) = bake_shipped("shipped.nelf", &["--source", "network"]);
     let source = &asset.metadata["source"]["source"];
     assert_eq!(source["kind"], "nelf-network", "{}", asset.metadata);

@@ -16,10 +16,12 @@
 //!    ([`nelf_bake::GroundTruth::Reconstructed`]) through [`nelf_bake::bake_capture`].
 //!    A reconstructed surface is Lambertian, so there is no view dependence to fit.
 //!
-//! [`write_reconstruction`] saves the reconstruction (an OBJ with per-vertex
-//! colours) and a JSON report of each stage for inspection.
+//! [`write_reconstruction`] saves the reconstruction (an OBJ with its material and
+//! the albedo as a texture atlas, [`atlas`]) and a JSON report of each stage for
+//! inspection.
 
 pub mod as_photographs;
+pub mod atlas;
 pub mod geometry;
 pub mod lighting;
 mod pixels;
@@ -31,7 +33,6 @@ use std::time::Instant;
 
 use nelf_bake::{BakeOutput, GroundTruth, LoadedCapture, Progress, ViewChoice, bake_capture};
 use nelf_scene::mesh::{Albedo, Mesh};
-use nelf_scene::srgb::linear_to_srgb;
 use serde::Serialize;
 
 use crate::config::{PhotoGeometry, PhotoSettings, PipelineConfig};
@@ -195,34 +196,18 @@ pub fn bake_photographs(
     })
 }
 
-/// Writes `dir/reconstruction.obj` (vertices with sRGB-encoded colours, the
-/// `v x y z r g b` extension that Blender and `MeshLab` read) and `dir/reconstruction.json`.
+/// Writes `dir/reconstruction.obj` with `reconstruction.mtl` and the albedo as a
+/// texture atlas, `reconstruction_albedo.jpg` (what any DCC tool opens;
+/// [`atlas::texture_atlas`]), and `dir/reconstruction.json`.
 pub fn write_reconstruction(reconstruction: &Reconstruction, dir: &Path) -> Result<()> {
-    use std::fmt::Write as _;
     std::fs::create_dir_all(dir)
         .map_err(|e| nelf_format::io_error::FileIoError::new(dir.to_path_buf(), e))?;
-    let mesh = &reconstruction.mesh;
-    let colours: Vec<[f32; 3]> = match &mesh.albedo {
-        Albedo::PerVertex(c) => c.clone(),
-        _ => vec![[0.5; 3]; mesh.positions.len()],
-    };
-    let mut obj =
-        String::from("# nelf: surface and albedo reconstructed from photographs (sRGB vertex colours)\n");
-    for (p, c) in mesh.positions.iter().zip(&colours) {
-        let [r, g, b] = c.map(linear_to_srgb);
-        let _ = writeln!(obj, "v {} {} {} {r:.4} {g:.4} {b:.4}", p.x, p.y, p.z);
-    }
-    for t in &mesh.triangles {
-        let _ = writeln!(obj, "f {} {} {}", t[0] + 1, t[1] + 1, t[2] + 1);
-    }
-    let write = |name: &str, bytes: &[u8]| {
-        let path = dir.join(name);
-        nelf_format::atomic::write_bytes_atomically(&path, bytes)
-            .map_err(|e| nelf_format::io_error::FileIoError::new(path, e))
-    };
-    write("reconstruction.obj", obj.as_bytes())?;
+    let textured = atlas::texture_atlas(&reconstruction.mesh, atlas::DEFAULT_CELL_TEXELS);
+    nelf_scene::mesh_io::write_obj(&textured, &dir.join("reconstruction.obj"))?;
+    let path = dir.join("reconstruction.json");
     let json = serde_json::to_string_pretty(&reconstruction.report)? + "\n";
-    write("reconstruction.json", json.as_bytes())?;
+    nelf_format::atomic::write_bytes_atomically(&path, json.as_bytes())
+        .map_err(|e| nelf_format::io_error::FileIoError::new(path, e))?;
     Ok(())
 }
 
