@@ -5,6 +5,8 @@
 //! equal to one process. The same plan on a real one-node Slurm cluster is in
 //! `tests/batch_slurm.rs`.
 
+// Process groups, signals, `sh` and Slurm: Unix only (Windows is type-checked, not run).
+#![cfg(unix)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;

@@ -6,6 +6,8 @@
 //! submitting them again completes the batch. Slurm comes from Debian's packages,
 //! which `./scripts/test` installs; missing programs fail this test, naming them.
 
+// Process groups, signals, `sh` and Slurm: Unix only (Windows is type-checked, not run).
+#![cfg(unix)]
 #![allow(clippy::unwrap_used, clippy::expect_used)]
 
 mod common;
