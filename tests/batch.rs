@@ -435,3 +435,50 @@ fn sweeps_run_in_parts_merge_into_the_report_one_machine_writes() {
     ]);
     assert!(String::from_utf8_lossy(&bad.stderr).contains("unknown axis \"no_such_axis\""));
 }
+
+#[test]
+fn a_reader_that_stops_early_ends_the_listing_quietly() {
+    let dir = tempfile::tempdir().unwrap();
+    let list = dir.path().join("list.csv");
+    let paths = (0..5000)
+        .map(|i| format!("/shared/captures/person{i:05}"))
+        .collect::<Vec<_>>()
+        .join("\n");
+    std::fs::write(&list, paths).unwrap();
+    let out = dir.path().join("out");
+    succeed(&[
+        "batch",
+        "plan",
+        "bake",
+        "--list",
+        list.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let plan = out.join("plan.jsonl");
+    for what in [&["commands", "--direct"][..], &["status"][..]] {
+        let mut child = Command::new(env!("CARGO_BIN_EXE_nelf"))
+            .arg("batch")
+            .arg(what[0])
+            .arg(&plan)
+            .args(&what[1..])
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Read one line, then go away (as `| head -1` does).
+        let mut first = String::new();
+        std::io::BufRead::read_line(
+            &mut std::io::BufReader::new(child.stdout.take().unwrap()),
+            &mut first,
+        )
+        .unwrap();
+        assert!(!first.is_empty());
+        let done = child.wait_with_output().unwrap();
+        let stderr = String::from_utf8_lossy(&done.stderr);
+        assert!(
+            done.status.success() && !stderr.contains("panicked"),
+            "{what:?}: {stderr}"
+        );
+    }
+}

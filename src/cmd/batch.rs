@@ -263,10 +263,7 @@ pub fn run(args: &BatchArgs) -> anyhow::Result<()> {
             } else {
                 nelf_batch::task_commands(&plan, &nelf)
             };
-            for line in lines {
-                println!("{line}");
-            }
-            Ok(())
+            print_out(&(lines.join("\n") + "\n"))
         }
     }
 }
@@ -503,13 +500,27 @@ fn write_slurm(args: &SlurmArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// Writes `text` to standard output; a reader that went away (`| head`) ends the
+/// output quietly instead of a panic.
+fn print_out(text: &str) -> anyhow::Result<()> {
+    use std::io::Write as _;
+    let mut out = std::io::stdout().lock();
+    match out.write_all(text.as_bytes()).and_then(|()| out.flush()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other.context("writing to standard output")?),
+    }
+}
+
 fn print_status(args: &StatusArgs) -> anyhow::Result<()> {
+    use std::fmt::Write as _;
     let plan = read_plan(&args.plan)?;
     let status = nelf_batch::status::batch_status(&plan)?;
+    let mut text = String::new();
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&status)?);
+        text = serde_json::to_string_pretty(&status)? + "\n";
     } else {
-        println!(
+        let _ = writeln!(
+            text,
             "{}: {} items in {} indices: {} done, {} failed, {} changed since they ran, {} missing",
             plan.path.display(),
             status.items,
@@ -520,20 +531,22 @@ fn print_status(args: &StatusArgs) -> anyhow::Result<()> {
             status.missing
         );
         for (id, error) in &status.failures {
-            println!("  failed {id}: {error}");
+            let _ = writeln!(text, "  failed {id}: {error}");
         }
         for staging in &status.staging {
-            println!(
+            let _ = writeln!(
+                text,
                 "  staging (running, or killed on another host): {}",
                 staging.display()
             );
         }
         if status.resubmit.is_empty() {
-            println!("all done");
+            text.push_str("all done\n");
         } else {
-            println!("to run again: --indices {}", status.resubmit);
+            let _ = writeln!(text, "to run again: --indices {}", status.resubmit);
         }
     }
+    print_out(&text)?;
     if args.check && !status.complete() {
         bail!(
             "{} of {} items are not done",
