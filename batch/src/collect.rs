@@ -9,7 +9,8 @@ use serde::Serialize;
 
 use crate::error::{BatchError, Result};
 use crate::manifest::Plan;
-use crate::record::{ItemRecord, ItemStatus, error_summary, read_record};
+use crate::record::{ItemRecord, error_summary, read_record};
+use crate::status::{ItemState, item_state};
 
 /// One item in the merged table.
 #[derive(Debug, Clone, Serialize)]
@@ -17,8 +18,9 @@ pub struct CollectedItem {
     /// The item's id and kind.
     pub id: String,
     pub kind: String,
-    /// `done`, `failed`, `changed` (record of other settings) or `missing`.
-    pub state: String,
+    /// Done, failed, changed (a record of other settings, or its output gone) or
+    /// missing, as `status` judges it.
+    pub state: ItemState,
     /// Its record, when it has one.
     pub record: Option<ItemRecord>,
 }
@@ -56,16 +58,10 @@ pub fn collect(plan: &Plan, out: Option<&Path>) -> Result<Collected> {
     let mut items = Vec::with_capacity(plan.items.len());
     for item in &plan.items {
         let record = read_record(&results, &item.id)?;
-        let state = match &record {
-            None => "missing",
-            Some(r) if r.hash != item.settings_hash() => "changed",
-            Some(r) if r.status == ItemStatus::Failed => "failed",
-            Some(_) => "done",
-        };
         items.push(CollectedItem {
             id: item.id.clone(),
             kind: item.kind.clone(),
-            state: state.into(),
+            state: item_state(item, record.as_ref()),
             record,
         });
     }
@@ -98,7 +94,11 @@ pub fn collect(plan: &Plan, out: Option<&Path>) -> Result<Collected> {
     }
     table.push('\n');
     for item in &items {
-        let mut row = vec![csv_field(&item.id), csv_field(&item.kind), item.state.clone()];
+        let mut row = vec![
+            csv_field(&item.id),
+            csv_field(&item.kind),
+            item.state.name().to_string(),
+        ];
         match &item.record {
             Some(r) => {
                 row.push(format!("{:.3}", r.secs));
@@ -128,12 +128,12 @@ pub fn collect(plan: &Plan, out: Option<&Path>) -> Result<Collected> {
     }
     nelf_format::atomic::write_bytes_atomically(&csv, table.as_bytes())
         .map_err(|e| BatchError::io(&csv, &e))?;
-    let count = |state: &str| items.iter().filter(|i| i.state == state).count();
+    let count = |state: ItemState| items.iter().filter(|i| i.state == state).count();
     Ok(Collected {
         json,
         csv,
-        done: count("done"),
-        failed: count("failed"),
-        other: count("missing") + count("changed"),
+        done: count(ItemState::Done),
+        failed: count(ItemState::Failed),
+        other: count(ItemState::Missing) + count(ItemState::Changed),
     })
 }

@@ -189,25 +189,31 @@ pub fn files_under(dir: &Path) -> Result<Vec<PathBuf>> {
     Ok(files)
 }
 
+/// The entry of `path` (under `dir`) with contents `bytes`.
+pub fn output_file(dir: &Path, path: &Path, bytes: &[u8]) -> OutputFile {
+    let relative = path.strip_prefix(dir).unwrap_or(path);
+    OutputFile {
+        path: relative.to_string_lossy().replace('\\', "/"),
+        bytes: bytes.len() as u64,
+        xxh3: format!("{:016x}", xxhash_rust::xxh3::xxh3_64(bytes)),
+    }
+}
+
 /// Every file under `dir`, sorted, with sizes and hashes.
 pub fn list_outputs(dir: &Path) -> Result<Vec<OutputFile>> {
     files_under(dir)?
         .into_iter()
         .map(|path| {
             let bytes = std::fs::read(&path).map_err(|e| BatchError::io(&path, &e))?;
-            let relative = path.strip_prefix(dir).unwrap_or(&path);
-            Ok(OutputFile {
-                path: relative.to_string_lossy().replace('\\', "/"),
-                bytes: bytes.len() as u64,
-                xxh3: format!("{:016x}", xxhash_rust::xxh3::xxh3_64(&bytes)),
-            })
+            Ok(output_file(dir, &path, &bytes))
         })
         .collect()
 }
 
 /// The figures of an item's own report: the numeric fields of the `report` of each
-/// `*.bake.json` sidecar in `dir` (a bake's file size, rank, voxels, loss …), and
-/// the row count of an evaluation's `results.json`.
+/// `*.bake.json` sidecar in `dir` (a bake's file size, rank, voxels, loss …), the
+/// row count of a Pareto sweep's `results.json` and the point count of a stability
+/// sweep's `stability.json`. Other files are not read.
 pub fn read_figures(dir: &Path) -> serde_json::Map<String, serde_json::Value> {
     let mut figures = serde_json::Map::new();
     let Ok(entries) = std::fs::read_dir(dir) else {
@@ -220,6 +226,14 @@ pub fn read_figures(dir: &Path) -> serde_json::Map<String, serde_json::Value> {
             .file_name()
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
+        let count_key = match name.as_str() {
+            "results.json" => Some("rows"),
+            "stability.json" => Some("points"),
+            _ => None,
+        };
+        if count_key.is_none() && !name.ends_with(".bake.json") {
+            continue;
+        }
         let Some(json) = std::fs::read(&path)
             .ok()
             .and_then(|b| serde_json::from_slice::<serde_json::Value>(&b).ok())
@@ -234,11 +248,9 @@ pub fn read_figures(dir: &Path) -> serde_json::Map<String, serde_json::Value> {
                     }
                 }
             }
-        } else if name == "results.json" {
-            for key in ["rows", "points"] {
-                if let Some(rows) = json.get(key).and_then(serde_json::Value::as_array) {
-                    figures.insert(key.into(), rows.len().into());
-                }
+        } else if let Some(key) = count_key {
+            if let Some(rows) = json.get(key).and_then(serde_json::Value::as_array) {
+                figures.insert(key.into(), rows.len().into());
             }
         }
     }

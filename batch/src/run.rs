@@ -2,7 +2,7 @@
 //!
 //! An item is skipped when its done record holds the hash of its settings as they
 //! are now and its output exists. Otherwise its command runs writing into a staging
-//! folder beside the output (`<output>.part-<host>-<pid>`, on the same file system,
+//! folder beside the output (`<output>.part-<host>-<pid>.<n>`, on the same file system,
 //! so the final rename is atomic); only a whole, successful output is renamed into
 //! place, and the record is written last (atomically). A killed item leaves at most a
 //! staging folder, which the next run on the same host removes once its process is
@@ -17,7 +17,9 @@ use std::time::{Instant, SystemTime, UNIX_EPOCH};
 
 use crate::error::{BatchError, Result};
 use crate::manifest::{Item, Plan};
-use crate::record::{ItemRecord, ItemStatus, list_outputs, read_figures, read_record, write_record};
+use crate::record::{
+    ItemRecord, ItemStatus, OutputFile, output_file, read_figures, read_record, write_record,
+};
 
 /// How items are run.
 #[derive(Debug, Clone)]
@@ -252,25 +254,32 @@ fn publish(plan: &Plan, item: &Item, staging: &Path, host: &str, pid: u32) -> Re
     }
 }
 
-/// Rewrites, in every text file under `staging`, the staging folder's path to the
-/// final output's: commands record where they wrote (a bake's sidecar names its
-/// asset), and the record must name where the file will be. Binary files are left
-/// as they are.
-fn relocate(staging: &Path, output: &Path) -> Result<()> {
+/// Lists the files under `staging` (sizes and hashes, for the record), first
+/// rewriting, in every text file, the staging folder's path to the final output's:
+/// commands record where they wrote (a bake's sidecar names its asset), and the files
+/// must name where they will be. Binary files are left as they are. Each file is
+/// read once.
+fn relocate_and_list(staging: &Path, output: &Path) -> Result<Vec<OutputFile>> {
     let from = staging.to_string_lossy().into_owned();
     let to = output.to_string_lossy().into_owned();
-    for path in crate::record::files_under(staging)? {
-        let bytes = std::fs::read(&path).map_err(|e| BatchError::io(&path, &e))?;
-        let Ok(text) = std::str::from_utf8(&bytes) else {
-            continue;
-        };
-        if text.contains('\0') || !text.contains(&from) {
-            continue;
-        }
-        nelf_format::atomic::write_bytes_atomically(&path, text.replace(&from, &to).as_bytes())
-            .map_err(|e| BatchError::io(&path, &e))?;
-    }
-    Ok(())
+    crate::record::files_under(staging)?
+        .into_iter()
+        .map(|path| {
+            let bytes = std::fs::read(&path).map_err(|e| BatchError::io(&path, &e))?;
+            let relocated = std::str::from_utf8(&bytes)
+                .ok()
+                .filter(|text| !text.contains('\0') && text.contains(&from))
+                .map(|text| text.replace(&from, &to));
+            match relocated {
+                Some(text) => {
+                    nelf_format::atomic::write_bytes_atomically(&path, text.as_bytes())
+                        .map_err(|e| BatchError::io(&path, &e))?;
+                    Ok(output_file(staging, &path, text.as_bytes()))
+                }
+                None => Ok(output_file(staging, &path, &bytes)),
+            }
+        })
+        .collect()
 }
 
 /// Runs one item (module docs).
@@ -324,8 +333,7 @@ pub fn run_item(plan: &Plan, item: &Item, options: &RunOptions) -> Result<ItemOu
         if item.shared_output {
             record.output_folder = crate::record::folder_identity(&item.output);
         } else {
-            relocate(&target, &item.output)?;
-            record.outputs = list_outputs(&target)?;
+            record.outputs = relocate_and_list(&target, &item.output)?;
             record.figures = read_figures(&target);
             publish(plan, item, &target, &host, pid)?;
         }

@@ -8,8 +8,8 @@ use std::path::PathBuf;
 use serde::Serialize;
 
 use crate::error::Result;
-use crate::manifest::{Plan, format_ranges};
-use crate::record::{ItemStatus, error_summary, read_record};
+use crate::manifest::{Item, Plan, format_ranges};
+use crate::record::{ItemRecord, ItemStatus, error_summary, read_record};
 
 /// One item's state.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -55,6 +55,29 @@ impl BatchStatus {
     }
 }
 
+impl ItemState {
+    /// Its name, as the JSON and CSV write it.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Done => "done",
+            Self::Failed => "failed",
+            Self::Changed => "changed",
+            Self::Missing => "missing",
+        }
+    }
+}
+
+/// The state of `item` given its record: the one rule `status` and `collect` share.
+pub fn item_state(item: &Item, record: Option<&ItemRecord>) -> ItemState {
+    match record {
+        None => ItemState::Missing,
+        Some(r) if r.hash != item.settings_hash() => ItemState::Changed,
+        Some(r) if r.status == ItemStatus::Failed => ItemState::Failed,
+        Some(r) if crate::record::counts_as_done(item, r) => ItemState::Done,
+        Some(_) => ItemState::Changed,
+    }
+}
+
 /// Reads every item's record.
 pub fn batch_status(plan: &Plan) -> Result<BatchStatus> {
     let results = plan.results_dir();
@@ -75,16 +98,10 @@ pub fn batch_status(plan: &Plan) -> Result<BatchStatus> {
     let mut parents = std::collections::BTreeSet::new();
     for (number, item) in plan.items.iter().enumerate() {
         let record = read_record(&results, &item.id)?;
-        let state = match record {
-            None => ItemState::Missing,
-            Some(r) if r.hash != item.settings_hash() => ItemState::Changed,
-            Some(r) if r.status == ItemStatus::Failed => {
-                status.failures.push((item.id.clone(), error_summary(&r.error)));
-                ItemState::Failed
-            }
-            Some(r) if crate::record::counts_as_done(item, &r) => ItemState::Done,
-            Some(_) => ItemState::Changed,
-        };
+        let state = item_state(item, record.as_ref());
+        if let (ItemState::Failed, Some(r)) = (state, &record) {
+            status.failures.push((item.id.clone(), error_summary(&r.error)));
+        }
         match state {
             ItemState::Done => status.done += 1,
             ItemState::Failed => status.failed += 1,
