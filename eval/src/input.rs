@@ -193,6 +193,28 @@ pub fn synthesize(config: &SynthConfig, dir: &Path, progress: &ProgressBar) -> R
     Ok(())
 }
 
+/// Copies the files under `from` into `to` (made as needed), recursively, keeping
+/// any file `to` already holds: a stability point's copy of the base capture, and
+/// the parts of a sweep merged into one folder (`merge`).
+pub fn copy_tree(from: &Path, to: &Path) -> Result<()> {
+    let io = |path: &Path, e: std::io::Error| EvalError::Io {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    std::fs::create_dir_all(to).map_err(|e| io(to, e))?;
+    for entry in std::fs::read_dir(from).map_err(|e| io(from, e))? {
+        let path = entry.map_err(|e| io(from, e))?.path();
+        let Some(name) = path.file_name() else { continue };
+        let target = to.join(name);
+        if path.is_dir() {
+            copy_tree(&path, &target)?;
+        } else if !target.exists() {
+            std::fs::copy(&path, &target).map_err(|e| io(&target, e))?;
+        }
+    }
+    Ok(())
+}
+
 /// Turns `input` into a capture with ground truth; synthesized captures go to
 /// `work_dir/capture`.
 pub fn prepare(

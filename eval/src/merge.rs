@@ -9,6 +9,7 @@
 use std::path::{Path, PathBuf};
 
 use crate::error::{EvalError, Result};
+use crate::input::copy_tree;
 use crate::pareto::{ParetoResults, run_pareto};
 use crate::stability::{StabilityResults, run_stability};
 
@@ -27,23 +28,13 @@ fn read_json<T: serde::de::DeserializeOwned>(path: &Path) -> Result<T> {
     })
 }
 
-/// Copies the files of `from` (recursively) into `to`, keeping files already there.
-fn copy_tree(from: &Path, to: &Path) -> Result<()> {
-    let Ok(entries) = std::fs::read_dir(from) else {
-        return Ok(());
-    };
-    std::fs::create_dir_all(to).map_err(|e| io(to, &e))?;
-    for entry in entries {
-        let path = entry.map_err(|e| io(from, &e))?.path();
-        let Some(name) = path.file_name() else { continue };
-        let target = to.join(name);
-        if path.is_dir() {
-            copy_tree(&path, &target)?;
-        } else if !target.exists() {
-            std::fs::copy(&path, &target).map_err(|e| io(&target, &e))?;
-        }
+/// [`copy_tree`] of a part's folder that may be absent (a part without thumbnails).
+fn copy_if_there(from: &Path, to: &Path) -> Result<()> {
+    if from.is_dir() {
+        copy_tree(from, to)
+    } else {
+        Ok(())
     }
-    Ok(())
 }
 
 /// Merges Pareto sweeps run in parts (`parts`: their output folders) into `out`.
@@ -85,7 +76,7 @@ pub fn merge_pareto(parts: &[PathBuf], out: &Path) -> Result<ParetoResults> {
             }
         }
         for dir in ["assets", "thumbnails", "capture"] {
-            copy_tree(&part.join(dir), &out.join(dir))?;
+            copy_if_there(&part.join(dir), &out.join(dir))?;
         }
         merged.rows.extend(results.rows);
         merged.run_secs += results.run_secs;
@@ -140,7 +131,7 @@ pub fn merge_stability(parts: &[PathBuf], out: &Path) -> Result<StabilityResults
             }
         }
         for dir in ["gallery", "captures/base"] {
-            copy_tree(&part.join(dir), &out.join(dir))?;
+            copy_if_there(&part.join(dir), &out.join(dir))?;
         }
         merged.points.extend(results.points);
         merged.run_secs += results.run_secs;

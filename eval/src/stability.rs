@@ -46,7 +46,7 @@ use nelf_scene::tracer::LtTracer;
 use serde::{Deserialize, Serialize};
 
 use crate::error::{EvalError, Result};
-use crate::input::{CaptureSetup, EvalInput, synth_config, synthesize};
+use crate::input::{CaptureSetup, EvalInput, copy_tree, synth_config, synthesize};
 use crate::measure::{score_held_aside, write_gallery_png};
 use crate::perturb::{MaskEdit, edit_masks, perturb_poses, sun_envmap, target_cameras_at_angles};
 use crate::rows::StabilityPoint;
@@ -185,25 +185,15 @@ fn create_dir(path: &Path) -> Result<()> {
     })
 }
 
+/// `to` made a fresh copy of `from`.
 fn copy_dir(from: &Path, to: &Path) -> Result<()> {
-    let io = |path: &Path, e: std::io::Error| EvalError::Io {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    };
     if to.exists() {
-        std::fs::remove_dir_all(to).map_err(|e| io(to, e))?;
+        std::fs::remove_dir_all(to).map_err(|e| EvalError::Io {
+            path: to.to_path_buf(),
+            message: e.to_string(),
+        })?;
     }
-    create_dir(to)?;
-    for entry in std::fs::read_dir(from).map_err(|e| io(from, e))? {
-        let entry = entry.map_err(|e| io(from, e))?;
-        let target = to.join(entry.file_name());
-        if entry.path().is_dir() {
-            copy_dir(&entry.path(), &target)?;
-        } else {
-            std::fs::copy(entry.path(), &target).map_err(|e| io(&target, e))?;
-        }
-    }
-    Ok(())
+    copy_tree(from, to)
 }
 
 /// The held-aside views every capture-varying point is scored at: two views between
