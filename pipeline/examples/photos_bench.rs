@@ -6,7 +6,7 @@
 //! bake (8-bit sRGB PSNR, foreground and whole image, at the held-aside targets)
 //! beside the ground-truth bake and the flat colour.
 //!
-//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [geometry=stereo|network] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform]`
+//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [geometry=stereo|network] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform|truth-white] [region=STEP]`
 //! (a synthetic capture with `synth_config.json` and targets, e.g. `nelf demo`'s
 //! `out/demo/capture`). `unnamed` reconstructs as if the capture named no lighting
 //! and scores after one exposure gain; `hull` keeps the visual hull uncarved;
@@ -100,6 +100,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             _ => nelf_pipeline::config::UnnamedLighting::Fit,
         },
         photo_blur_mm: option("blur").map_or(Ok(nelf_pipeline::config::DEFAULT_PHOTO_BLUR_MM), str::parse)?,
+        photo_light_region_step: option("region").map_or(
+            Ok(nelf_pipeline::config::DEFAULT_PHOTO_LIGHT_REGION_STEP),
+            str::parse,
+        )?,
         ..Default::default()
     };
     if args.iter().any(|a| a == "depth") {
@@ -135,13 +139,86 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 nelf_format::conventions::LatLong::constant(16, 8, [1.0; 3]),
                 false,
             )
+        } else if option("light") == Some("truth-white") {
+            // The source lighting's shape with its colour taken out (equal power per
+            // channel) and its scale forgotten: what a perfect fit could give.
+            let path = capture
+                .source_envmap_path()
+                .ok_or("light=truth-white needs a named lighting")?;
+            let mut map = nelf_format::conventions::project_envmap(
+                &nelf_scene::envmap::load_envmap(&path)?,
+                DMat3::IDENTITY,
+            )?;
+            let integral = map.integral();
+            for t in map.texels_mut() {
+                for ch in 0..3 {
+                    t[ch] = (f64::from(t[ch]) / integral[ch]) as f32;
+                }
+            }
+            if option("mesh") == Some("truth")
+                && let nelf_scene::mesh::Albedo::PerVertex(truth_albedo) = &truth_mesh.albedo
+            {
+                // How well `albedo × white shading` explains the photographs under the
+                // true light's shape, vertex by vertex.
+                let lum = |c: [f32; 3]| f64::from(c[0] + c[1] + c[2]);
+                let mut ratios: Vec<f64> = (0..observations.colour.len())
+                    .filter_map(|i| {
+                        let c = observations.colour[i]?;
+                        let s = lum(observations.shading(i, &map));
+                        (s > 0.0).then(|| lum(c) / s / lum(truth_albedo[i]).max(1e-6))
+                    })
+                    .collect();
+                let mut by_albedo = std::collections::BTreeMap::<[i32; 3], Vec<f64>>::new();
+                for (i, seen) in observations.colour.iter().enumerate() {
+                    let Some(c) = *seen else { continue };
+                    let s = lum(observations.shading(i, &map));
+                    if s > 0.0 {
+                        let key = truth_albedo[i].map(|a| (a * 100.0).round() as i32);
+                        by_albedo
+                            .entry(key)
+                            .or_default()
+                            .push(lum(c) / s / lum(truth_albedo[i]).max(1e-6));
+                    }
+                }
+                let mut groups: Vec<_> = by_albedo.into_iter().filter(|(_, v)| v.len() > 200).collect();
+                groups.sort_by_key(|(_, v)| std::cmp::Reverse(v.len()));
+                for (key, mut v) in groups {
+                    v.sort_by(f64::total_cmp);
+                    let q = |p: f64| v[((v.len() - 1) as f64 * p) as usize];
+                    println!(
+                        "  albedo {key:?}: {} vertices, ratio percentiles 5 25 50 75 95: {:.3} {:.3} {:.3} {:.3} {:.3}",
+                        v.len(),
+                        q(0.05),
+                        q(0.25),
+                        q(0.5),
+                        q(0.75),
+                        q(0.95)
+                    );
+                }
+                ratios.sort_by(f64::total_cmp);
+                let q = |p: f64| ratios[((ratios.len() - 1) as f64 * p) as usize];
+                let median = q(0.5);
+                println!(
+                    "photo / (albedo x shading), relative to the median, percentiles 5 25 50 75 95: {:.2} {:.2} 1 {:.2} {:.2} ({} vertices)",
+                    q(0.05) / median,
+                    q(0.25) / median,
+                    q(0.75) / median,
+                    q(0.95) / median,
+                    ratios.len()
+                );
+            }
+            (map, false)
         } else {
             let (light, report) = nelf_pipeline::photo::lighting::capture_lighting(
                 &photographs,
                 None,
-                settings.photo_lighting,
+                &settings,
                 &observations,
+                &geometry.triangles,
             )?;
+            if let Some(fit) = &report.fit {
+                println!("rerun fit: {}", serde_json::to_string(fit)?);
+            }
             (light, report.named)
         };
         let (albedo, report) = nelf_pipeline::photo::reflectance::albedo_from_observations(

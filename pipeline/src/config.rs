@@ -99,6 +99,13 @@ fn default_photo_blur_mm() -> f64 {
     DEFAULT_PHOTO_BLUR_MM
 }
 
+/// Default `--photo-light-region-step`.
+pub const DEFAULT_PHOTO_LIGHT_REGION_STEP: f64 = 0.05;
+
+fn default_photo_light_region_step() -> f64 {
+    DEFAULT_PHOTO_LIGHT_REGION_STEP
+}
+
 fn default_photo_spacing_mm() -> f64 {
     DEFAULT_PHOTO_SPACING_MM
 }
@@ -169,6 +176,12 @@ pub struct PhotoSettings {
     #[arg(long, value_enum, default_value_t)]
     #[serde(default)]
     pub photo_geometry: PhotoGeometry,
+    /// Photographs: the lighting fit's materials as regions of the surface whose
+    /// neighbouring colours differ by less than this in log luminance (an albedo
+    /// edge is a step, shading changes smoothly; 0: chromaticity clusters).
+    #[arg(long, default_value_t = DEFAULT_PHOTO_LIGHT_REGION_STEP)]
+    #[serde(default = "default_photo_light_region_step")]
+    pub photo_light_region_step: f64,
 }
 
 impl PhotoSettings {
@@ -178,6 +191,12 @@ impl PhotoSettings {
             return Err(PipelineError::Invalid(format!(
                 "invalid reconstruction settings: --photo-spacing-mm {} must be positive",
                 self.photo_spacing_mm
+            )));
+        }
+        if !(self.photo_light_region_step.is_finite() && self.photo_light_region_step >= 0.0) {
+            return Err(PipelineError::Invalid(format!(
+                "invalid reconstruction settings: --photo-light-region-step {} must be zero or positive",
+                self.photo_light_region_step
             )));
         }
         if !(self.photo_blur_mm.is_finite() && self.photo_blur_mm >= 0.0) {
@@ -199,6 +218,7 @@ impl Default for PhotoSettings {
             photo_shading_bounces: 0,
             photo_lighting: UnnamedLighting::default(),
             photo_geometry: PhotoGeometry::default(),
+            photo_light_region_step: DEFAULT_PHOTO_LIGHT_REGION_STEP,
         }
     }
 }

@@ -128,7 +128,7 @@ pub fn reconstruct(
         ..ReflectanceSettings::default()
     };
     let observations = observe(&mesh, capture, &reflectance_settings, spacing_m as f32)?;
-    let (light, lighting) = capture_lighting(capture, weights, settings.photo_lighting, &observations)?;
+    let (light, lighting) = capture_lighting(capture, weights, settings, &observations, &mesh.triangles)?;
     let (albedo, reflectance) = albedo_from_observations(
         &observations,
         &mesh.triangles,
