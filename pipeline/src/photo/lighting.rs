@@ -117,6 +117,10 @@ pub struct LightingFitSettings {
     pub region_step: f64,
     /// Regions with fewer seen vertices are left out of the fit.
     pub region_min_vertices: usize,
+    /// The kept regions must hold at least this share of the seen vertices, else
+    /// the fit uses chromaticity clusters: a light fitted to a few regions is
+    /// free in the directions only the rest face (a finely textured surface).
+    pub region_min_coverage: f64,
 }
 
 impl Default for LightingFitSettings {
@@ -128,6 +132,7 @@ impl Default for LightingFitSettings {
             max_vertices: 12_000,
             region_step: 0.0,
             region_min_vertices: 200,
+            region_min_coverage: 0.5,
         }
     }
 }
@@ -146,6 +151,10 @@ pub struct LightingFitReport {
     pub material_vertices: Vec<usize>,
     /// Each group's albedo (in the fitted light's units) after the last alternation.
     pub material_albedo: Vec<[f32; 3]>,
+    /// Share of the seen vertices in regions large enough to fit to (`None`:
+    /// regions not asked for); the groups are regions when it reaches
+    /// [`LightingFitSettings::region_min_coverage`], else chromaticity clusters.
+    pub region_coverage: Option<f64>,
 }
 
 /// Fits an 8 × 16 lighting to `observations` of a surface, for a capture that
@@ -180,18 +189,21 @@ pub fn fit_lighting(
         return Err(invalid("no view sees the reconstructed surface".to_string()));
     }
     let colour = |i: usize| observations.colour[i].unwrap_or([0.0; 3]);
-    let regions = (settings.region_step > 0.0 && !triangles.is_empty())
-        .then(|| {
-            albedo_regions(
-                observations,
-                triangles,
-                settings.region_step,
-                settings.region_min_vertices,
-            )
-        })
-        .filter(|(_, sizes)| !sizes.is_empty());
-    // Regions where the surface has them; else (no region large enough: a surface
-    // of fine texture, or regions not asked for) chromaticity clusters.
+    let regions = (settings.region_step > 0.0 && !triangles.is_empty()).then(|| {
+        albedo_regions(
+            observations,
+            triangles,
+            settings.region_step,
+            settings.region_min_vertices,
+        )
+    });
+    let region_coverage = regions
+        .as_ref()
+        .map(|(_, sizes)| sizes.iter().sum::<usize>() as f64 / seen.len() as f64);
+    let regions =
+        regions.filter(|_| region_coverage.is_some_and(|c| c >= settings.region_min_coverage.max(1e-9)));
+    // Regions where the surface has them; else (regions too small or too few: a
+    // surface of fine texture, or regions not asked for) chromaticity clusters.
     let (group, material_vertices) = if let Some((group, sizes)) = regions {
         seen.retain(|&i| group[i] != usize::MAX);
         (group, sizes)
@@ -327,6 +339,7 @@ pub fn fit_lighting(
             texels_at_zero: at_zero,
             material_vertices,
             material_albedo,
+            region_coverage,
         },
     ))
 }
