@@ -200,15 +200,23 @@ pub fn run_network(config: &NetworkEvalConfig, print: &mut dyn FnMut(&str)) -> R
         mean_of("truth_bake").unwrap_or(f64::NAN),
         mean_of("flat_colour").unwrap_or(f64::NAN),
     ));
+    let flip_of = |kind: &str| summary["mean_foreground_flip"][kind].as_f64().unwrap_or(f64::NAN);
+    print(&format!(
+        "  foreground ꟻLIP (lower is better): its bake {:.3}, ground-truth bake {:.3}, flat colour {:.3}",
+        flip_of("network_bake"),
+        flip_of("truth_bake"),
+        flip_of("flat_colour"),
+    ));
     if let Some(photos) = mean_of("photos_bake") {
         print(&format!(
-            "  the photographs' reconstruction baked{}: {photos:.2} dB foreground, {:.2} dB whole image",
+            "  the photographs' reconstruction baked{}: {photos:.2} dB foreground, {:.2} dB whole image, foreground ꟻLIP {:.3}",
             if config.unnamed_lighting {
                 " (lighting not named; one exposure gain per capture)"
             } else {
                 ""
             },
-            summary["mean_psnr"]["photos_bake"].as_f64().unwrap_or(f64::NAN)
+            summary["mean_psnr"]["photos_bake"].as_f64().unwrap_or(f64::NAN),
+            flip_of("photos_bake")
         ));
     }
     let path = out.join("network.json");
@@ -422,13 +430,13 @@ fn describe_row(row: &TargetScores) -> String {
     let network = |f: fn(&Srgb8Scores) -> String| row.network.as_ref().map_or("-".to_string(), f);
     let photos = row.photos_bake.as_ref().map_or(String::new(), |s| {
         format!(
-            "; photographs' bake {:.2} ({:.2}, SSIM {:.3}) dB",
-            s.foreground_psnr, s.psnr, s.ssim
+            "; photographs' bake {:.2} ({:.2}, SSIM {:.3}, ꟻLIP {:.3}) dB",
+            s.foreground_psnr, s.psnr, s.ssim, s.foreground_flip
         )
     });
     format!(
         "{} {}: foreground PSNR network {}, its bake {:.2}, ground-truth bake {:.2}, flat colour {:.2} dB \
-         (whole image {}, {:.2}, {:.2}, {:.2}; SSIM {}, {:.3}, {:.3}, {:.3}){photos}",
+         (whole image {}, {:.2}, {:.2}, {:.2}; SSIM {}, {:.3}, {:.3}, {:.3}; foreground ꟻLIP {}, {:.3}, {:.3}, {:.3}){photos}",
         row.capture.display(),
         row.target,
         network(|s| format!("{:.2}", s.foreground_psnr)),
@@ -442,7 +450,11 @@ fn describe_row(row: &TargetScores) -> String {
         network(|s| format!("{:.3}", s.ssim)),
         row.network_bake.ssim,
         row.truth_bake.ssim,
-        row.network_bake.flat_ssim
+        row.network_bake.flat_ssim,
+        network(|s| format!("{:.3}", s.foreground_flip)),
+        row.network_bake.foreground_flip,
+        row.truth_bake.foreground_flip,
+        row.network_bake.flat_foreground_flip
     )
 }
 
@@ -501,6 +513,20 @@ fn summarise(
             "truth_bake": mean(&|r| r.truth_bake.ssim),
             "flat_colour": mean(&|r| r.network_bake.flat_ssim),
             "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.ssim))),
+        },
+        "mean_flip": {
+            "network": mean_network(|s| s.flip),
+            "network_bake": mean(&|r| r.network_bake.flip),
+            "truth_bake": mean(&|r| r.truth_bake.flip),
+            "flat_colour": mean(&|r| r.network_bake.flat_flip),
+            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.flip))),
+        },
+        "mean_foreground_flip": {
+            "network": mean_network(|s| s.foreground_flip),
+            "network_bake": mean(&|r| r.network_bake.foreground_flip),
+            "truth_bake": mean(&|r| r.truth_bake.foreground_flip),
+            "flat_colour": mean(&|r| r.network_bake.flat_foreground_flip),
+            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.foreground_flip))),
         },
         "rows": rows,
     })

@@ -364,15 +364,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let closed =
             (p.foreground_psnr - p.flat_foreground_psnr) / (g.foreground_psnr - p.flat_foreground_psnr);
         println!(
-            "{}: photos {:.2} fg / {:.2} whole (ssim {:.3}); truth bake {:.2} / {:.2}; flat {:.2} / {:.2}; gap closed {:.0} %; gain {gain:.3}",
+            "{}: photos {:.2} fg / {:.2} whole (ssim {:.3}, ꟻLIP {:.3} fg / {:.3}); truth bake {:.2} / {:.2} (ꟻLIP {:.3} / {:.3}); flat {:.2} / {:.2} (ꟻLIP {:.3} / {:.3}); gap closed {:.0} %; gain {gain:.3}",
             held.names[t],
             p.foreground_psnr,
             p.psnr,
             p.ssim,
+            p.foreground_flip,
+            p.flip,
             g.foreground_psnr,
             g.psnr,
+            g.foreground_flip,
+            g.flip,
             p.flat_foreground_psnr,
             p.flat_psnr,
+            p.flat_foreground_flip,
+            p.flat_flip,
             100.0 * closed
         );
         let exposure = (0.6 / nelf_bake::eval::data_range(&held.images[t])).log2();

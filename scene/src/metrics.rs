@@ -425,16 +425,22 @@ mod tests {
         let exact = srgb8_scores(&truth, &truth, &mask, w, h).unwrap();
         assert!(exact.psnr.is_infinite() && exact.foreground_psnr.is_infinite());
         assert!((exact.ssim - 1.0).abs() < 1e-12);
+        assert!(exact.flip == 0.0 && exact.foreground_flip == 0.0);
         let baseline = srgb8_scores(&flat, &truth, &mask, w, h).unwrap();
         assert_eq!(baseline.psnr, baseline.flat_psnr);
         assert_eq!(baseline.foreground_psnr, baseline.flat_foreground_psnr);
         assert_eq!(baseline.ssim, baseline.flat_ssim);
+        assert_eq!(baseline.flip, baseline.flat_flip);
+        assert_eq!(baseline.foreground_flip, baseline.flat_foreground_flip);
+        // The black outside is right, so the foreground's ꟻLIP is the larger.
+        assert!(baseline.foreground_flip > baseline.flip && baseline.flip > 0.0);
         // Outside the mask both are black, so the whole image scores higher than the
         // foreground alone.
         assert!(baseline.psnr > baseline.foreground_psnr);
         // A black image is worse than the baseline.
         let black = srgb8_scores(&vec![[0.0; 3]; 256], &truth, &mask, w, h).unwrap();
         assert!(black.foreground_psnr < baseline.foreground_psnr);
+        assert!(black.foreground_flip > baseline.foreground_flip);
     }
 
     #[test]
@@ -486,6 +492,14 @@ pub struct Srgb8Scores {
     pub flat_foreground_psnr: f64,
     /// The flat-colour baseline's SSIM.
     pub flat_ssim: f64,
+    /// Whole-image mean ꟻLIP ([`crate::flip`], the default observer; lower is better).
+    pub flip: f64,
+    /// Mean ꟻLIP inside the mask.
+    pub foreground_flip: f64,
+    /// The flat-colour baseline's whole-image mean ꟻLIP.
+    pub flat_flip: f64,
+    /// The flat-colour baseline's mean ꟻLIP inside the mask.
+    pub flat_foreground_flip: f64,
 }
 
 /// Linear RGB as 8-bit sRGB values (0–255, rounded).
@@ -544,6 +558,20 @@ pub fn srgb8_scores(
     let want = srgb8_values(truth);
     let flat = srgb8_values(&flat_colour_baseline(truth, mask));
     let got = srgb8_values(image);
+    let flip_of = |image: &[[f32; 3]]| -> Result<(f64, f64), MetricError> {
+        let map = crate::flip::flip_map(
+            truth,
+            image,
+            width,
+            height,
+            crate::flip::DEFAULT_PIXELS_PER_DEGREE,
+        )?;
+        let whole = crate::flip::pooled_mean(&map, None)?.unwrap_or(0.0);
+        let foreground = crate::flip::pooled_mean(&map, Some(&binary))?.unwrap_or(0.0);
+        Ok((whole, foreground))
+    };
+    let (flip, foreground_flip) = flip_of(image)?;
+    let (flat_flip, flat_foreground_flip) = flip_of(&flat_colour_baseline(truth, mask))?;
     Ok(Srgb8Scores {
         psnr: psnr(&got, &want, 255.0)?,
         foreground_psnr: psnr_masked(&got, &want, &binary, 255.0)?,
@@ -551,5 +579,9 @@ pub fn srgb8_scores(
         flat_psnr: psnr(&flat, &want, 255.0)?,
         flat_foreground_psnr: psnr_masked(&flat, &want, &binary, 255.0)?,
         flat_ssim: ssim(&flat, &want, width, height, 255.0)?,
+        flip,
+        foreground_flip,
+        flat_flip,
+        flat_foreground_flip,
     })
 }
