@@ -147,6 +147,98 @@ pub fn reduce_views(
     (cams, imgs, msks)
 }
 
+/// Views of different sizes brought to one, so that the network, which stacks its
+/// views, takes them all, at one scale: each view is first resampled (bilinear,
+/// pixel centres at half-integers, edges clamped) so that its focal length `fx` is
+/// the views' largest (a head then spans as many pixels in every view, as in
+/// training), then padded on the right and below with empty pixels (mask 0) to the
+/// largest width and height among them (intrinsics unchanged by the padding).
+/// Views of one size are returned as they are.
+pub fn to_one_size(cameras: &[PinholeCamera], images: &[Vec<[f32; 3]>], masks: &[Vec<f32>]) -> ViewSet {
+    let same = cameras
+        .windows(2)
+        .all(|p| (p[0].width, p[0].height) == (p[1].width, p[1].height));
+    let consistent = cameras.iter().zip(images.iter().zip(masks)).all(|(c, (i, m))| {
+        c.width > 0 && c.height > 0 && i.len() == m.len() && i.len() == (c.width * c.height) as usize
+    });
+    if same || !consistent {
+        // As they are (a wrong pixel count is reported by the caller's checks).
+        return (cameras.to_vec(), images.to_vec(), masks.to_vec());
+    }
+    let focal = cameras.iter().map(|c| c.fx).fold(0.0f64, f64::max);
+    let scaled: Vec<(PinholeCamera, Vec<[f32; 3]>, Vec<f32>)> = cameras
+        .iter()
+        .zip(images.iter().zip(masks))
+        .map(|(camera, (image, mask))| {
+            let k = if camera.fx > 0.0 { focal / camera.fx } else { 1.0 };
+            if (k - 1.0).abs() < 1e-9 {
+                return (*camera, image.clone(), mask.clone());
+            }
+            let (w, h) = (camera.width as usize, camera.height as usize);
+            let (nw, nh) = (
+                ((w as f64 * k).round() as usize).max(1),
+                ((h as f64 * k).round() as usize).max(1),
+            );
+            let (sx, sy) = (w as f64 / nw as f64, h as f64 / nh as f64);
+            // Bilinear taps of the old image at the centre of new pixel i.
+            let taps = |i: usize, old: usize, s: f64| -> (usize, usize, f32) {
+                let x = ((i as f64 + 0.5) * s - 0.5).clamp(0.0, (old - 1) as f64);
+                let x0 = x.floor() as usize;
+                (x0, (x0 + 1).min(old - 1), (x - x0 as f64) as f32)
+            };
+            let mut rgb = Vec::with_capacity(nw * nh);
+            let mut alpha = Vec::with_capacity(nw * nh);
+            for j in 0..nh {
+                let (y0, y1, ty) = taps(j, h, sy);
+                for i in 0..nw {
+                    let (x0, x1, tx) = taps(i, w, sx);
+                    let weights = [
+                        (y0 * w + x0, (1.0 - tx) * (1.0 - ty)),
+                        (y0 * w + x1, tx * (1.0 - ty)),
+                        (y1 * w + x0, (1.0 - tx) * ty),
+                        (y1 * w + x1, tx * ty),
+                    ];
+                    rgb.push(std::array::from_fn(|c| {
+                        weights.iter().map(|&(p, wt)| image[p][c] * wt).sum()
+                    }));
+                    alpha.push(weights.iter().map(|&(p, wt)| mask[p] * wt).sum());
+                }
+            }
+            let camera = PinholeCamera {
+                width: nw as u32,
+                height: nh as u32,
+                fx: camera.fx / sx,
+                cx: camera.cx / sx,
+                fy: camera.fy / sy,
+                cy: camera.cy / sy,
+                ..*camera
+            };
+            (camera, rgb, alpha)
+        })
+        .collect();
+    let width = scaled.iter().map(|v| v.0.width).max().unwrap_or(0);
+    let height = scaled.iter().map(|v| v.0.height).max().unwrap_or(0);
+    let mut out: ViewSet = (Vec::new(), Vec::new(), Vec::new());
+    for (camera, image, mask) in scaled {
+        let w = camera.width as usize;
+        let mut rgb = vec![[0.0f32; 3]; (width * height) as usize];
+        let mut alpha = vec![0.0f32; (width * height) as usize];
+        for (y, (row, mask_row)) in image.chunks(w).zip(mask.chunks(w)).enumerate() {
+            let at = y * width as usize;
+            rgb[at..at + w].copy_from_slice(row);
+            alpha[at..at + w].copy_from_slice(mask_row);
+        }
+        out.0.push(PinholeCamera {
+            width,
+            height,
+            ..camera
+        });
+        out.1.push(rgb);
+        out.2.push(alpha);
+    }
+    out
+}
+
 /// A capture prepared for the network.
 #[derive(Debug, Clone)]
 pub struct NetCapture {
@@ -192,10 +284,11 @@ impl NetCapture {
         net_from_world: DMat3,
         working_image_size: Option<usize>,
     ) -> Result<Self, NetError> {
+        let (cameras, images, masks) = to_one_size(cameras, images, masks);
         let factor = cameras.first().map_or(1, |c| {
             working_factor(c.width as usize, c.height as usize, working_image_size)
         });
-        let (cams, imgs, msks) = reduce_views(cameras, images, masks, factor);
+        let (cams, imgs, msks) = reduce_views(&cameras, &images, &masks, factor);
         Self::new(&cams, &imgs, &msks, head_centre_m, net_from_world)
     }
 
@@ -432,6 +525,55 @@ fn load_capture_dir_at(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn views_of_other_sizes_are_brought_to_one_scale_and_size() {
+        let big = PinholeCamera::look_at(DVec3::new(0.0, 0.0, 1.0), DVec3::ZERO, DVec3::Y, 40, 30, 0.6);
+        // Half the focal length (a wider lens, or a smaller photograph) and off-centre.
+        let small = PinholeCamera {
+            cx: 11.0,
+            ..PinholeCamera::look_at(DVec3::new(0.3, 0.0, 1.0), DVec3::ZERO, DVec3::Y, 20, 10, 0.6)
+        };
+        // The same focal length, another size: only padded.
+        let tall = PinholeCamera::look_at(DVec3::new(0.0, 0.3, 1.0), DVec3::ZERO, DVec3::Y, 40, 36, 0.6);
+        // A ramp in continuous pixel coordinates, which bilinear resampling keeps.
+        let ramp = |c: &PinholeCamera| -> Vec<[f32; 3]> {
+            (0..c.width * c.height)
+                .map(|k| {
+                    let (x, y) = (f64::from(k % c.width) + 0.5, f64::from(k / c.width) + 0.5);
+                    [(0.01 * x) as f32, (0.02 * y) as f32, 1.0]
+                })
+                .collect()
+        };
+        let cameras = [big, small, tall];
+        let images: Vec<_> = cameras.iter().map(ramp).collect();
+        let masks: Vec<_> = cameras
+            .iter()
+            .map(|c| vec![0.5f32; (c.width * c.height) as usize])
+            .collect();
+        let (cams, imgs, msks) = to_one_size(&cameras, &images, &masks);
+        assert!(cams.iter().all(|c| (c.width, c.height) == (40, 36)), "{cams:?}");
+        assert!(imgs.iter().all(|i| i.len() == 40 * 36) && msks.iter().all(|m| m.len() == 40 * 36));
+        assert!(cams.iter().all(|c| (c.fx - big.fx).abs() < 1e-9), "{cams:?}");
+        // Padding keeps the pixels where they were and adds empty ones.
+        assert_eq!(cams[0], PinholeCamera { height: 36, ..big });
+        assert_eq!(&imgs[0][..1200], &images[0][..]);
+        assert!(imgs[0][1200..].iter().all(|p| *p == [0.0; 3]) && msks[0][1200..].iter().all(|&m| m == 0.0));
+        assert_eq!(cams[2], tall);
+        // The small view, twice its size: a world point lands on the same spot.
+        let p = DVec3::new(0.05, -0.03, 0.1);
+        let (old, new) = (small.project(p).unwrap(), cams[1].project(p).unwrap());
+        assert!((new.x * 0.5 - old.x).abs() < 1e-9 && (new.y * 0.5 - old.y).abs() < 1e-9);
+        // Inside the clamped border it holds the old ramp at that spot; masks 0.5
+        // inside, 0 in the padding.
+        for (i, j) in [(5usize, 4usize), (20, 11), (33, 17)] {
+            let (x, y) = ((i as f64 + 0.5) * 0.5, (j as f64 + 0.5) * 0.5);
+            let got = imgs[1][j * 40 + i];
+            assert!((f64::from(got[0]) - 0.01 * x).abs() < 1e-6, "{got:?} at {x}");
+            assert!((f64::from(got[1]) - 0.02 * y).abs() < 1e-6, "{got:?} at {y}");
+        }
+        assert!((msks[1][5 * 40 + 5] - 0.5).abs() < 1e-6 && msks[1][30 * 40 + 5] == 0.0);
+    }
 
     #[test]
     fn default_frame_turns_y_up_into_z_up() {

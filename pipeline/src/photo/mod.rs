@@ -341,13 +341,15 @@ mod tests {
             capture.cameras[3] = small.cameras[3];
             capture.images[3] = small.images[3].clone();
             capture.masks[3] = small.masks[3].clone();
-            // The network needs one size: its geometry falls back to stereo, noted.
+            // The network's views are brought to one size first
+            // (`nelf_field::capture::to_one_size`): the geometry asked for, no note.
             let mixed = reconstruct_it(&capture).expect("mixed sizes");
-            assert_sane("mixed sizes", &mixed, PhotoGeometry::Stereo);
-            assert_eq!(mixed.report.surface.geometry, PhotoGeometry::Stereo);
-            assert_eq!(
-                mixed.report.surface.note.is_some(),
-                geometry == PhotoGeometry::Network
+            assert_sane("mixed sizes", &mixed, geometry);
+            assert_eq!(mixed.report.surface.geometry, geometry);
+            assert!(
+                mixed.report.surface.note.is_none(),
+                "{:?}",
+                mixed.report.surface.note
             );
         }
         let reconstruct_it =
