@@ -38,6 +38,18 @@ def share(rows, kind, key, flat_key):
     return None if value is None else 100.0 * (value - flat) / (truth - flat)
 
 
+def bootstrap_share(rows, groups, kind):
+    """`kind`'s foreground share of the gap, with its 5-95 % interval over 2,000
+    bootstrap resamples of the heads (`groups`, seed 0)."""
+    draw = random.Random(0)
+    shares = sorted(
+        share([r for _ in groups for r in draw.choice(groups)], kind, "foreground_psnr", "flat_foreground_psnr")
+        for _ in range(2000)
+    )
+    return (f"{share(rows, kind, 'foreground_psnr', 'flat_foreground_psnr'):.1f} %, "
+            f"5-95 % bootstrap interval over the heads {shares[100]:.1f}-{shares[1899]:.1f} %")
+
+
 def main(paths):
     rows = []
     for path in paths:
@@ -77,28 +89,15 @@ def main(paths):
             )
             print(f"{scope} mean FLIP (lower is better): {values}, "
                   f"flat colour {mean(rows, 'network_bake', 'flat_' + key):.3f}")
-        print(f"SSIM: " + ", ".join(
+        print("SSIM: " + ", ".join(
             f"{kind} {mean(rows, kind, 'ssim'):.3f}" for kind in kinds if mean(rows, kind, "ssim") is not None
         ) + f", flat colour {mean(rows, 'network_bake', 'flat_ssim'):.3f}")
     if len(heads) > 1:
-        draw = random.Random(0)
         groups = list(heads.values())
-        shares = sorted(
-            share([r for _ in groups for r in draw.choice(groups)], "network_bake", "foreground_psnr", "flat_foreground_psnr")
-            for _ in range(2000)
-        )
         print(f"the bake's foreground share over {len(heads)} heads ({len(rows)} targets): "
-              f"{share(rows, 'network_bake', 'foreground_psnr', 'flat_foreground_psnr'):.1f} %, "
-              f"5-95 % bootstrap interval over the heads {shares[100]:.1f}-{shares[1899]:.1f} %")
+              + bootstrap_share(rows, groups, "network_bake"))
         if photos:
-            draw = random.Random(0)
-            shares = sorted(
-                share([r for _ in groups for r in draw.choice(groups)], "photos_bake", "foreground_psnr", "flat_foreground_psnr")
-                for _ in range(2000)
-            )
-            print(f"the photographs' bake's foreground share: "
-                  f"{share(rows, 'photos_bake', 'foreground_psnr', 'flat_foreground_psnr'):.1f} %, "
-                  f"5-95 % bootstrap interval over the heads {shares[100]:.1f}-{shares[1899]:.1f} %")
+            print("the photographs' bake's foreground share: " + bootstrap_share(rows, groups, "photos_bake"))
     return 0 if ok else 1
 
 

@@ -470,6 +470,16 @@ fn summarise(
     let mean_network = |key: fn(&Srgb8Scores) -> f64| {
         (!config.bakes_only).then(|| mean(&|r| r.network.as_ref().map_or(f64::NAN, key)))
     };
+    // One score's means for every source, beside the flat colour's.
+    let by_source = |value: fn(&Srgb8Scores) -> f64, flat: fn(&Srgb8Scores) -> f64| {
+        serde_json::json!({
+            "network": mean_network(value),
+            "network_bake": mean(&|r| value(&r.network_bake)),
+            "truth_bake": mean(&|r| value(&r.truth_bake)),
+            "flat_colour": mean(&|r| flat(&r.network_bake)),
+            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.as_ref().map_or(f64::NAN, value))),
+        })
+    };
     serde_json::json!({
         "weights": weights_name,
         "resolution": config.resolution,
@@ -483,13 +493,7 @@ fn summarise(
         "rank": config.rank,
         "bakes_only": config.bakes_only,
         "targets": rows.len(),
-        "mean_foreground_psnr": {
-            "network": mean_network(|s| s.foreground_psnr),
-            "network_bake": mean(&|r| r.network_bake.foreground_psnr),
-            "truth_bake": mean(&|r| r.truth_bake.foreground_psnr),
-            "flat_colour": mean(&|r| r.network_bake.flat_foreground_psnr),
-            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
-        },
+        "mean_foreground_psnr": by_source(|s| s.foreground_psnr, |s| s.flat_foreground_psnr),
         "photos_unnamed_lighting": config.photos.then_some(config.unnamed_lighting),
         "mean_foreground_psnr_oracle_view_bake": config.oracle_view.then(|| mean(&|r| r.oracle_view_bake.map_or(f64::NAN, |s| s.foreground_psnr))),
         "mean_split": (!split_parts.is_empty()).then(|| split_parts.iter().map(|part| {
@@ -500,34 +504,10 @@ fn summarise(
                 "psnr": of(|s| s.psnr),
             }))
         }).collect::<serde_json::Map<_, _>>()),
-        "mean_psnr": {
-            "network": mean_network(|s| s.psnr),
-            "network_bake": mean(&|r| r.network_bake.psnr),
-            "truth_bake": mean(&|r| r.truth_bake.psnr),
-            "flat_colour": mean(&|r| r.network_bake.flat_psnr),
-            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.psnr))),
-        },
-        "mean_ssim": {
-            "network": mean_network(|s| s.ssim),
-            "network_bake": mean(&|r| r.network_bake.ssim),
-            "truth_bake": mean(&|r| r.truth_bake.ssim),
-            "flat_colour": mean(&|r| r.network_bake.flat_ssim),
-            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.ssim))),
-        },
-        "mean_flip": {
-            "network": mean_network(|s| s.flip),
-            "network_bake": mean(&|r| r.network_bake.flip),
-            "truth_bake": mean(&|r| r.truth_bake.flip),
-            "flat_colour": mean(&|r| r.network_bake.flat_flip),
-            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.flip))),
-        },
-        "mean_foreground_flip": {
-            "network": mean_network(|s| s.foreground_flip),
-            "network_bake": mean(&|r| r.network_bake.foreground_flip),
-            "truth_bake": mean(&|r| r.truth_bake.foreground_flip),
-            "flat_colour": mean(&|r| r.network_bake.flat_foreground_flip),
-            "photos_bake": config.photos.then(|| mean(&|r| r.photos_bake.map_or(f64::NAN, |s| s.foreground_flip))),
-        },
+        "mean_psnr": by_source(|s| s.psnr, |s| s.flat_psnr),
+        "mean_ssim": by_source(|s| s.ssim, |s| s.flat_ssim),
+        "mean_flip": by_source(|s| s.flip, |s| s.flat_flip),
+        "mean_foreground_flip": by_source(|s| s.foreground_flip, |s| s.flat_foreground_flip),
         "rows": rows,
     })
 }

@@ -161,30 +161,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 // How well `albedo × white shading` explains the photographs under the
                 // true light's shape, vertex by vertex.
                 let lum = |c: [f32; 3]| f64::from(c[0] + c[1] + c[2]);
-                let mut ratios: Vec<f64> = (0..observations.colour.len())
+                // Each seen vertex's ratio, with its true albedo (in hundredths) as key.
+                let keyed: Vec<([i32; 3], f64)> = (0..observations.colour.len())
                     .filter_map(|i| {
                         let c = observations.colour[i]?;
                         let s = lum(observations.shading(i, &map));
-                        (s > 0.0).then(|| lum(c) / s / lum(truth_albedo[i]).max(1e-6))
+                        (s > 0.0).then(|| {
+                            (
+                                truth_albedo[i].map(|a| (a * 100.0).round() as i32),
+                                lum(c) / s / lum(truth_albedo[i]).max(1e-6),
+                            )
+                        })
                     })
                     .collect();
+                let quantile = |sorted: &[f64], p: f64| sorted[((sorted.len() - 1) as f64 * p) as usize];
                 let mut by_albedo = std::collections::BTreeMap::<[i32; 3], Vec<f64>>::new();
-                for (i, seen) in observations.colour.iter().enumerate() {
-                    let Some(c) = *seen else { continue };
-                    let s = lum(observations.shading(i, &map));
-                    if s > 0.0 {
-                        let key = truth_albedo[i].map(|a| (a * 100.0).round() as i32);
-                        by_albedo
-                            .entry(key)
-                            .or_default()
-                            .push(lum(c) / s / lum(truth_albedo[i]).max(1e-6));
-                    }
+                for &(key, ratio) in &keyed {
+                    by_albedo.entry(key).or_default().push(ratio);
                 }
+                let mut ratios: Vec<f64> = keyed.into_iter().map(|(_, ratio)| ratio).collect();
                 let mut groups: Vec<_> = by_albedo.into_iter().filter(|(_, v)| v.len() > 200).collect();
                 groups.sort_by_key(|(_, v)| std::cmp::Reverse(v.len()));
                 for (key, mut v) in groups {
                     v.sort_by(f64::total_cmp);
-                    let q = |p: f64| v[((v.len() - 1) as f64 * p) as usize];
+                    let q = |p: f64| quantile(&v, p);
                     println!(
                         "  albedo {key:?}: {} vertices, ratio percentiles 5 25 50 75 95: {:.3} {:.3} {:.3} {:.3} {:.3}",
                         v.len(),
@@ -196,7 +196,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     );
                 }
                 ratios.sort_by(f64::total_cmp);
-                let q = |p: f64| ratios[((ratios.len() - 1) as f64 * p) as usize];
+                let q = |p: f64| quantile(&ratios, p);
                 let median = q(0.5);
                 println!(
                     "photo / (albedo x shading), relative to the median, percentiles 5 25 50 75 95: {:.2} {:.2} 1 {:.2} {:.2} ({} vertices)",

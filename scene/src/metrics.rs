@@ -558,10 +558,13 @@ pub fn srgb8_scores(
     let want = srgb8_values(truth);
     let flat = srgb8_values(&flat_colour_baseline(truth, mask));
     let got = srgb8_values(image);
-    let flip_of = |image: &[[f32; 3]]| -> Result<(f64, f64), MetricError> {
-        let map = crate::flip::flip_map(
-            truth,
-            image,
+    // ꟻLIP of the same 8-bit values (whole numbers 0–255, so the cast is exact).
+    let bytes = |values: &[[f32; 3]]| -> Vec<u8> { values.iter().flatten().map(|&v| v as u8).collect() };
+    let want_bytes = bytes(&want);
+    let flip_of = |values: &[[f32; 3]]| -> Result<(f64, f64), MetricError> {
+        let map = crate::flip::flip_map_srgb8(
+            &want_bytes,
+            &bytes(values),
             width,
             height,
             crate::flip::DEFAULT_PIXELS_PER_DEGREE,
@@ -570,8 +573,8 @@ pub fn srgb8_scores(
         let foreground = crate::flip::pooled_mean(&map, Some(&binary))?.unwrap_or(0.0);
         Ok((whole, foreground))
     };
-    let (flip, foreground_flip) = flip_of(image)?;
-    let (flat_flip, flat_foreground_flip) = flip_of(&flat_colour_baseline(truth, mask))?;
+    let (flip, foreground_flip) = flip_of(&got)?;
+    let (flat_flip, flat_foreground_flip) = flip_of(&flat)?;
     Ok(Srgb8Scores {
         psnr: psnr(&got, &want, 255.0)?,
         foreground_psnr: psnr_masked(&got, &want, &binary, 255.0)?,

@@ -208,14 +208,7 @@ pub fn fit_lighting(
         seen.retain(|&i| group[i] != usize::MAX);
         (group, sizes)
     } else {
-        let chroma: Vec<[f32; 2]> = seen
-            .iter()
-            .map(|&i| {
-                let c = colour(i);
-                let sum = (c[0] + c[1] + c[2]).max(1e-6);
-                [c[0] / sum, c[1] / sum]
-            })
-            .collect();
+        let chroma: Vec<[f32; 2]> = seen.iter().map(|&i| chromaticity(colour(i))).collect();
         let (group_of_seen, sizes) = chroma_groups(&chroma, settings.materials.max(1));
         let mut group = vec![usize::MAX; observations.colour.len()];
         for (k, &i) in seen.iter().enumerate() {
@@ -364,10 +357,12 @@ fn albedo_regions(
     let n = observations.colour.len();
     let mut parent: Vec<usize> = (0..n).collect();
     let describe = |i: usize| {
-        observations.colour.get(i).copied().flatten().map(|c| {
-            let sum = (c[0] + c[1] + c[2]).max(1e-6);
-            (f64::from(sum).ln(), [c[0] / sum, c[1] / sum])
-        })
+        observations
+            .colour
+            .get(i)
+            .copied()
+            .flatten()
+            .map(|c| (f64::from((c[0] + c[1] + c[2]).max(1e-6)).ln(), chromaticity(c)))
     };
     for t in triangles {
         for (a, b) in [(t[0], t[1]), (t[1], t[2]), (t[2], t[0])] {
@@ -387,21 +382,19 @@ fn albedo_regions(
             }
         }
     }
+    // Each seen vertex's region, and the regions' sizes.
+    let roots: Vec<Option<usize>> = (0..n)
+        .map(|i| observations.colour[i].is_some().then(|| root(&mut parent, i)))
+        .collect();
     let mut size = vec![0usize; n];
-    for i in 0..n {
-        if observations.colour[i].is_some() {
-            let r = root(&mut parent, i);
-            size[r] += 1;
-        }
+    for r in roots.iter().flatten() {
+        size[*r] += 1;
     }
     let mut id = vec![usize::MAX; n];
     let mut sizes = Vec::new();
     let mut group = vec![usize::MAX; n];
-    for (i, g) in group.iter_mut().enumerate() {
-        if observations.colour[i].is_none() {
-            continue;
-        }
-        let r = root(&mut parent, i);
+    for (g, r) in group.iter_mut().zip(&roots) {
+        let Some(r) = *r else { continue };
         if size[r] < min_vertices.max(1) {
             continue;
         }
@@ -412,6 +405,12 @@ fn albedo_regions(
         *g = id[r];
     }
     (group, sizes)
+}
+
+/// A colour's chromaticity `(r, g) / (r + g + b)`.
+fn chromaticity(c: [f32; 3]) -> [f32; 2] {
+    let sum = (c[0] + c[1] + c[2]).max(1e-6);
+    [c[0] / sum, c[1] / sum]
 }
 
 /// Chromaticities closer than this are one material.
@@ -546,6 +545,34 @@ mod tests {
             .collect()
     }
 
+    /// A sun in texel `sun` (radiance 20) over a dim uniform sky (0.05), grey.
+    fn sun_and_sky(sun: usize) -> LatLong {
+        let mut texels = vec![[0.05f32; 3]; ENV_TEXELS];
+        texels[sun] = [20.0; 3];
+        LatLong::new(ENV_W, ENV_H, texels).expect("8 x 16")
+    }
+
+    /// What the views see of a convex surface (no shadows) with these normals and
+    /// albedos under the grey `light`: each point's colour and white transport.
+    fn convex_observations(
+        points: impl IntoIterator<Item = (DVec3, [f32; 3])>,
+        light: &LatLong,
+    ) -> Observations {
+        let (colour, transport) = points
+            .into_iter()
+            .map(|(n, albedo)| {
+                let t = convex_transport(n);
+                let shading: f32 = t.iter().zip(light.texels()).map(|(t, l)| t * l[0]).sum();
+                (Some(albedo.map(|a| a * shading)), t)
+            })
+            .unzip();
+        Observations {
+            colour,
+            transport,
+            seconds: 0.0,
+        }
+    }
+
     /// The fitted light's brightness-weighted direction, degrees from texel `sun`'s.
     fn centre_angle_deg(fitted: &LatLong, sun: usize) -> f64 {
         let mut mean = DVec3::ZERO;
@@ -565,27 +592,19 @@ mod tests {
         // sun and a dim sky.
         let (rows, cols) = (40usize, 80usize);
         let sun = 2 * ENV_W + 12;
-        let mut truth = vec![[0.05f32; 3]; ENV_TEXELS];
-        truth[sun] = [20.0; 3];
-        let truth = LatLong::new(ENV_W, ENV_H, truth).expect("8 x 16");
-        let mut colour = Vec::new();
-        let mut transport = Vec::new();
-        for i in 0..rows {
-            for j in 0..cols {
+        let points = (0..rows).flat_map(|i| {
+            (0..cols).map(move |j| {
                 let theta = std::f64::consts::PI * (i as f64 + 0.5) / rows as f64 * 0.8;
                 let phi = std::f64::consts::TAU * j as f64 / cols as f64;
-                let n = direction(theta, phi);
-                let t = convex_transport(n);
                 let albedo = if (20..50).contains(&j) {
                     [0.12, 0.08, 0.06]
                 } else {
                     [0.6, 0.4, 0.3]
                 };
-                let shading: f32 = t.iter().zip(truth.texels()).map(|(t, l)| t * l[0]).sum();
-                colour.push(Some(albedo.map(|a| a * shading)));
-                transport.push(t);
-            }
-        }
+                (direction(theta, phi), albedo)
+            })
+        });
+        let observations = convex_observations(points, &sun_and_sky(sun));
         let mut triangles = Vec::new();
         for i in 0..rows - 1 {
             for j in 0..cols {
@@ -594,11 +613,6 @@ mod tests {
                 triangles.push([v(i, j), v(i + 1, j + 1), v(i, j + 1)]);
             }
         }
-        let observations = Observations {
-            colour,
-            transport,
-            seconds: 0.0,
-        };
         let regions = LightingFitSettings {
             region_step: 0.05,
             region_min_vertices: 50,
@@ -637,32 +651,20 @@ mod tests {
         // half reddish (skin), right half greenish; lit by one bright texel and a dim
         // uniform sky.
         let sun = 2 * ENV_W + 5;
-        let mut truth = vec![[0.05f32; 3]; ENV_TEXELS];
-        truth[sun] = [20.0; 3];
-        let truth = LatLong::new(ENV_W, ENV_H, truth).expect("8 x 16");
-        let mut colour = Vec::new();
-        let mut transport = Vec::new();
-        for i in 0..40 {
-            for j in 0..80 {
+        let points = (0..40).flat_map(|i| {
+            (0..80).map(move |j| {
                 let theta = std::f64::consts::FRAC_PI_2 * (i as f64 + 0.5) / 40.0 * 1.6;
                 let phi = std::f64::consts::TAU * (j as f64 + 0.5) / 80.0;
                 let n = direction(theta, phi);
-                let t = convex_transport(n);
                 let albedo = if n.x < 0.0 {
                     [0.6, 0.4, 0.3]
                 } else {
                     [0.3, 0.5, 0.2]
                 };
-                let shading: f32 = t.iter().zip(truth.texels()).map(|(t, l)| t * l[0]).sum();
-                colour.push(Some(albedo.map(|a| a * shading)));
-                transport.push(t);
-            }
-        }
-        let observations = Observations {
-            colour,
-            transport,
-            seconds: 0.0,
-        };
+                (n, albedo)
+            })
+        });
+        let observations = convex_observations(points, &sun_and_sky(sun));
         let (fitted, report) =
             fit_lighting(&observations, &LightingFitSettings::default(), &[]).expect("a fit");
         assert_eq!(report.material_vertices.len(), 2, "{report:?}");
@@ -678,11 +680,7 @@ mod tests {
             br.abs_diff(sr) <= 1 && bc.abs_diff(sc) <= 1,
             "brightest texel {br},{bc}, sun {sr},{sc}"
         );
-        let mut mean = DVec3::ZERO;
-        for (k, t) in fitted.texels().iter().enumerate() {
-            mean += texel_direction(k) * f64::from(lum(t)) * texel_solid_angle(k / ENV_W, ENV_H, ENV_W);
-        }
-        let angle = mean.normalize().dot(texel_direction(sun)).acos().to_degrees();
+        let angle = centre_angle_deg(&fitted, sun);
         assert!(angle < 20.0, "the fitted light's centre is {angle}° from the sun");
         // Grey world: the fit's channels have equal power.
         let [r, g, b] = fitted.integral();
