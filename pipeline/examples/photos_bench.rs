@@ -6,7 +6,7 @@
 //! bake (8-bit sRGB PSNR, foreground and whole image, at the held-aside targets)
 //! beside the ground-truth bake and the flat colour.
 //!
-//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [geometry=stereo|network] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform|truth-white] [region=STEP]`
+//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [geometry=stereo|network] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform|truth-white] [region=STEP] [refine=N] [refine_smoothness=A] [refine_truth=N]`
 //! (a synthetic capture with `synth_config.json` and targets, e.g. `nelf demo`'s
 //! `out/demo/capture`). `unnamed` reconstructs as if the capture named no lighting
 //! and scores after one exposure gain; `hull` keeps the visual hull uncarved;
@@ -14,7 +14,9 @@
 //! `mesh=truth` runs the reflectance stage on the true surface and `albedo=truth`
 //! puts the true albedo on the reconstructed one (each stage's own error);
 //! `highlight`, `texel_samples`, `bounces`, `light=uniform` rerun the reflectance
-//! stage with those settings.
+//! stage with those settings; `refine=N` refines the surface by shading for N steps and
+//! `refine_truth=N` runs N steps of it from the true surface under the named
+//! lighting and prints how far it leaves it.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -104,10 +106,39 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             Ok(nelf_pipeline::config::DEFAULT_PHOTO_LIGHT_REGION_STEP),
             str::parse,
         )?,
+        photo_refine_iterations: option("refine").map_or(Ok(0), str::parse)?,
+        photo_refine_smoothness: option("refine_smoothness")
+            .map_or(Ok(nelf_pipeline::photo::refine::DEFAULT_SMOOTHNESS), str::parse)?,
         ..Default::default()
     };
     if args.iter().any(|a| a == "depth") {
         depth_error(&photographs, &truth_mesh, config.bake.max_hull_radius_m)?;
+    }
+    if let Some(it) = option("refine_truth") {
+        // The refinement started from the true surface: how far it leaves it.
+        let light = nelf_format::conventions::project_envmap(
+            &nelf_scene::envmap::load_envmap(&capture.source_envmap_path().ok_or("needs a named lighting")?)?,
+            DMat3::IDENTITY,
+        )?;
+        let observations = nelf_pipeline::photo::reflectance::observe(
+            &truth_mesh,
+            &photographs,
+            &nelf_pipeline::photo::reflectance::ReflectanceSettings::default(),
+            1.5e-3,
+        )?;
+        let (moved, report) = nelf_pipeline::photo::refine::refine_surface(
+            &truth_mesh,
+            &observations,
+            &light,
+            &nelf_pipeline::photo::refine::RefineSettings {
+                iterations: it.parse()?,
+                smoothness: settings.photo_refine_smoothness,
+                ..Default::default()
+            },
+        )?;
+        println!("refine on the truth: {}", serde_json::to_string(&report)?);
+        geometry_error(&moved, &truth_mesh, &capture.cameras);
+        return Ok(());
     }
     let t = Instant::now();
     // `albedo=truth`: the true albedo on the reconstructed surface (geometry's own error).

@@ -228,14 +228,14 @@ impl<'a, D: DensityAt + ?Sized> Marcher<'a, D> {
         }
     }
 
-    /// Marches one ray; calls `visit(w_i, corners)` for every sample with `σ_i > 0` and
-    /// returns the final transmittance.
+    /// Marches one ray; calls `visit(w_i, corners, p_i)` for every sample with `σ_i > 0`
+    /// and returns the final transmittance.
     fn march(
         &self,
         origin: DVec3,
         dir: DVec3,
         stats: &mut MarchStats,
-        mut visit: impl FnMut(f32, &[(usize, f32)]),
+        mut visit: impl FnMut(f32, &[(usize, f32)], DVec3),
     ) -> f32 {
         let Some((t_near, t_far)) = ray_box(origin, dir, self.grid.bbox_min(), self.grid.bbox_max()) else {
             return 1.0;
@@ -282,7 +282,7 @@ impl<'a, D: DensityAt + ?Sized> Marcher<'a, D> {
             if sigma > 0.0 {
                 stats.samples_composited += 1;
                 let survive = (-sigma * self.step_m_f32).exp();
-                visit(transmittance * (1.0 - survive), &corners[..n]);
+                visit(transmittance * (1.0 - survive), &corners[..n], p);
                 transmittance *= survive;
                 if transmittance < self.min_transmittance {
                     break;
@@ -364,7 +364,33 @@ pub fn render_volume(
     camera: &PinholeCamera,
     settings: &MarchSettings,
 ) -> Result<Image, RenderError> {
-    render_volume_with(grid, density, radiance, camera, settings, Skipping::On).map(|(image, _)| image)
+    render_volume_with(grid, density, radiance, camera, settings, Skipping::On, None).map(|(image, _)| image)
+}
+
+/// A per-sample factor on the interpolated radiance: `factor(p)` at the sample's
+/// world position (the fine reflectance layer).
+pub type SampleFactor<'a> = &'a (dyn Fn(DVec3) -> [f32; 3] + Sync);
+
+/// [`render_volume`] with each sample's interpolated radiance multiplied by
+/// `factor(p)`, `p` the sample's world position.
+pub fn render_volume_factored(
+    grid: &BrickGrid,
+    density: &[f32],
+    radiance: &[[f32; 3]],
+    factor: SampleFactor<'_>,
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+) -> Result<Image, RenderError> {
+    render_volume_with(
+        grid,
+        density,
+        radiance,
+        camera,
+        settings,
+        Skipping::On,
+        Some(factor),
+    )
+    .map(|(image, _)| image)
 }
 
 /// [`render_volume`] that also counts samples evaluated and skipped.
@@ -375,7 +401,7 @@ pub fn render_volume_stats(
     camera: &PinholeCamera,
     settings: &MarchSettings,
 ) -> Result<(Image, MarchStats), RenderError> {
-    render_volume_with(grid, density, radiance, camera, settings, Skipping::On)
+    render_volume_with(grid, density, radiance, camera, settings, Skipping::On, None)
 }
 
 /// [`render_volume`] without empty-space skipping and without the single-brick fast path:
@@ -388,7 +414,7 @@ pub fn render_volume_unskipped(
     camera: &PinholeCamera,
     settings: &MarchSettings,
 ) -> Result<Image, RenderError> {
-    render_volume_with(grid, density, radiance, camera, settings, Skipping::Off).map(|(image, _)| image)
+    render_volume_with(grid, density, radiance, camera, settings, Skipping::Off, None).map(|(image, _)| image)
 }
 
 fn render_volume_with(
@@ -398,6 +424,7 @@ fn render_volume_with(
     camera: &PinholeCamera,
     settings: &MarchSettings,
     skipping: Skipping,
+    factor: Option<SampleFactor<'_>>,
 ) -> Result<(Image, MarchStats), RenderError> {
     check_inputs(grid, density, camera, settings)?;
     if radiance.len() != grid.voxel_count() {
@@ -428,12 +455,18 @@ fn render_volume_with(
                 let (mut pixel_rgb, mut pixel_alpha) = ([0.0f32; 3], 0.0f32);
                 for (origin, dir) in pixel_rays(camera, col, row, n) {
                     let mut sum = [0.0f32; 3];
-                    let t_end = marcher.march(origin, dir, &mut stats, |w, corners| {
+                    let t_end = marcher.march(origin, dir, &mut stats, |w, corners, p| {
                         let mut c = [0.0f32; 3];
                         for &(v, cw) in corners {
                             let r = voxels[v];
                             for ch in 0..3 {
                                 c[ch] += cw * r[ch + 1];
+                            }
+                        }
+                        if let Some(factor) = factor {
+                            let f = factor(p);
+                            for ch in 0..3 {
+                                c[ch] *= f[ch];
                             }
                         }
                         for ch in 0..3 {
@@ -489,7 +522,7 @@ pub fn render_features(
             let mut stats = MarchStats::default();
             for (col, pixel) in out_row.chunks_exact_mut(dim).enumerate() {
                 for (origin, dir) in pixel_rays(camera, col, row, n) {
-                    marcher.march(origin, dir, &mut stats, |w, corners| {
+                    marcher.march(origin, dir, &mut stats, |w, corners, _| {
                         for &(v, cw) in corners {
                             let weight = share * w * cw;
                             for (p, f) in pixel.iter_mut().zip(&features[v * dim..(v + 1) * dim]) {
@@ -537,7 +570,7 @@ pub fn visibility_weights(
             for row in (band..camera.height as usize).step_by(bands) {
                 for col in 0..camera.width {
                     let (origin, dir) = camera.pixel_ray(col, row as u32);
-                    marcher.march(origin, dir, &mut stats, |w, corners| {
+                    marcher.march(origin, dir, &mut stats, |w, corners, _| {
                         for &(v, cw) in corners {
                             acc[v] += w * cw;
                         }

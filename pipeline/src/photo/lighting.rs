@@ -341,7 +341,7 @@ pub fn fit_lighting(
 /// each vertex's region (`usize::MAX` for unseen vertices and regions smaller than
 /// `min_vertices`) and the kept regions' sizes. Union-find over the triangles'
 /// edges; deterministic.
-fn albedo_regions(
+pub(crate) fn albedo_regions(
     observations: &Observations,
     triangles: &[[u32; 3]],
     step: f64,
@@ -524,54 +524,9 @@ fn nonnegative_solve(system: &DMatrix<f64>, rhs: &DVector<f64>) -> Vec<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::photo::test_support::{convex_observations, sun_and_sky, texel_direction};
     use glam::DVec3;
-    use nelf_format::conventions::{col_phi_bounds, direction, row_theta_bounds, texel_solid_angle};
-
-    fn texel_direction(k: usize) -> DVec3 {
-        let (row, col) = (k / ENV_W, k % ENV_W);
-        let (t0, t1) = row_theta_bounds(row, ENV_H);
-        let (p0, p1) = col_phi_bounds(col, ENV_W);
-        direction(0.5 * (t0 + t1), 0.5 * (p0 + p1))
-    }
-
-    /// A white Lambertian surface's transport per texel at normal `n` without
-    /// shadows: `Ω_k max(0, n·d_k) / π`.
-    fn convex_transport(n: DVec3) -> Vec<f32> {
-        (0..ENV_TEXELS)
-            .map(|k| {
-                let omega = texel_solid_angle(k / ENV_W, ENV_H, ENV_W);
-                (omega * n.dot(texel_direction(k)).max(0.0) / std::f64::consts::PI) as f32
-            })
-            .collect()
-    }
-
-    /// A sun in texel `sun` (radiance 20) over a dim uniform sky (0.05), grey.
-    fn sun_and_sky(sun: usize) -> LatLong {
-        let mut texels = vec![[0.05f32; 3]; ENV_TEXELS];
-        texels[sun] = [20.0; 3];
-        LatLong::new(ENV_W, ENV_H, texels).expect("8 x 16")
-    }
-
-    /// What the views see of a convex surface (no shadows) with these normals and
-    /// albedos under the grey `light`: each point's colour and white transport.
-    fn convex_observations(
-        points: impl IntoIterator<Item = (DVec3, [f32; 3])>,
-        light: &LatLong,
-    ) -> Observations {
-        let (colour, transport) = points
-            .into_iter()
-            .map(|(n, albedo)| {
-                let t = convex_transport(n);
-                let shading: f32 = t.iter().zip(light.texels()).map(|(t, l)| t * l[0]).sum();
-                (Some(albedo.map(|a| a * shading)), t)
-            })
-            .unzip();
-        Observations {
-            colour,
-            transport,
-            seconds: 0.0,
-        }
-    }
+    use nelf_format::conventions::{direction, texel_solid_angle};
 
     /// The fitted light's brightness-weighted direction, degrees from texel `sun`'s.
     fn centre_angle_deg(fitted: &LatLong, sun: usize) -> f64 {

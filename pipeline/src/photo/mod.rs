@@ -9,7 +9,10 @@
 //!    solid (its density, `--photo-geometry network`) or carved by multi-view stereo
 //!    ([`stereo`]), as a smooth closed mesh.
 //! 2. [`lighting`]: the lighting the capture names, else fitted to the photographs'
-//!    shading on the surface (or the network's estimate).
+//!    shading on the surface (or the network's estimate); then [`refine`]: the
+//!    surface's vertices moved along their normals until `albedo × shading` under
+//!    that lighting matches the photographs' brightness, and the lighting fitted
+//!    again on the refined surface.
 //! 3. [`reflectance`]: each vertex's colour in the views that see it divided by the
 //!    shading a white copy of the surface gets under that lighting.
 //! 4. The bake: the textured surface as a ground truth
@@ -25,8 +28,11 @@ pub mod atlas;
 pub mod geometry;
 pub mod lighting;
 mod pixels;
+pub mod refine;
 pub mod reflectance;
 pub mod stereo;
+#[cfg(test)]
+mod test_support;
 
 use std::path::Path;
 use std::time::Instant;
@@ -67,6 +73,8 @@ pub struct Reconstruction {
 pub struct ReconstructionReport {
     /// Geometry.
     pub surface: SurfaceReport,
+    /// The surface's refinement by shading (`None`: not asked for).
+    pub refinement: Option<refine::RefineReport>,
     /// Lighting.
     pub lighting: LightingReport,
     /// Reflectance.
@@ -127,8 +135,34 @@ pub fn reconstruct(
         bounces: settings.photo_shading_bounces,
         ..ReflectanceSettings::default()
     };
-    let observations = observe(&mesh, capture, &reflectance_settings, spacing_m as f32)?;
-    let (light, lighting) = capture_lighting(capture, weights, settings, &observations, &mesh.triangles)?;
+    let mut observations = observe(&mesh, capture, &reflectance_settings, spacing_m as f32)?;
+    let (mut light, mut lighting) =
+        capture_lighting(capture, weights, settings, &observations, &mesh.triangles)?;
+    let mut mesh = mesh;
+    let mut refinement = None;
+    if settings.photo_refine_iterations > 0 {
+        let (refined, report) = refine::refine_surface(
+            &mesh,
+            &observations,
+            &light,
+            &refine::RefineSettings {
+                iterations: settings.photo_refine_iterations,
+                smoothness: settings.photo_refine_smoothness,
+                spacing_m,
+                // The lighting fit's regions; its default where it uses clusters.
+                region_step: if settings.photo_light_region_step > 0.0 {
+                    settings.photo_light_region_step
+                } else {
+                    crate::config::DEFAULT_PHOTO_LIGHT_REGION_STEP
+                },
+                ..refine::RefineSettings::default()
+            },
+        )?;
+        mesh = refined;
+        refinement = Some(report);
+        observations = observe(&mesh, capture, &reflectance_settings, spacing_m as f32)?;
+        (light, lighting) = capture_lighting(capture, weights, settings, &observations, &mesh.triangles)?;
+    }
     let (albedo, reflectance) = albedo_from_observations(
         &observations,
         &mesh.triangles,
@@ -148,6 +182,7 @@ pub fn reconstruct(
         lighting: light,
         report: ReconstructionReport {
             surface,
+            refinement,
             lighting,
             reflectance,
         },
@@ -312,6 +347,18 @@ mod tests {
             assert_sane("clean", &fitted, geometry);
             // The lighting is not named: it was fitted.
             assert!(!fitted.report.lighting.named && fitted.report.lighting.fit.is_some());
+            // Refined by shading: still sane, and the refinement lowered its residual.
+            let refining = PhotoSettings {
+                photo_refine_iterations: refine::DEFAULT_ITERATIONS,
+                ..settings(geometry)
+            };
+            let refined = reconstruct(&clean, None, &refining, 0.5).expect("refined");
+            assert_sane("refined", &refined, geometry);
+            let report = refined.report.refinement.expect("a refinement report");
+            assert!(
+                report.steps > 0 && report.rms_log_residual[1] < report.rms_log_residual[0],
+                "{report:?}"
+            );
 
             // Masks eroded and dilated by 4 pixels (a matting tool's soft edge
             // thresholded differently).

@@ -1,0 +1,250 @@
+//! Measures a fine reflectance layer over coarse light transport (issue 51) before it
+//! is built into the format: bakes a synthetic mesh capture at `RESOLUTION`, then
+//! renders the asset at its held-aside targets (a) as it is, (b) with each voxel's
+//! radiance divided by the albedo it was baked with (the albedo at the voxel centre's
+//! closest surface point: the mesh field's rule) and each sample multiplied by a
+//! finer albedo — the mesh's own at the sample's closest surface point (`inf`, the
+//! ceiling), or trilinear from a lattice `FACTOR` times finer than the voxels, each
+//! lattice point the mean albedo of `SUPER³` points of its cell's closest surface
+//! points. Prints whole and foreground PSNR (8-bit sRGB) against the targets.
+//!
+//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|inf ...] [super=N]`
+
+use std::collections::HashMap;
+use std::path::PathBuf;
+use std::time::Instant;
+
+use glam::{DMat3, DVec3};
+use nelf_bake::eval::load_held_aside;
+use nelf_bake::{
+    BakeConfig, CaptureLoadOptions, GroundTruth, Progress, ViewChoice, bake_capture, load_capture,
+};
+use nelf_format::grid::{BRICK_VOXELS, local_voxel_coords};
+use nelf_format::{WriteOptions, encode_asset};
+use nelf_render::march::{asset_density, render_volume_factored};
+use nelf_render::{BrickGrid, MarchSettings, project_light, render_asset, voxel_radiance};
+use nelf_scene::bvh::Bvh;
+use nelf_scene::mesh::Mesh;
+use nelf_scene::metrics::srgb8_scores;
+use rayon::prelude::*;
+
+struct Surface<'a> {
+    mesh: &'a Mesh,
+    bvh: Bvh,
+}
+
+impl Surface<'_> {
+    fn albedo(&self, p: DVec3) -> Option<[f32; 3]> {
+        let c = self.bvh.closest_point(p.as_vec3(), f32::INFINITY)?;
+        Some(self.mesh.albedo_at(c.triangle as usize, c.b1, c.b2))
+    }
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let args: Vec<String> = std::env::args().collect();
+    let dir = PathBuf::from(
+        args.get(1)
+            .ok_or("usage: detail_bench CAPTURE RESOLUTION [FACTOR|inf ...]")?,
+    );
+    let resolution: u32 = args.get(2).map_or(Ok(128), |r| r.parse())?;
+    let supersample: usize = args
+        .iter()
+        .find_map(|a| a.strip_prefix("super="))
+        .map_or(Ok(2), str::parse)?;
+    let modes: Vec<String> = args[3.min(args.len())..]
+        .iter()
+        .filter(|a| !a.contains('='))
+        .cloned()
+        .collect();
+    let capture = load_capture(&dir, &CaptureLoadOptions::default())?;
+    let truth = GroundTruth::from_synth_capture(&dir)?;
+    let mesh = truth.mesh()?;
+    let config = BakeConfig {
+        resolution,
+        view_dependence: ViewChoice::Off,
+        ..BakeConfig::default()
+    };
+    let t = Instant::now();
+    let output = bake_capture(&capture, &truth, &config, &Progress::hidden())?;
+    let bake_secs = t.elapsed().as_secs_f64();
+    let asset = &output.asset;
+    let (bytes, _) = encode_asset(asset, &WriteOptions::default())?;
+    println!(
+        "resolution {resolution}: bake {bake_secs:.1} s, {} bytes, {} bricks, voxel {:.2} mm",
+        bytes.len(),
+        asset.bricks.len(),
+        asset.grid.voxel_size_m * 1e3
+    );
+    let grid = BrickGrid::from_asset(asset)?;
+    let density = asset_density(asset);
+    let surface = Surface {
+        mesh: &mesh,
+        bvh: Bvh::new(&mesh.positions, &mesh.triangles),
+    };
+    let voxel_m = asset.grid.voxel_size_m;
+    let centre = |v: usize| {
+        asset.grid.voxel_center_m(
+            asset.bricks[v / BRICK_VOXELS],
+            local_voxel_coords(v % BRICK_VOXELS),
+        )
+    };
+    // The albedo each voxel was baked with.
+    let t = Instant::now();
+    let coarse: Vec<[f32; 3]> = (0..density.len())
+        .into_par_iter()
+        .map(|v| surface.albedo(centre(v)).unwrap_or([1.0; 3]))
+        .collect();
+    println!("coarse albedo {:.1} s", t.elapsed().as_secs_f64());
+    let description = capture.description().ok_or("no cameras.json")?;
+    let held = load_held_aside(description, &dir)?;
+    let settings = MarchSettings::default();
+    let score_all =
+        |name: &str, render: &dyn Fn(usize) -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>>| {
+            let (mut whole, mut fg) = (0.0, 0.0);
+            let mut line = Vec::new();
+            for t in 0..held.len() {
+                let image = render(t)?;
+                let (w, h) = (held.cameras[t].width, held.cameras[t].height);
+                let s = srgb8_scores(&image, &held.images[t], &held.masks[t], w, h)?;
+                whole += s.psnr / held.len() as f64;
+                fg += s.foreground_psnr / held.len() as f64;
+                line.push(format!("{:.2}", s.psnr));
+            }
+            println!(
+                "{name}: mean {whole:.2} whole / {fg:.2} fg; per target whole {}",
+                line.join(" ")
+            );
+            Ok::<(), Box<dyn std::error::Error>>(())
+        };
+    score_all("as baked", &|t| {
+        Ok(render_asset(
+            asset,
+            &held.cameras[t],
+            &held.envs[t],
+            DMat3::IDENTITY,
+            None,
+            &settings,
+        )?
+        .rgb)
+    })?;
+    let white = |t: usize| -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>> {
+        let light = project_light(&asset.pca, asset.world_from_light, &held.envs[t], DMat3::IDENTITY)?;
+        Ok(voxel_radiance(asset, &light, None)
+            .iter()
+            .zip(&coarse)
+            .map(|(r, a)| std::array::from_fn(|ch| r[ch] / a[ch].max(1e-3)))
+            .collect())
+    };
+    for mode in &modes {
+        let t0 = Instant::now();
+        if mode == "inf" {
+            let factor = |p: DVec3| surface.albedo(p).unwrap_or([1.0; 3]);
+            score_all("fine = the mesh's albedo", &|t| {
+                Ok(
+                    render_volume_factored(
+                        &grid,
+                        &density,
+                        &white(t)?,
+                        &factor,
+                        &held.cameras[t],
+                        &settings,
+                    )?
+                    .rgb,
+                )
+            })?;
+            continue;
+        }
+        let k: usize = mode.parse()?;
+        let fine_m = voxel_m / k as f64;
+        let origin = DVec3::from_array(asset.grid.bbox_min_m);
+        // Fine lattice points (fine-cell centres) inside voxels that have density.
+        let mut keys = Vec::new();
+        for (v, &sigma) in density.iter().enumerate() {
+            if sigma <= 0.0 {
+                continue;
+            }
+            let base = ((centre(v) - origin) / voxel_m - 0.5).round();
+            for l in 0..k * k * k {
+                let (a, b, c) = (l % k, (l / k) % k, l / (k * k));
+                keys.push([
+                    base.x as i64 * k as i64 + a as i64,
+                    base.y as i64 * k as i64 + b as i64,
+                    base.z as i64 * k as i64 + c as i64,
+                ]);
+            }
+        }
+        let s = supersample.max(1);
+        let values: Vec<[f32; 3]> = keys
+            .par_iter()
+            .map(|key| {
+                let mut sum = [0.0f32; 3];
+                for q in 0..s * s * s {
+                    let o = DVec3::new((q % s) as f64, ((q / s) % s) as f64, (q / (s * s)) as f64);
+                    let p = origin
+                        + (DVec3::new(key[0] as f64, key[1] as f64, key[2] as f64) + (o + 0.5) / s as f64)
+                            * fine_m;
+                    let a = surface.albedo(p).unwrap_or([1.0; 3]);
+                    for ch in 0..3 {
+                        sum[ch] += a[ch] / (s * s * s) as f32;
+                    }
+                }
+                sum
+            })
+            .collect();
+        let lattice: HashMap<[i64; 3], [f32; 3]> = keys.into_iter().zip(values).collect();
+        println!(
+            "factor {k}: {} fine points ({:.1} MB at 3 bytes), {:.1} s",
+            lattice.len(),
+            lattice.len() as f64 * 3.0 / 1e6,
+            t0.elapsed().as_secs_f64()
+        );
+        let coarse_at = |p: DVec3| {
+            let mut corners = [(0usize, 0.0f32); 8];
+            let n = grid.trilinear(p, &mut corners);
+            let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
+            for &(v, w) in &corners[..n] {
+                for ch in 0..3 {
+                    sum[ch] += w * coarse[v][ch];
+                }
+                wsum += w;
+            }
+            sum.map(|x| x / wsum.max(1e-6))
+        };
+        let factor = |p: DVec3| {
+            let u = (p - origin) / fine_m - 0.5;
+            let base = u.floor();
+            let f = (u - base).as_vec3();
+            let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
+            for corner in 0..8 {
+                let d = [corner & 1, (corner >> 1) & 1, corner >> 2];
+                let key = [
+                    base.x as i64 + d[0] as i64,
+                    base.y as i64 + d[1] as i64,
+                    base.z as i64 + d[2] as i64,
+                ];
+                let w = (0..3)
+                    .map(|a| if d[a] == 1 { f[a] } else { 1.0 - f[a] })
+                    .product::<f32>();
+                if let Some(v) = lattice.get(&key) {
+                    for ch in 0..3 {
+                        sum[ch] += w * v[ch];
+                    }
+                    wsum += w;
+                }
+            }
+            if wsum > 1e-6 {
+                sum.map(|x| x / wsum)
+            } else {
+                coarse_at(p)
+            }
+        };
+        score_all(&format!("fine lattice ×{k}, {s}³ samples per point"), &|t| {
+            Ok(
+                render_volume_factored(&grid, &density, &white(t)?, &factor, &held.cameras[t], &settings)?
+                    .rgb,
+            )
+        })?;
+        println!("  ({:.1} s)", t0.elapsed().as_secs_f64());
+    }
+    Ok(())
+}
