@@ -6,9 +6,10 @@
 //! finer albedo — the mesh's own at the sample's closest surface point (`inf`, the
 //! ceiling), or trilinear from a lattice `FACTOR` times finer than the voxels, each
 //! lattice point the mean albedo of `SUPER³` points of its cell's closest surface
-//! points. Prints whole and foreground PSNR (8-bit sRGB) against the targets.
+//! points. Prints whole and foreground PSNR (8-bit sRGB) against the targets and how
+//! the squared error splits between the inside, the silhouette's edge and the outside.
 //!
-//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|inf ...] [super=N]`
+//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|hitFACTOR|inf|hit ...] [super=N] [grid=N] [errors=DIR]`
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -24,8 +25,13 @@ use nelf_format::{WriteOptions, encode_asset};
 use nelf_render::march::{asset_density, render_volume_factored};
 use nelf_render::{BrickGrid, MarchSettings, project_light, render_asset, voxel_radiance};
 use nelf_scene::bvh::Bvh;
+use nelf_scene::image_io::write_png_srgb;
 use nelf_scene::mesh::Mesh;
 use nelf_scene::metrics::srgb8_scores;
+use nelf_scene::srgb::{linear_to_srgb8, srgb_to_linear};
+
+/// Pixels from the true silhouette counted as its edge.
+const EDGE_PX: i64 = 2;
 use rayon::prelude::*;
 
 struct Surface<'a> {
@@ -44,7 +50,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let args: Vec<String> = std::env::args().collect();
     let dir = PathBuf::from(
         args.get(1)
-            .ok_or("usage: detail_bench CAPTURE RESOLUTION [FACTOR|inf ...]")?,
+            .ok_or("usage: detail_bench CAPTURE RESOLUTION [FACTOR|hitFACTOR|inf|hit ...]")?,
     );
     let resolution: u32 = args.get(2).map_or(Ok(128), |r| r.parse())?;
     let supersample: usize = args
@@ -56,6 +62,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .filter(|a| !a.contains('='))
         .cloned()
         .collect();
+    // `errors=DIR`: truth | render | error strips per target and variant.
+    let error_dir = args
+        .iter()
+        .find_map(|a| a.strip_prefix("errors="))
+        .map(PathBuf::from);
     let capture = load_capture(&dir, &CaptureLoadOptions::default())?;
     let truth = GroundTruth::from_synth_capture(&dir)?;
     let mesh = truth.mesh()?;
@@ -97,22 +108,81 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("coarse albedo {:.1} s", t.elapsed().as_secs_f64());
     let description = capture.description().ok_or("no cameras.json")?;
     let held = load_held_aside(description, &dir)?;
-    let settings = MarchSettings::default();
+    // Rays per pixel along each axis (`grid=N`; the targets are antialiased with 4).
+    let settings = MarchSettings {
+        pixel_grid: args
+            .iter()
+            .find_map(|a| a.strip_prefix("grid="))
+            .map_or(Ok(nelf_bake::eval::EVAL_PIXEL_GRID), str::parse)?,
+        ..MarchSettings::default()
+    };
     let score_all =
         |name: &str, render: &dyn Fn(usize) -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>>| {
             let (mut whole, mut fg) = (0.0, 0.0);
             let mut line = Vec::new();
+            // Squared 8-bit error inside the true mask (farther than EDGE_PX from its
+            // silhouette), within EDGE_PX of the silhouette, and outside.
+            let mut parts = [0.0f64; 3];
             for t in 0..held.len() {
                 let image = render(t)?;
                 let (w, h) = (held.cameras[t].width, held.cameras[t].height);
                 let s = srgb8_scores(&image, &held.images[t], &held.masks[t], w, h)?;
+                if let Some(dir) = &error_dir {
+                    // Truth | render | |error| × 4, in sRGB.
+                    let (wu, hu) = (w as usize, h as usize);
+                    let mut strip = vec![[0.0f32; 3]; 3 * wu * hu];
+                    for (i, (a, b)) in image.iter().zip(&held.images[t]).enumerate() {
+                        let (x, y) = (i % wu, i / wu);
+                        let row = y * 3 * wu;
+                        strip[row + x] = *b;
+                        strip[row + wu + x] = *a;
+                        strip[row + 2 * wu + x] = std::array::from_fn(|ch| {
+                            let d = f32::from(linear_to_srgb8(a[ch])) - f32::from(linear_to_srgb8(b[ch]));
+                            srgb_to_linear((d.abs() * 4.0 / 255.0).min(1.0))
+                        });
+                    }
+                    std::fs::create_dir_all(dir)?;
+                    let tag: String = name
+                        .chars()
+                        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                        .collect();
+                    write_png_srgb(dir.join(format!("{tag}_{t}.png")), 3 * w, h, &strip, 0.0)?;
+                }
                 whole += s.psnr / held.len() as f64;
                 fg += s.foreground_psnr / held.len() as f64;
                 line.push(format!("{:.2}", s.psnr));
+                let inside = |x: i64, y: i64| {
+                    x >= 0
+                        && y >= 0
+                        && x < i64::from(w)
+                        && y < i64::from(h)
+                        && held.masks[t][(y * i64::from(w) + x) as usize] > 0.5
+                };
+                for (i, (a, b)) in image.iter().zip(&held.images[t]).enumerate() {
+                    let (x, y) = ((i % w as usize) as i64, (i / w as usize) as i64);
+                    let here = inside(x, y);
+                    let near_edge = (-EDGE_PX..=EDGE_PX)
+                        .any(|dy| (-EDGE_PX..=EDGE_PX).any(|dx| inside(x + dx, y + dy) != here));
+                    let part = if near_edge {
+                        1
+                    } else if here {
+                        0
+                    } else {
+                        2
+                    };
+                    for ch in 0..3 {
+                        let d = f64::from(linear_to_srgb8(a[ch])) - f64::from(linear_to_srgb8(b[ch]));
+                        parts[part] += d * d;
+                    }
+                }
             }
+            let total: f64 = parts.iter().sum::<f64>().max(1e-30);
             println!(
-                "{name}: mean {whole:.2} whole / {fg:.2} fg; per target whole {}",
-                line.join(" ")
+                "{name}: mean {whole:.2} whole / {fg:.2} fg; per target whole {}; squared error inside / within {EDGE_PX} px of the silhouette / outside: {:.0} / {:.0} / {:.0} %",
+                line.join(" "),
+                100.0 * parts[0] / total,
+                100.0 * parts[1] / total,
+                100.0 * parts[2] / total
             );
             Ok::<(), Box<dyn std::error::Error>>(())
         };
@@ -137,6 +207,32 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     };
     for mode in &modes {
         let t0 = Instant::now();
+        if mode == "hit" {
+            // The albedo where the camera's ray through the sample first meets the
+            // mesh: the fine layer on a perfectly sharp surface.
+            score_all("fine = the mesh's albedo at the ray's hit", &|t| {
+                let eye = held.cameras[t].centre();
+                let factor = |p: DVec3| {
+                    let dir = (p - eye).as_vec3();
+                    surface.bvh.closest_hit(eye.as_vec3(), dir, 0.0, 2.0).map_or_else(
+                        || surface.albedo(p).unwrap_or([1.0; 3]),
+                        |h| mesh.albedo_at(h.triangle as usize, h.b1, h.b2),
+                    )
+                };
+                Ok(
+                    render_volume_factored(
+                        &grid,
+                        &density,
+                        &white(t)?,
+                        &factor,
+                        &held.cameras[t],
+                        &settings,
+                    )?
+                    .rgb,
+                )
+            })?;
+            continue;
+        }
         if mode == "inf" {
             let factor = |p: DVec3| surface.albedo(p).unwrap_or([1.0; 3]);
             score_all("fine = the mesh's albedo", &|t| {
@@ -154,7 +250,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             })?;
             continue;
         }
-        let k: usize = mode.parse()?;
+        // `hitN`: the lattice read where the camera's ray meets the mesh.
+        let (at_hit, k) = match mode.strip_prefix("hit") {
+            Some(k) => (true, k.parse::<usize>()?),
+            None => (false, mode.parse::<usize>()?),
+        };
         let fine_m = voxel_m / k as f64;
         let origin = DVec3::from_array(asset.grid.bbox_min_m);
         // Fine lattice points (fine-cell centres) inside voxels that have density.
@@ -238,12 +338,30 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 coarse_at(p)
             }
         };
-        score_all(&format!("fine lattice ×{k}, {s}³ samples per point"), &|t| {
-            Ok(
-                render_volume_factored(&grid, &density, &white(t)?, &factor, &held.cameras[t], &settings)?
-                    .rgb,
-            )
-        })?;
+        let at = if at_hit {
+            "at the ray's hit"
+        } else {
+            "at each sample"
+        };
+        score_all(
+            &format!("fine lattice ×{k}, {s}³ samples per point, read {at}"),
+            &|t| {
+                let eye = held.cameras[t].centre();
+                let read = |p: DVec3| {
+                    if !at_hit {
+                        return factor(p);
+                    }
+                    surface
+                        .bvh
+                        .closest_hit(eye.as_vec3(), (p - eye).as_vec3(), 0.0, 2.0)
+                        .map_or_else(|| factor(p), |h| factor(eye + (p - eye) * f64::from(h.t)))
+                };
+                Ok(
+                    render_volume_factored(&grid, &density, &white(t)?, &read, &held.cameras[t], &settings)?
+                        .rgb,
+                )
+            },
+        )?;
         println!("  ({:.1} s)", t0.elapsed().as_secs_f64());
     }
     Ok(())

@@ -157,6 +157,15 @@ pub struct SynthConfig {
     /// Seed of the path tracer.
     #[arg(long, default_value_t = 0)]
     pub trace_seed: u64,
+    /// Colour rays per pixel along each axis (1: the pixel centre, which aliases
+    /// texture finer than a pixel; a camera integrates over the pixel, as 4 does).
+    #[arg(long, default_value_t = 1)]
+    #[serde(default = "one")]
+    pub pixel_grid: u32,
+}
+
+fn one() -> u32 {
+    1
 }
 
 impl Default for SynthConfig {
@@ -187,6 +196,7 @@ impl Default for SynthConfig {
             indirect_samples: 128,
             specular_weight: Specular::MILD_SHEEN.weight,
             trace_seed: 0,
+            pixel_grid: 1,
         }
     }
 }
@@ -242,6 +252,9 @@ impl SynthConfig {
                 self.specular_weight
             ));
         }
+        if !(1..=16).contains(&self.pixel_grid) {
+            return bad(format!("--pixel-grid {} must be in 1..=16", self.pixel_grid));
+        }
         Ok(())
     }
 
@@ -256,6 +269,7 @@ impl SynthConfig {
                 ..Specular::MILD_SHEEN
             }),
             seed: self.trace_seed,
+            pixel_grid: self.pixel_grid,
             ..TraceSettings::default()
         }
     }

@@ -21,6 +21,16 @@ pub fn texture_atlas(mesh: &Mesh, cell_texels: usize) -> Mesh {
     if matches!(mesh.albedo, Albedo::Texture { .. }) {
         return mesh.clone();
     }
+    texture_atlas_from(mesh, cell_texels, |t, b1, b2| mesh.albedo_at(t, b1, b2))
+}
+
+/// `mesh` with an atlas texture (module docs) whose texels take `albedo(t, b1, b2)`
+/// at their centres' barycentric coordinates on triangle `t`.
+pub fn texture_atlas_from(
+    mesh: &Mesh,
+    cell_texels: usize,
+    albedo: impl Fn(usize, f32, f32) -> [f32; 3],
+) -> Mesh {
     let cell = cell_texels.max(4);
     let margin = 1.0_f32;
     let leg = cell as f32 - 2.0 * margin;
@@ -53,7 +63,7 @@ pub fn texture_atlas(mesh: &Mesh, cell_texels: usize) -> Mesh {
                     b2 /= sum;
                 }
                 let y_top = height - 1 - y_up;
-                texels[y_top * width + x] = mesh.albedo_at(t, b1, b2);
+                texels[y_top * width + x] = albedo(t, b1, b2);
             }
         }
     }

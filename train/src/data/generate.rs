@@ -313,6 +313,7 @@ pub fn head_synth_config(
         indirect_samples: config.indirect_samples,
         specular_weight: spec.specular_weight,
         trace_seed: spec.trace_seed,
+        pixel_grid: 1,
     })
 }
 
