@@ -9,7 +9,7 @@
 //! points. Prints whole and foreground PSNR (8-bit sRGB) against the targets and how
 //! the squared error splits between the inside, the silhouette's edge and the outside.
 //!
-//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|hitFACTOR|inf|hit ...] [super=N] [grid=N] [errors=DIR]`
+//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|hitFACTOR|inf|hit ...] [super=N] [grid=N] [errors=DIR] [coverage=truth]`
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -22,7 +22,7 @@ use nelf_bake::{
 };
 use nelf_format::grid::{BRICK_VOXELS, local_voxel_coords};
 use nelf_format::{WriteOptions, encode_asset};
-use nelf_render::march::{asset_density, render_volume_factored};
+use nelf_render::march::{Image, asset_density, render_volume_factored};
 use nelf_render::{BrickGrid, MarchSettings, project_light, render_asset, voxel_radiance};
 use nelf_scene::bvh::Bvh;
 use nelf_scene::image_io::write_png_srgb;
@@ -63,6 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .cloned()
         .collect();
     // `errors=DIR`: truth | render | error strips per target and variant.
+    let true_coverage = args.iter().any(|a| a == "coverage=truth");
     let error_dir = args
         .iter()
         .find_map(|a| a.strip_prefix("errors="))
@@ -116,76 +117,88 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .map_or(Ok(nelf_bake::eval::EVAL_PIXEL_GRID), str::parse)?,
         ..MarchSettings::default()
     };
-    let score_all =
-        |name: &str, render: &dyn Fn(usize) -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>>| {
-            let (mut whole, mut fg) = (0.0, 0.0);
-            let mut line = Vec::new();
-            // Squared 8-bit error inside the true mask (farther than EDGE_PX from its
-            // silhouette), within EDGE_PX of the silhouette, and outside.
-            let mut parts = [0.0f64; 3];
-            for t in 0..held.len() {
-                let image = render(t)?;
-                let (w, h) = (held.cameras[t].width, held.cameras[t].height);
-                let s = srgb8_scores(&image, &held.images[t], &held.masks[t], w, h)?;
-                if let Some(dir) = &error_dir {
-                    // Truth | render | |error| × 4, in sRGB.
-                    let (wu, hu) = (w as usize, h as usize);
-                    let mut strip = vec![[0.0f32; 3]; 3 * wu * hu];
-                    for (i, (a, b)) in image.iter().zip(&held.images[t]).enumerate() {
-                        let (x, y) = (i % wu, i / wu);
-                        let row = y * 3 * wu;
-                        strip[row + x] = *b;
-                        strip[row + wu + x] = *a;
-                        strip[row + 2 * wu + x] = std::array::from_fn(|ch| {
-                            let d = f32::from(linear_to_srgb8(a[ch])) - f32::from(linear_to_srgb8(b[ch]));
-                            srgb_to_linear((d.abs() * 4.0 / 255.0).min(1.0))
-                        });
-                    }
-                    std::fs::create_dir_all(dir)?;
-                    let tag: String = name
-                        .chars()
-                        .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
-                        .collect();
-                    write_png_srgb(dir.join(format!("{tag}_{t}.png")), 3 * w, h, &strip, 0.0)?;
-                }
-                whole += s.psnr / held.len() as f64;
-                fg += s.foreground_psnr / held.len() as f64;
-                line.push(format!("{:.2}", s.psnr));
-                let inside = |x: i64, y: i64| {
-                    x >= 0
-                        && y >= 0
-                        && x < i64::from(w)
-                        && y < i64::from(h)
-                        && held.masks[t][(y * i64::from(w) + x) as usize] > 0.5
-                };
+    let score_all = |name: &str, render: &dyn Fn(usize) -> Result<Image, Box<dyn std::error::Error>>| {
+        let (mut whole, mut fg) = (0.0, 0.0);
+        let mut line = Vec::new();
+        // Squared 8-bit error inside the true mask (farther than EDGE_PX from its
+        // silhouette), within EDGE_PX of the silhouette, and outside.
+        let mut parts = [0.0f64; 3];
+        for t in 0..held.len() {
+            let rendered = render(t)?;
+            // `coverage=truth`: the render's colour over the true coverage
+            // (silhouettes exact; what is left is colour).
+            let image: Vec<[f32; 3]> = if true_coverage {
+                rendered
+                    .rgb
+                    .iter()
+                    .zip(&rendered.alpha)
+                    .zip(&held.masks[t])
+                    .map(|((c, &a), &m)| if a > 1e-3 { c.map(|v| v / a * m) } else { [0.0; 3] })
+                    .collect()
+            } else {
+                rendered.rgb
+            };
+            let (w, h) = (held.cameras[t].width, held.cameras[t].height);
+            let s = srgb8_scores(&image, &held.images[t], &held.masks[t], w, h)?;
+            if let Some(dir) = &error_dir {
+                // Truth | render | |error| × 4, in sRGB.
+                let (wu, hu) = (w as usize, h as usize);
+                let mut strip = vec![[0.0f32; 3]; 3 * wu * hu];
                 for (i, (a, b)) in image.iter().zip(&held.images[t]).enumerate() {
-                    let (x, y) = ((i % w as usize) as i64, (i / w as usize) as i64);
-                    let here = inside(x, y);
-                    let near_edge = (-EDGE_PX..=EDGE_PX)
-                        .any(|dy| (-EDGE_PX..=EDGE_PX).any(|dx| inside(x + dx, y + dy) != here));
-                    let part = if near_edge {
-                        1
-                    } else if here {
-                        0
-                    } else {
-                        2
-                    };
-                    for ch in 0..3 {
-                        let d = f64::from(linear_to_srgb8(a[ch])) - f64::from(linear_to_srgb8(b[ch]));
-                        parts[part] += d * d;
-                    }
+                    let (x, y) = (i % wu, i / wu);
+                    let row = y * 3 * wu;
+                    strip[row + x] = *b;
+                    strip[row + wu + x] = *a;
+                    strip[row + 2 * wu + x] = std::array::from_fn(|ch| {
+                        let d = f32::from(linear_to_srgb8(a[ch])) - f32::from(linear_to_srgb8(b[ch]));
+                        srgb_to_linear((d.abs() * 4.0 / 255.0).min(1.0))
+                    });
+                }
+                std::fs::create_dir_all(dir)?;
+                let tag: String = name
+                    .chars()
+                    .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
+                    .collect();
+                write_png_srgb(dir.join(format!("{tag}_{t}.png")), 3 * w, h, &strip, 0.0)?;
+            }
+            whole += s.psnr / held.len() as f64;
+            fg += s.foreground_psnr / held.len() as f64;
+            line.push(format!("{:.2}", s.psnr));
+            let inside = |x: i64, y: i64| {
+                x >= 0
+                    && y >= 0
+                    && x < i64::from(w)
+                    && y < i64::from(h)
+                    && held.masks[t][(y * i64::from(w) + x) as usize] > 0.5
+            };
+            for (i, (a, b)) in image.iter().zip(&held.images[t]).enumerate() {
+                let (x, y) = ((i % w as usize) as i64, (i / w as usize) as i64);
+                let here = inside(x, y);
+                let near_edge = (-EDGE_PX..=EDGE_PX)
+                    .any(|dy| (-EDGE_PX..=EDGE_PX).any(|dx| inside(x + dx, y + dy) != here));
+                let part = if near_edge {
+                    1
+                } else if here {
+                    0
+                } else {
+                    2
+                };
+                for ch in 0..3 {
+                    let d = f64::from(linear_to_srgb8(a[ch])) - f64::from(linear_to_srgb8(b[ch]));
+                    parts[part] += d * d;
                 }
             }
-            let total: f64 = parts.iter().sum::<f64>().max(1e-30);
-            println!(
-                "{name}: mean {whole:.2} whole / {fg:.2} fg; per target whole {}; squared error inside / within {EDGE_PX} px of the silhouette / outside: {:.0} / {:.0} / {:.0} %",
-                line.join(" "),
-                100.0 * parts[0] / total,
-                100.0 * parts[1] / total,
-                100.0 * parts[2] / total
-            );
-            Ok::<(), Box<dyn std::error::Error>>(())
-        };
+        }
+        let total: f64 = parts.iter().sum::<f64>().max(1e-30);
+        println!(
+            "{name}: mean {whole:.2} whole / {fg:.2} fg; per target whole {}; squared error inside / within {EDGE_PX} px of the silhouette / outside: {:.0} / {:.0} / {:.0} %",
+            line.join(" "),
+            100.0 * parts[0] / total,
+            100.0 * parts[1] / total,
+            100.0 * parts[2] / total
+        );
+        Ok::<(), Box<dyn std::error::Error>>(())
+    };
     score_all("as baked", &|t| {
         Ok(render_asset(
             asset,
@@ -194,8 +207,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             DMat3::IDENTITY,
             None,
             &settings,
-        )?
-        .rgb)
+        )?)
     })?;
     let white = |t: usize| -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>> {
         let light = project_light(&asset.pca, asset.world_from_light, &held.envs[t], DMat3::IDENTITY)?;
@@ -204,6 +216,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .zip(&coarse)
             .map(|(r, a)| std::array::from_fn(|ch| r[ch] / a[ch].max(1e-3)))
             .collect())
+    };
+    // The white radiance × `factor` at every sample, at target `t`.
+    let factored = |t: usize,
+                    factor: &(dyn Fn(DVec3) -> [f32; 3] + Sync)|
+     -> Result<Image, Box<dyn std::error::Error>> {
+        Ok(render_volume_factored(
+            &grid,
+            &density,
+            &white(t)?,
+            factor,
+            &held.cameras[t],
+            &settings,
+        )?)
     };
     for mode in &modes {
         let t0 = Instant::now();
@@ -219,35 +244,13 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         |h| mesh.albedo_at(h.triangle as usize, h.b1, h.b2),
                     )
                 };
-                Ok(
-                    render_volume_factored(
-                        &grid,
-                        &density,
-                        &white(t)?,
-                        &factor,
-                        &held.cameras[t],
-                        &settings,
-                    )?
-                    .rgb,
-                )
+                factored(t, &factor)
             })?;
             continue;
         }
         if mode == "inf" {
             let factor = |p: DVec3| surface.albedo(p).unwrap_or([1.0; 3]);
-            score_all("fine = the mesh's albedo", &|t| {
-                Ok(
-                    render_volume_factored(
-                        &grid,
-                        &density,
-                        &white(t)?,
-                        &factor,
-                        &held.cameras[t],
-                        &settings,
-                    )?
-                    .rgb,
-                )
-            })?;
+            score_all("fine = the mesh's albedo", &|t| factored(t, &factor))?;
             continue;
         }
         // `hitN`: the lattice read where the camera's ray meets the mesh.
@@ -356,10 +359,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                         .closest_hit(eye.as_vec3(), (p - eye).as_vec3(), 0.0, 2.0)
                         .map_or_else(|| factor(p), |h| factor(eye + (p - eye) * f64::from(h.t)))
                 };
-                Ok(
-                    render_volume_factored(&grid, &density, &white(t)?, &read, &held.cameras[t], &settings)?
-                        .rgb,
-                )
+                factored(t, &read)
             },
         )?;
         println!("  ({:.1} s)", t0.elapsed().as_secs_f64());
