@@ -106,8 +106,13 @@ fn default_photo_light_region_step() -> f64 {
     DEFAULT_PHOTO_LIGHT_REGION_STEP
 }
 
+/// Default `--photo-refine-smoothness` (chosen on heads 1 and 6 of the 21-head
+/// protocol: 0.3–3 bend the normals to explain albedo texture, 100–300 move too
+/// little).
+pub const DEFAULT_PHOTO_REFINE_SMOOTHNESS: f64 = 30.0;
+
 fn default_photo_refine_smoothness() -> f64 {
-    crate::photo::refine::DEFAULT_SMOOTHNESS
+    DEFAULT_PHOTO_REFINE_SMOOTHNESS
 }
 
 fn default_photo_spacing_mm() -> f64 {
@@ -196,7 +201,7 @@ pub struct PhotoSettings {
     #[serde(default)]
     pub photo_refine_iterations: usize,
     /// Photographs: weight of the refinement's displacement roughness.
-    #[arg(long, default_value_t = crate::photo::refine::DEFAULT_SMOOTHNESS)]
+    #[arg(long, default_value_t = DEFAULT_PHOTO_REFINE_SMOOTHNESS)]
     #[serde(default = "default_photo_refine_smoothness")]
     pub photo_refine_smoothness: f64,
 }
@@ -243,7 +248,7 @@ impl Default for PhotoSettings {
             photo_geometry: PhotoGeometry::default(),
             photo_light_region_step: DEFAULT_PHOTO_LIGHT_REGION_STEP,
             photo_refine_iterations: 0,
-            photo_refine_smoothness: crate::photo::refine::DEFAULT_SMOOTHNESS,
+            photo_refine_smoothness: DEFAULT_PHOTO_REFINE_SMOOTHNESS,
         }
     }
 }

@@ -40,10 +40,8 @@ use crate::error::{Result, invalid};
 use crate::photo::lighting::albedo_regions;
 use crate::photo::reflectance::Observations;
 
-/// Default [`RefineSettings::smoothness`] (chosen on heads 1 and 6 of the 21-head
-/// protocol: 0.3–3 bend the normals to explain albedo texture, 100–300 move too
-/// little).
-pub const DEFAULT_SMOOTHNESS: f64 = 30.0;
+/// Default [`RefineSettings::smoothness`]: `--photo-refine-smoothness`'s.
+pub const DEFAULT_SMOOTHNESS: f64 = crate::config::DEFAULT_PHOTO_REFINE_SMOOTHNESS;
 
 /// Default [`RefineSettings::iterations`].
 pub const DEFAULT_ITERATIONS: usize = 300;
