@@ -22,9 +22,9 @@
 //!
 //! `Σ_v r_v² / N + α Σ_v (u_v − ū_v)² / N`, `u = d / spacing`, `ū` the neighbours' mean,
 //!
-//! is descended with finite-difference gradients (a vertex moves its own normal and
-//! its neighbours') and a step that grows while the energy falls and halves when it
-//! rises; `|d|` is bounded.
+//! is descended with analytic gradients (a vertex moves its own normal and its
+//! neighbours'), each step clipped per vertex and growing while the energy falls,
+//! halving when it rises; `|d|` is bounded.
 
 use std::time::Instant;
 
@@ -84,7 +84,7 @@ pub struct RefineReport {
     pub vertices: usize,
     /// Root-mean-square of `r` (log brightness) before and after.
     pub rms_log_residual: [f64; 2],
-    /// Mean and largest `|d|`, millimetres.
+    /// Mean `|d|`, millimetres.
     pub mean_displacement_mm: f64,
     /// Largest `|d|`, millimetres.
     pub max_displacement_mm: f64,
@@ -133,6 +133,10 @@ fn irradiance_harmonics(light: &LatLong) -> [f64; VIEW_HARMONICS] {
     coefficients
 }
 
+/// The constant harmonic `1/(2√π)`: `e[0] · Y0` is the mean radiance a white
+/// surface reflects.
+const Y0: f64 = 0.282_094_8;
+
 fn irradiance(e: &[f64; VIEW_HARMONICS], n: DVec3) -> f64 {
     irradiance_and_gradient(e, n).0
 }
@@ -140,12 +144,11 @@ fn irradiance(e: &[f64; VIEW_HARMONICS], n: DVec3) -> f64 {
 /// `E(n)` and its gradient as a polynomial in `n = (x, y, z)` (unit), with the
 /// harmonics of [`view_harmonics`].
 fn irradiance_and_gradient(e: &[f64; VIEW_HARMONICS], n: DVec3) -> (f64, DVec3) {
-    const C0: f64 = 0.282_094_8;
     const A: f64 = 0.488_602_5;
     const B: f64 = 1.092_548_4;
     const C: f64 = 0.315_391_57;
     let (x, y, z) = (n.x, n.y, n.z);
-    let value = e[0] * C0
+    let value = e[0] * Y0
         + A * (e[1] * y + e[2] * z + e[3] * x)
         + B * (e[4] * x * y + e[5] * y * z + e[7] * x * z + 0.5 * e[8] * (x * x - y * y))
         + C * e[6] * (3.0 * z * z - 1.0);
@@ -186,28 +189,16 @@ impl Topology {
     }
 }
 
-/// The state the descent changes: displacements (in spacings) and the positions they give.
-struct Surface<'a> {
-    start: &'a [Vec3],
-    normals0: &'a [DVec3],
-    triangles: &'a [[u32; 3]],
-    topology: &'a Topology,
-    spacing_m: f64,
-}
-
-impl Surface<'_> {
-    fn position(&self, u: &[f64], v: usize) -> DVec3 {
-        self.start[v].as_dvec3() + self.normals0[v] * (u[v] * self.spacing_m)
-    }
-
-    /// Vertex `v`'s unit normal (area-weighted, as [`Mesh::vertex_normals`]).
-    fn normal(&self, u: &[f64], v: usize) -> DVec3 {
-        let mut n = DVec3::ZERO;
-        for &t in &self.topology.triangles_of[v] {
-            let [a, b, c] = self.triangles[t as usize].map(|i| self.position(u, i as usize));
-            n += (b - a).cross(c - a);
+impl Topology {
+    /// Vertex `v`'s area-weighted normal, unnormalised (the sum of its triangles'
+    /// edge cross products, as [`Mesh::vertex_normals`] before it normalises).
+    fn area_normal(&self, triangles: &[[u32; 3]], positions: &[DVec3], v: usize) -> DVec3 {
+        let mut m = DVec3::ZERO;
+        for &t in &self.triangles_of[v] {
+            let [a, b, c] = triangles[t as usize].map(|i| positions[i as usize]);
+            m += (b - a).cross(c - a);
         }
-        n.normalize_or_zero()
+        m
     }
 }
 
@@ -239,7 +230,7 @@ pub fn refine_surface(
     // Per data vertex: ln V and ln c; the rest take no part.
     let mut log_visibility = vec![f64::NAN; n];
     let mut log_colour = vec![f64::NAN; n];
-    let mean_e = e[0] * 0.282_094_8;
+    let mean_e = e[0] * Y0;
     for v in 0..n {
         let Some(c) = observations.colour[v] else { continue };
         if region[v] == usize::MAX || normals0[v] == DVec3::ZERO {
@@ -273,24 +264,26 @@ pub fn refine_surface(
         return Ok((mesh.clone(), report));
     }
     let topology = Topology::new(n, &mesh.triangles);
-    let surface = Surface {
-        start: &mesh.positions,
-        normals0: &normals0,
-        triangles: &mesh.triangles,
-        topology: &topology,
-        spacing_m: settings.spacing_m,
+    // The vertices displaced by `u` spacings along their starting normals.
+    let positions_at = |u: &[f64]| -> Vec<DVec3> {
+        (0..n)
+            .map(|v| mesh.positions[v].as_dvec3() + normals0[v] * (u[v] * settings.spacing_m))
+            .collect()
     };
     let groups = sizes.len();
     // ln(V E(n)) − ln c at vertex v.
-    let log_error = |u: &[f64], v: usize| {
-        let normal = surface.normal(u, v);
+    let log_error = |positions: &[DVec3], v: usize| {
+        let normal = topology
+            .area_normal(&mesh.triangles, positions, v)
+            .normalize_or_zero();
         log_visibility[v] + irradiance(&e, normal).max(1e-4 * mean_e).ln() - log_colour[v]
     };
     let region_means = |u: &[f64]| {
+        let positions = positions_at(u);
         let mut sum = vec![(0.0f64, 0usize); groups];
         for &v in &data {
             let s = &mut sum[region[v]];
-            s.0 += log_error(u, v);
+            s.0 += log_error(&positions, v);
             s.1 += 1;
         }
         sum.iter()
@@ -305,9 +298,10 @@ pub fn refine_surface(
         u[v] - nb.iter().map(|&w| u[w as usize]).sum::<f64>() / nb.len() as f64
     };
     let energy = |u: &[f64], log_albedo: &[f64]| {
+        let positions = positions_at(u);
         let data_term: f64 = data
             .par_iter()
-            .map(|&v| (log_albedo[region[v]] + log_error(u, v)).powi(2))
+            .map(|&v| (log_albedo[region[v]] + log_error(&positions, v)).powi(2))
             .sum::<f64>()
             / data.len() as f64;
         let rough: f64 = (0..n)
@@ -329,18 +323,14 @@ pub fn refine_surface(
         // unnormalised normal (Σ of its triangles' edge cross products), then
         // ∂m_v/∂u_k = s Σ_{t ∋ v, k} n0_k × (x_next(k) − x_prev(k)). Roughness
         // analytically.
-        let positions: Vec<DVec3> = (0..n).map(|v| surface.position(&u, v)).collect();
+        let positions = positions_at(&u);
         let g_data: Vec<DVec3> = (0..n)
             .into_par_iter()
             .map(|v| {
                 if !is_data[v] {
                     return DVec3::ZERO;
                 }
-                let mut m = DVec3::ZERO;
-                for &t in &topology.triangles_of[v] {
-                    let [a, b, c] = mesh.triangles[t as usize].map(|i| positions[i as usize]);
-                    m += (b - a).cross(c - a);
-                }
+                let m = topology.area_normal(&mesh.triangles, &positions, v);
                 let length = m.length();
                 if length <= 0.0 {
                     return DVec3::ZERO;
@@ -415,7 +405,7 @@ pub fn refine_surface(
     }
     let (last_data, _) = energy(&u, &log_albedo);
     report.rms_log_residual[1] = last_data.sqrt();
-    let positions: Vec<Vec3> = (0..n).map(|v| surface.position(&u, v).as_vec3()).collect();
+    let positions: Vec<Vec3> = positions_at(&u).iter().map(|p| p.as_vec3()).collect();
     let displacement_mm: Vec<f64> = u.iter().map(|x| x.abs() * settings.spacing_m * 1e3).collect();
     report.mean_displacement_mm = displacement_mm.iter().sum::<f64>() / n.max(1) as f64;
     report.max_displacement_mm = displacement_mm.iter().fold(0.0, |m: f64, d| m.max(*d));
