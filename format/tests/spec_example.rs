@@ -29,17 +29,21 @@ use std::collections::BTreeMap;
 use std::fmt::Write as _;
 use std::io::Cursor;
 
-use glam::{DMat3, DVec3};
+use glam::{DMat3, DVec3, Mat3, Vec3};
 use half::f16;
 use nelf_format::asset::local_voxel_coords;
-use nelf_format::conventions::{ENV_H, ENV_TEXELS, ENV_W, LT_DIM, LatLong, project_envmap, shade};
+use nelf_format::conventions::{
+    ENV_H, ENV_TEXELS, ENV_W, LT_DIM, LatLong, col_phi_bounds, direction, lobe_table_corners,
+    lobe_table_direction, project_envmap, row_theta_bounds, shade,
+};
 use nelf_format::spec::{
     CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, KIND_COEFFICIENTS, KIND_METADATA, KIND_PCA,
-    SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, checksum, header_checksum, unshuffle,
+    KIND_REFLECTION, KIND_REFLECTION_VALUES, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, checksum,
+    header_checksum, unshuffle,
 };
 use nelf_format::{
-    Asset, AssetReader, Coefficients, FormatError, GridGeometry, PcaModel, WriteOptions, encode_asset,
-    read_asset_bytes,
+    Asset, AssetReader, Coefficients, FormatError, GridGeometry, PcaModel, Reflection, WriteOptions,
+    encode_asset, read_asset_bytes,
 };
 
 const SPEC: &str = include_str!("../SPEC.md");
@@ -346,6 +350,18 @@ enum Expected {
     F64(Vec<f64>),
     /// Values to within an absolute tolerance (printed rounded).
     Approx(Vec<f64>, f64),
+    /// Values to within a relative tolerance (printed to 7 significant digits): those
+    /// that depend on the C library's `acosf`, `atan2f`, `powf`, `sin`, `cos`.
+    Rel(Vec<f64>, f64),
+}
+
+/// `x` to 7 significant digits, in plain decimals.
+fn significant(x: f64) -> String {
+    if x == 0.0 {
+        return "0.0".into();
+    }
+    let decimals = (6 - x.abs().log10().floor() as i32).max(1) as usize;
+    format!("{x:.decimals$}")
 }
 
 impl Expected {
@@ -363,6 +379,7 @@ impl Expected {
             Self::F32(v) => list(v.iter().map(|&x| format!("{:?}", f64::from(x))).collect()),
             Self::F64(v) => list(v.iter().map(|x| format!("{x:?}")).collect()),
             Self::Approx(v, _) => list(v.iter().map(|x| format!("{x:.6}")).collect()),
+            Self::Rel(v, _) => list(v.iter().map(|&x| significant(x)).collect()),
         }
     }
 
@@ -392,6 +409,12 @@ impl Expected {
                     && v.iter()
                         .zip(&items)
                         .all(|(x, t)| t.parse::<f64>().is_ok_and(|y| (y - x).abs() <= *tol))
+            }
+            Self::Rel(v, tol) => {
+                same(v.len())
+                    && v.iter()
+                        .zip(&items)
+                        .all(|(x, t)| t.parse::<f64>().is_ok_and(|y| (y - x).abs() <= tol * x.abs()))
             }
         }
     }
@@ -563,6 +586,7 @@ const HEX_BLOCKS: [&str; 12] = [
 fn spec_example_matches_the_writer() {
     if std::env::var_os("SPEC_EXAMPLE_PRINT").is_some() {
         println!("{}", print_blocks());
+        println!("{}", print_reflection_block());
     }
     let (file, entries) = example_file();
     let decoded: BTreeMap<String, (Vec<u8>, Vec<u8>)> = entries
@@ -571,10 +595,11 @@ fn spec_example_matches_the_writer() {
         .collect();
     let blocks = spec_blocks();
     let mut errors = Vec::new();
-    for name in HEX_BLOCKS
-        .iter()
-        .chain(&["spec-example-voxel", "spec-example-projection"])
-    {
+    for name in HEX_BLOCKS.iter().chain(&[
+        "spec-example-voxel",
+        "spec-example-projection",
+        "spec-example-reflection",
+    ]) {
         match blocks.iter().filter(|b| b.tag == *name).count() {
             1 => {}
             n => errors.push(format!("SPEC.md has {n} blocks tagged `{name}`, expected one")),
@@ -584,6 +609,7 @@ fn spec_example_matches_the_writer() {
         match block.tag {
             "spec-example-voxel" => check_text_block(block, &voxel_values(&example_asset()), &mut errors),
             "spec-example-projection" => check_text_block(block, &projection_values(), &mut errors),
+            "spec-example-reflection" => check_text_block(block, &reflection_values(), &mut errors),
             tag => check_hex_block(block, tag, &file, &decoded, &mut errors),
         }
     }
@@ -1077,4 +1103,275 @@ fn metadata_json_limits() {
     assert!(with_meta(b"{\"a\": \"\xFF\"}").is_err(), "not UTF-8");
     assert!(with_meta(b"[]").is_err(), "not an object");
     assert!(with_meta(b"{\"a\": 1, \"a\": 2}").is_ok(), "repeated keys");
+}
+
+// ---------------------------------------------------------------------------------
+// §17.7: the same asset with a reflection part (format 1.3), one voxel relit by the
+// steps of SPEC.md §6 `VREF` ("Precision"), which are those of `nelf_render::reflection`.
+
+/// The lobe exponent λ.
+const EXPONENT: f32 = 20.0;
+/// The eyes `T̄` was averaged over (E = 2), metres.
+const EYES_M: [[f32; 3]; 2] = [[-0.25, 0.125, 0.5], [0.25, 0.0, 0.4375]];
+/// The camera centre the voxel is seen from, metres.
+const CAMERA_M: [f64; 3] = [0.0, 0.0625, 0.5];
+/// `VREF`'s 8-bit parameters of u, v (step 2⁻⁷ from −1) and s (step 2⁻⁸ from 0).
+const REFLECTION_SCALE: [f32; 3] = [0.007_812_5, 0.007_812_5, 0.003_906_25];
+const REFLECTION_OFFSET: [f32; 3] = [-1.0, -1.0, 0.0];
+/// Codes of the voxels in the ball: u = 0.25, v = 0.125, s = 0.25; elsewhere s = 0.
+const BALL_CODES: [u8; 3] = [160, 144, 64];
+const OUTSIDE_CODES: [u8; 3] = [128, 128, 0];
+
+fn reflection_asset() -> Asset {
+    let codes = (0..512)
+        .flat_map(|l| if inside(l) { BALL_CODES } else { OUTSIDE_CODES })
+        .collect();
+    Asset {
+        reflection: Some(Reflection {
+            exponent: EXPONENT,
+            eyes_m: EYES_M.to_vec(),
+            coefficients: Coefficients::U8Affine {
+                rank: 3,
+                scale: REFLECTION_SCALE.to_vec(),
+                offset: REFLECTION_OFFSET.to_vec(),
+                codes,
+            },
+        }),
+        metadata: serde_json::json!({"example": "SPEC.md section 17.7"}),
+        ..example_asset()
+    }
+}
+
+/// The sky of §17.7: radiance 1 in the upper light rows (0–3), 0 below.
+fn sky() -> LatLong {
+    let texels = (0..ENV_TEXELS)
+        .map(|i| if i / ENV_W < ENV_H / 2 { [1.0; 3] } else { [0.0; 3] })
+        .collect();
+    LatLong::new(ENV_W, ENV_H, texels).unwrap()
+}
+
+/// `g_i(node)` for every light texel (§6 `VREF`, Precision step 1).
+fn lobe_at_node(node: usize) -> [f32; ENV_TEXELS] {
+    let m = lobe_table_direction(node).as_vec3();
+    std::array::from_fn(|i| {
+        let (t0, t1) = row_theta_bounds(i / ENV_W, ENV_H);
+        let (p0, p1) = col_phi_bounds(i % ENV_W, ENV_W);
+        let mut g = 0.0f32;
+        for a in 0..3 {
+            for b in 0..3 {
+                let (a, b) = (f64::from(a), f64::from(b));
+                let (ta, tb) = (t0 + (t1 - t0) * a / 3.0, t0 + (t1 - t0) * (a + 1.0) / 3.0);
+                let phi = p0 + (p1 - p0) * (b + 0.5) / 3.0;
+                let solid = ((p1 - p0) / 3.0 * (ta.cos() - tb.cos())) as f32;
+                let c = m.dot(direction(0.5 * (ta + tb), phi).as_vec3());
+                g += if c > 0.0 { c.powf(EXPONENT) * solid } else { 0.0 };
+            }
+        }
+        g
+    })
+}
+
+/// `F_c(node)` under `light` (Precision step 2).
+fn filtered_at_node(node: usize, light: &LatLong) -> [f32; 3] {
+    let g = lobe_at_node(node);
+    let mut sum = [0.0f64; 3];
+    for (gi, l) in g.iter().zip(light.texels()) {
+        for c in 0..3 {
+            sum[c] += f64::from(*gi) * f64::from(l[c]);
+        }
+    }
+    sum.map(|v| v as f32)
+}
+
+/// What one direction toward an eye gives (Precision step 3).
+struct Seen {
+    omega: Vec3,
+    cos: f32,
+    r: Vec3,
+    r_light: Vec3,
+    corners: [(usize, f32); 4],
+    nodes: [[f32; 3]; 4],
+    filtered: [f32; 3],
+    term: [f32; 3],
+}
+
+fn seen_from(eye: DVec3, centre: DVec3, n: Vec3, light_from_world: Mat3, light: &LatLong) -> Seen {
+    let omega = (eye - centre).normalize_or_zero().as_vec3();
+    let cos = n.dot(omega);
+    let r = (2.0 * cos * n - omega).normalize_or_zero();
+    let r_light = light_from_world * r;
+    let corners = lobe_table_corners(r_light.to_array());
+    let nodes = corners.map(|(node, _)| filtered_at_node(node, light));
+    let mut filtered = [0.0f32; 3];
+    for ((_, w), e) in corners.iter().zip(&nodes) {
+        for c in 0..3 {
+            filtered[c] += w * e[c];
+        }
+    }
+    let term = if cos > 0.0 {
+        filtered.map(|e| cos * e)
+    } else {
+        [0.0; 3]
+    };
+    Seen {
+        omega,
+        cos,
+        r,
+        r_light,
+        corners,
+        nodes,
+        filtered,
+        term,
+    }
+}
+
+fn reflection_values() -> Vec<(String, Expected)> {
+    let asset = reflection_asset();
+    let (file, entries) = encode_asset(&asset, &WriteOptions::default()).unwrap();
+    let vref = entries.iter().find(|e| e.kind == KIND_REFLECTION).unwrap();
+    let (_, raw) = decode_section(&file, vref);
+    let word = |o: usize| u32::from_le_bytes(raw[o..o + 4].try_into().unwrap());
+    let real = |o: usize| f32::from_le_bytes(raw[o..o + 4].try_into().unwrap());
+    let eyes = word(0) as usize;
+    let vrco = entries.iter().find(|e| e.kind == KIND_REFLECTION_VALUES).unwrap();
+    let (_, codes) = decode_section(&file, vrco);
+    let codes = &codes[3 * VOXEL..3 * VOXEL + 3];
+    let part = asset.reflection.as_ref().unwrap();
+    let mut values = [0.0f32; 3];
+    part.coefficients.voxel_f32(VOXEL, &mut values);
+    let (n, s) = part.voxel(VOXEL);
+    let n = Vec3::from_array(n);
+    let light = sky();
+    // The PCA part under the sky, projected as `nelf_render::light` does.
+    let project = |v: &[f32]| -> [f32; 3] {
+        std::array::from_fn(|c| {
+            v[c * ENV_TEXELS..(c + 1) * ENV_TEXELS]
+                .iter()
+                .zip(light.texels())
+                .map(|(&t, l)| f64::from(t) * f64::from(l[c]))
+                .sum::<f64>() as f32
+        })
+    };
+    let mut pca = project(&asset.pca.mean);
+    let mut coefficients = [0.0f32; 2];
+    asset.coefficients_f32(VOXEL, &mut coefficients);
+    for (k, ck) in coefficients.iter().enumerate() {
+        let p = project(asset.pca.component(k));
+        for c in 0..3 {
+            pca[c] += ck * p[c];
+        }
+    }
+    let centre = asset.voxel_position_m(VOXEL);
+    let light_from_world = asset.world_from_light.transpose().as_mat3();
+    let camera = seen_from(DVec3::from_array(CAMERA_M), centre, n, light_from_world, &light);
+    let share = 1.0 / part.eyes_m.len() as f32;
+    let mut mean = [0.0f32; 3];
+    let mut out = vec![
+        (
+            "version_minor".to_string(),
+            Expected::Int(vec![i64::from(u16::from_le_bytes([file[10], file[11]]))]),
+        ),
+        (
+            "VREF.raw_length".into(),
+            Expected::Int(vec![vref.raw_length as i64]),
+        ),
+        ("VREF.E".into(), Expected::Int(vec![eyes as i64])),
+        ("VREF.exponent".into(), Expected::F32(vec![real(4)])),
+    ];
+    for e in 0..eyes {
+        out.push((
+            format!("VREF.eye{e}_m"),
+            Expected::F32((0..3).map(|a| real(8 + 12 * e + 4 * a)).collect()),
+        ));
+    }
+    out.push((
+        "VREF.scale_offset".into(),
+        Expected::F32((0..6).map(|k| real(8 + 12 * eyes + 4 * k)).collect()),
+    ));
+    out.extend([
+        (
+            "VRCO.codes".to_string(),
+            Expected::Int(codes.iter().map(|&c| i64::from(c)).collect()),
+        ),
+        ("values".into(), Expected::F32(values.to_vec())),
+        ("n".into(), Expected::F32(n.to_array().to_vec())),
+        ("s".into(), Expected::F32(vec![s])),
+        ("radiance_pca".into(), Expected::F32(pca.to_vec())),
+    ]);
+    let mut seen = |name: &str, v: &Seen| {
+        out.extend([
+            (
+                format!("{name} omega"),
+                Expected::F32(v.omega.to_array().to_vec()),
+            ),
+            (format!("{name} n.omega"), Expected::F32(vec![v.cos])),
+        ]);
+        if v.cos <= 0.0 {
+            return;
+        }
+        out.extend([
+            (format!("{name} r"), Expected::F32(v.r.to_array().to_vec())),
+            (
+                format!("{name} r_light"),
+                Expected::F32(v.r_light.to_array().to_vec()),
+            ),
+            (
+                format!("{name} nodes"),
+                Expected::Int(v.corners.iter().map(|&(i, _)| i as i64).collect()),
+            ),
+            (
+                format!("{name} weights"),
+                Expected::Approx(v.corners.iter().map(|&(_, w)| f64::from(w)).collect(), 1e-4),
+            ),
+            (
+                format!("{name} F(nodes)"),
+                Expected::Rel(v.nodes.iter().map(|e| f64::from(e[0])).collect(), 1e-5),
+            ),
+            (
+                format!("{name} F(r)"),
+                Expected::Rel(vec![f64::from(v.filtered[0])], 1e-4),
+            ),
+            (
+                format!("{name} term"),
+                Expected::Rel(vec![f64::from(v.term[0])], 1e-4),
+            ),
+        ]);
+    };
+    seen("camera", &camera);
+    for (e, eye) in part.eyes_m.iter().enumerate() {
+        let eye = DVec3::from_array(eye.map(f64::from));
+        let v = seen_from(eye, centre, n, light_from_world, &light);
+        for (m, t) in mean.iter_mut().zip(v.term) {
+            *m += share * t;
+        }
+        seen(&format!("eye{e}"), &v);
+    }
+    let radiance: [f32; 3] = std::array::from_fn(|c| pca[c] + s * (camera.term[c] - mean[c]));
+    out.extend([
+        ("Fbar".to_string(), Expected::Rel(vec![f64::from(mean[0])], 1e-4)),
+        (
+            "radiance".into(),
+            Expected::Rel(radiance.iter().map(|&v| f64::from(v)).collect(), 1e-4),
+        ),
+    ]);
+    out
+}
+
+/// The `spec-example-reflection` block as the code computes it.
+fn print_reflection_block() -> String {
+    let mut out = String::from("```text spec-example-reflection\n");
+    for (key, value) in reflection_values() {
+        // f32 values as their shortest text, which parses back to the same f32.
+        let text = match &value {
+            Expected::F32(v) if v.len() == 1 => format!("{:?}", v[0]),
+            Expected::F32(v) => format!(
+                "({})",
+                v.iter().map(|x| format!("{x:?}")).collect::<Vec<_>>().join(", ")
+            ),
+            _ => value.text(),
+        };
+        writeln!(out, "{key} = {text}").unwrap();
+    }
+    out.push_str("```\n");
+    out
 }
