@@ -104,7 +104,7 @@ pub const fn reflection_params_bytes(eyes: usize) -> u64 {
 pub const REFLECTION_BYTES_PER_BRICK: u64 = 3 * BRICK_VOXELS as u64;
 /// Size of the [`ViewHeader`] at the start of `VDEP`.
 pub const VIEW_HEADER_SIZE: usize = 16;
-/// Largest decoded `VDEP`: its header, 8 lobes, 384 basis vectors and 384 pairs of 8-bit
+/// Largest decoded `VDEP`: its header, 9 lobes, 384 basis vectors and 384 pairs of 8-bit
 /// parameters (no file reaches it: `J·K_v ≤ 384`); a larger declared length is refused
 /// before anything is decoded.
 pub const MAX_VIEW_PARAMS_BYTES: u64 = VIEW_HEADER_SIZE as u64
@@ -512,7 +512,7 @@ impl Header {
 /// `u32 J`, `u32 K_v`, `u32 encoding`, `u32` reserved.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct ViewHeader {
-    /// Lobes `J`, 1..=8.
+    /// Lobes `J`, 1..=9.
     pub lobes: u32,
     /// View basis rank `K_v`, ≥ 1, with `J·K_v ≤ 384`.
     pub rank: u32,
@@ -526,7 +526,7 @@ impl ViewHeader {
         u64::from(self.lobes) * u64::from(self.rank)
     }
 
-    /// Decoded length of the whole `VDEP` section: header, `J·8` lobe weights, `K_v·384`
+    /// Decoded length of the whole `VDEP` section: header, `J·9` lobe weights, `K_v·384`
     /// basis values, and `R` (scale, offset) pairs when 8-bit, all `f32`.
     pub fn section_length(&self) -> u64 {
         let params = match self.encoding {
@@ -554,7 +554,7 @@ impl ViewHeader {
     }
 
     /// Unpacks and checks the header from the start of a decoded `VDEP` (any length):
-    /// at least 16 bytes, `J` in 1..=8, `K_v ≥ 1` with `J·K_v ≤ 384`, a known encoding,
+    /// at least 16 bytes, `J` in 1..=9, `K_v ≥ 1` with `J·K_v ≤ 384`, a known encoding,
     /// and a section length equal to [`Self::section_length`]. The reserved field is ignored.
     pub fn from_section(b: &[u8]) -> Result<Self> {
         let bad = |reason: String| FormatError::InvalidView(format!("section VDEP: {reason}"));

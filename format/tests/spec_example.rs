@@ -16,8 +16,9 @@
 //!   (ASCII), `0x…` or a decimal integer (unsigned little-endian over the line's
 //!   bytes), a number with `.` or `e` (f16, f32 or f64 by the line's width), or a
 //!   comma-separated list of these that splits the bytes evenly.
-//! * `text spec-example-voxel` and `text spec-example-projection`: lines
-//!   `KEY = VALUE` whose keys and values must be exactly those this test computes.
+//! * `text spec-example-voxel`, `-projection`, `-reflection` and `-view`: lines
+//!   `KEY = VALUE` whose keys and values must be exactly those this test computes
+//!   (bit for bit, or within the stated tolerance for the rounded ones).
 //!
 //! To regenerate the blocks after an intended change of the writer, run
 //! `SPEC_EXAMPLE_PRINT=1 cargo test -p nelf-format --release --test spec_example -- --nocapture`
@@ -33,17 +34,17 @@ use glam::{DMat3, DVec3, Mat3, Vec3};
 use half::f16;
 use nelf_format::asset::local_voxel_coords;
 use nelf_format::conventions::{
-    ENV_H, ENV_TEXELS, ENV_W, LT_DIM, LatLong, col_phi_bounds, direction, lobe_table_corners,
-    lobe_table_direction, project_envmap, row_theta_bounds, shade,
+    ENV_H, ENV_TEXELS, ENV_W, LT_DIM, LatLong, VIEW_HARMONICS, col_phi_bounds, direction, lobe_table_corners,
+    lobe_table_direction, project_envmap, row_theta_bounds, shade, view_harmonics,
 };
 use nelf_format::spec::{
     CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, KIND_COEFFICIENTS, KIND_METADATA, KIND_PCA,
-    KIND_REFLECTION, KIND_REFLECTION_VALUES, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, checksum,
-    header_checksum, unshuffle,
+    KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, SECTION_ENTRY_SIZE,
+    SectionCodec, SectionEntry, checksum, header_checksum, unshuffle,
 };
 use nelf_format::{
-    Asset, AssetReader, Coefficients, FormatError, GridGeometry, PcaModel, Reflection, WriteOptions,
-    encode_asset, read_asset_bytes,
+    Asset, AssetReader, Coefficients, FormatError, GridGeometry, PcaModel, Reflection, ViewDependence,
+    WriteOptions, encode_asset, read_asset_bytes,
 };
 
 const SPEC: &str = include_str!("../SPEC.md");
@@ -586,7 +587,11 @@ const HEX_BLOCKS: [&str; 12] = [
 fn spec_example_matches_the_writer() {
     if std::env::var_os("SPEC_EXAMPLE_PRINT").is_some() {
         println!("{}", print_blocks());
-        println!("{}", print_reflection_block());
+        println!(
+            "{}",
+            print_text_block("spec-example-reflection", &reflection_values())
+        );
+        println!("{}", print_text_block("spec-example-view", &view_values().0));
     }
     let (file, entries) = example_file();
     let decoded: BTreeMap<String, (Vec<u8>, Vec<u8>)> = entries
@@ -599,6 +604,7 @@ fn spec_example_matches_the_writer() {
         "spec-example-voxel",
         "spec-example-projection",
         "spec-example-reflection",
+        "spec-example-view",
     ]) {
         match blocks.iter().filter(|b| b.tag == *name).count() {
             1 => {}
@@ -610,6 +616,7 @@ fn spec_example_matches_the_writer() {
             "spec-example-voxel" => check_text_block(block, &voxel_values(&example_asset()), &mut errors),
             "spec-example-projection" => check_text_block(block, &projection_values(), &mut errors),
             "spec-example-reflection" => check_text_block(block, &reflection_values(), &mut errors),
+            "spec-example-view" => check_text_block(block, &view_values().0, &mut errors),
             tag => check_hex_block(block, tag, &file, &decoded, &mut errors),
         }
     }
@@ -1357,12 +1364,12 @@ fn reflection_values() -> Vec<(String, Expected)> {
     out
 }
 
-/// The `spec-example-reflection` block as the code computes it.
-fn print_reflection_block() -> String {
-    let mut out = String::from("```text spec-example-reflection\n");
-    for (key, value) in reflection_values() {
-        // f32 values as their shortest text, which parses back to the same f32.
-        let text = match &value {
+/// A `text` block as the code computes it: f32 values as their shortest text, which
+/// parses back to the same f32.
+fn print_text_block(tag: &str, values: &[(String, Expected)]) -> String {
+    let mut out = format!("```text {tag}\n");
+    for (key, value) in values {
+        let text = match value {
             Expected::F32(v) if v.len() == 1 => format!("{:?}", v[0]),
             Expected::F32(v) => format!(
                 "({})",
@@ -1374,4 +1381,239 @@ fn print_reflection_block() -> String {
     }
     out.push_str("```\n");
     out
+}
+
+// ---------------------------------------------------------------------------------
+// §17.8: the same asset with a harmonic view-dependent part (format 1.2), one voxel relit
+// and seen along one direction by the steps of SPEC.md §6 `VDEP` and §8 ("The
+// view-dependent part"), which are those of `nelf_render::view`. Every value is read
+// from the decoded sections by the spec's layout and computed in plain IEEE arithmetic
+// (no C library function), so the block holds them bit for bit.
+
+/// The lobes' weights over the 9 harmonics: `Y_0 = y_2 = a·z`, `Y_1 = ½ y_3 + ¼ y_6`.
+const VIEW_LOBES: [[f32; VIEW_HARMONICS]; 2] = [
+    [0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0],
+    [0.0, 0.0, 0.0, 0.5, 0.0, 0.0, 0.25, 0.0, 0.0],
+];
+/// View basis rank `K_v`.
+const VIEW_RANK: usize = 2;
+/// `VDEP`'s 8-bit parameters, the same for the `R = 4` view coefficients: step 2⁻⁷ from −1
+/// (code 128 is 0).
+const VIEW_SCALE: f32 = 0.007_812_5;
+const VIEW_OFFSET: f32 = -1.0;
+/// View codes of the voxels in the ball, `m = j·K_v + i`: `d = (0.25, 0.125, −0.125,
+/// 0.0625)`; elsewhere 128 (`d = 0`, no view part).
+const VIEW_BALL_CODES: [u8; 4] = [160, 144, 112, 136];
+
+fn view_asset() -> Asset {
+    let per_voxel = VIEW_LOBES.len() * VIEW_RANK;
+    let codes = (0..512)
+        .flat_map(|l| if inside(l) { VIEW_BALL_CODES } else { [128; 4] })
+        .collect();
+    let upper = |j: usize| (j % ENV_TEXELS) / ENV_W < ENV_H / 2;
+    // V_0: 1/1024 in the upper hemisphere (all channels), 0 below; V_1: 1/512 in green.
+    let v0 = (0..LT_DIM).map(|j| if upper(j) { 1.0 / 1024.0 } else { 0.0 });
+    let v1 = (0..LT_DIM).map(|j| if j / ENV_TEXELS == 1 { 1.0 / 512.0 } else { 0.0 });
+    Asset {
+        view: Some(ViewDependence {
+            lobes: VIEW_LOBES.concat(),
+            basis: v0.chain(v1).collect(),
+            coefficients: Coefficients::U8Affine {
+                rank: per_voxel,
+                scale: vec![VIEW_SCALE; per_voxel],
+                offset: vec![VIEW_OFFSET; per_voxel],
+                codes,
+            },
+        }),
+        metadata: serde_json::json!({"example": "SPEC.md section 17.8"}),
+        ..example_asset()
+    }
+}
+
+/// `Σ_j v[c·128 + j] · L[j][c]` per channel, in f64, rounded once (`nelf_render::light`).
+fn projected(v: &[f32], light: &LatLong) -> [f32; 3] {
+    std::array::from_fn(|c| {
+        v[c * ENV_TEXELS..(c + 1) * ENV_TEXELS]
+            .iter()
+            .zip(light.texels())
+            .map(|(&t, l)| f64::from(t) * f64::from(l[c]))
+            .sum::<f64>() as f32
+    })
+}
+
+/// The 9 harmonics of `d` by the words of SPEC.md §6 `VDEP` (normalise, then the products
+/// left to right), to hold `view_harmonics` to them.
+fn harmonics_as_specified(d: [f32; 3]) -> ([f32; 3], [f32; VIEW_HARMONICS]) {
+    let (c0, a, b, c) = (0.282_094_8f32, 0.488_602_5f32, 1.092_548_4f32, 0.315_391_57f32);
+    let len = ((d[0] * d[0] + d[1] * d[1]) + d[2] * d[2]).sqrt();
+    assert!(len > 0.0 && len.is_finite());
+    let [x, y, z] = d.map(|v| v / len);
+    let harmonics = [
+        c0,
+        a * y,
+        a * z,
+        a * x,
+        (b * x) * y,
+        (b * y) * z,
+        c * ((3.0 * z) * z - 1.0),
+        (b * x) * z,
+        (0.5 * b) * (x * x - y * y),
+    ];
+    ([x, y, z], harmonics)
+}
+
+/// The values of §17.8, with the `f32` radiance (for the cross-checks of
+/// `view_example_agrees_with_the_transport`).
+fn view_values() -> (Vec<(String, Expected)>, [f32; 3]) {
+    let asset = view_asset();
+    let (file, entries) = encode_asset(&asset, &WriteOptions::default()).unwrap();
+    let vdep = entries.iter().find(|e| e.kind == KIND_VIEW).unwrap();
+    let vcof = entries.iter().find(|e| e.kind == KIND_VIEW_COEFFICIENTS).unwrap();
+    let (_, raw) = decode_section(&file, vdep);
+    let word = |o: usize| u32::from_le_bytes(raw[o..o + 4].try_into().unwrap()) as usize;
+    let real = |o: usize| f32::from_le_bytes(raw[o..o + 4].try_into().unwrap());
+    let (lobes, rank, encoding) = (word(0), word(4), word(8));
+    let per_voxel = lobes * rank;
+    let basis_at = 16 + 4 * VIEW_HARMONICS * lobes;
+    let params_at = basis_at + 4 * LT_DIM * rank;
+    let basis: Vec<f32> = (0..LT_DIM * rank).map(|e| real(basis_at + 4 * e)).collect();
+    let (_, codes) = decode_section(&file, vcof);
+    let codes = &codes[per_voxel * VOXEL..per_voxel * (VOXEL + 1)];
+    // d_m = offset_m + scale_m · code (§9), m = j·K_v + i.
+    let d: Vec<f32> = codes
+        .iter()
+        .enumerate()
+        .map(|(m, &code)| real(params_at + 8 * m + 4) + real(params_at + 8 * m) * f32::from(code))
+        .collect();
+
+    let light = sky();
+    let mut pca = projected(&asset.pca.mean, &light);
+    let mut c = [0.0f32; 2];
+    asset.coefficients_f32(VOXEL, &mut c);
+    for (k, ck) in c.iter().enumerate() {
+        let p = projected(asset.pca.component(k), &light);
+        for ch in 0..3 {
+            pca[ch] += ck * p[ch];
+        }
+    }
+    // ω: the difference in f64, rounded to f32, normalised by `view_harmonics`.
+    let diff = (DVec3::from_array(CAMERA_M) - asset.voxel_position_m(VOXEL))
+        .as_vec3()
+        .to_array();
+    let y = view_harmonics(diff);
+    let (omega, as_specified) = harmonics_as_specified(diff);
+    assert_eq!(
+        y.map(f32::to_bits),
+        as_specified.map(f32::to_bits),
+        "view_harmonics differs from SPEC.md §6 VDEP's steps"
+    );
+    let lobe_values: Vec<f32> = (0..lobes)
+        .map(|j| {
+            let mut s = 0.0f32;
+            for (l, yl) in y.iter().enumerate() {
+                s += real(16 + 4 * (j * VIEW_HARMONICS + l)) * yl;
+            }
+            s
+        })
+        .collect();
+    let view_light: Vec<[f32; 3]> = basis.chunks_exact(LT_DIM).map(|v| projected(v, &light)).collect();
+    // C_j = Σ_i d_ji P^v_i, f32, i ascending; then radiance = radiance_pca + Σ_j Y_j C_j.
+    let colours: Vec<[f32; 3]> = (0..lobes)
+        .map(|j| {
+            let mut rgb = [0.0f32; 3];
+            for (i, p) in view_light.iter().enumerate() {
+                for ch in 0..3 {
+                    rgb[ch] += d[j * rank + i] * p[ch];
+                }
+            }
+            rgb
+        })
+        .collect();
+    let mut radiance = pca;
+    for (yj, cj) in lobe_values.iter().zip(&colours) {
+        for ch in 0..3 {
+            radiance[ch] += yj * cj[ch];
+        }
+    }
+
+    let mut out = vec![
+        (
+            "version_minor".to_string(),
+            Expected::Int(vec![i64::from(u16::from_le_bytes([file[10], file[11]]))]),
+        ),
+        (
+            "VDEP.raw_length".into(),
+            Expected::Int(vec![vdep.raw_length as i64]),
+        ),
+        ("VDEP.J".into(), Expected::Int(vec![lobes as i64])),
+        ("VDEP.K_v".into(), Expected::Int(vec![rank as i64])),
+        ("VDEP.encoding".into(), Expected::Int(vec![encoding as i64])),
+    ];
+    for j in 0..lobes {
+        out.push((
+            format!("VDEP.lobe{j}"),
+            Expected::F32(
+                (0..VIEW_HARMONICS)
+                    .map(|l| real(16 + 4 * (j * VIEW_HARMONICS + l)))
+                    .collect(),
+            ),
+        ));
+    }
+    for (i, e) in [(0, 0), (0, 64), (1, 0), (1, 128)] {
+        out.push((
+            format!("VDEP.V_{i}[{e}]"),
+            Expected::F32(vec![basis[i * LT_DIM + e]]),
+        ));
+    }
+    out.extend([
+        (
+            "VDEP.scale_offset".to_string(),
+            Expected::F32((0..2 * per_voxel).map(|k| real(params_at + 4 * k)).collect()),
+        ),
+        (
+            "VCOF.raw_length".into(),
+            Expected::Int(vec![vcof.raw_length as i64]),
+        ),
+        (
+            "VCOF.codes".into(),
+            Expected::Int(codes.iter().map(|&x| i64::from(x)).collect()),
+        ),
+        ("d".into(), Expected::F32(d.clone())),
+        ("radiance_pca".into(), Expected::F32(pca.to_vec())),
+        ("eye - p".into(), Expected::F32(diff.to_vec())),
+        ("omega".into(), Expected::F32(omega.to_vec())),
+        ("y".into(), Expected::F32(y.to_vec())),
+        ("Y".into(), Expected::F32(lobe_values)),
+    ]);
+    for (i, p) in view_light.iter().enumerate() {
+        out.push((format!("P^v_{i}"), Expected::F32(p.to_vec())));
+    }
+    for (j, cj) in colours.iter().enumerate() {
+        out.push((format!("C_{j}"), Expected::F32(cj.to_vec())));
+    }
+    out.push(("radiance".into(), Expected::F32(radiance.to_vec())));
+    (out, radiance)
+}
+
+#[test]
+fn view_example_agrees_with_the_transport() {
+    // §17.8's steps against the format crate: the file reads back as the asset, the lobe
+    // values are `ViewDependence::lobe_values`, and the radiance is the sky's dot product
+    // with `T(x, ω)` (SPEC.md §8: equal up to rounding).
+    let asset = view_asset();
+    let (file, _) = encode_asset(&asset, &WriteOptions::default()).unwrap();
+    assert_eq!(read_asset_bytes(&file).unwrap(), asset);
+    let (values, radiance) = view_values();
+    let diff = (DVec3::from_array(CAMERA_M) - asset.voxel_position_m(VOXEL))
+        .as_vec3()
+        .to_array();
+    let lobes = asset.view.as_ref().unwrap().lobe_values(diff);
+    let Some((_, Expected::F32(printed))) = values.iter().find(|(k, _)| k == "Y") else {
+        panic!("no Y")
+    };
+    assert_eq!(printed, &lobes);
+    let transport = shade(&asset.reconstruct_lt_toward(VOXEL, diff), &sky());
+    for (a, b) in radiance.iter().zip(transport) {
+        assert!((a - b).abs() <= 1e-6 * b.abs(), "{radiance:?} vs {transport:?}");
+    }
 }
