@@ -11,6 +11,7 @@ Options (KEY=VALUE):
   maps=studio:0,forest:0,interior:90   world maps of data/envmaps and the world's Mapping
                                         Z rotation in degrees (one per relit render)
   size=256  samples=16  orbit=AZ,EL     image size, Cycles samples, camera (nelf render --orbit)
+  fov=30                                the camera's horizontal field of view, degrees
   shift=-0.5 or X,Y,Z                   the object's offset in voxels along the asset's axes
   nelf=target/release/nelf  rank=K      the nelf binary; components kept (default all)
   scene=1                               also renders the head in front of the world (screenshots)
@@ -46,6 +47,7 @@ maps = [(m.split(":")[0], float(m.split(":")[1])) for m in options.get("maps", "
 size = int(options.get("size", "256"))
 samples = int(options.get("samples", "16"))
 orbit = options.get("orbit", "0,0")
+fov = options.get("fov", "30")
 shift_arg = options.get("shift", "-0.5")
 shift = [float(v) for v in shift_arg.split(",")] * (3 if "," not in shift_arg else 1)
 nelf = os.path.abspath(options.get("nelf", os.path.join(ROOT, "target", "release", "nelf")))
@@ -186,7 +188,7 @@ for kind, name, beta in jobs:
     alpha = nelf_rotate(beta)
     tag = f"{kind}_{name}_{beta:g}"
     ref = os.path.join(out_dir, f"ref_{name}_{beta:g}{f'_grid{pixel_grid}' if pixel_grid else ''}.exr")
-    render_args = ["render", asset_path, "--orbit", orbit, "--width", str(size), "--height", str(size)]
+    render_args = ["render", asset_path, "--orbit", orbit, "--width", str(size), "--height", str(size), "--fov-deg", fov]
     render_args += ["--envmap", os.path.join(ROOT, "data", "envmaps", f"{name}.exr"), "--rotate-deg", f"{alpha:.12g}", "-o", ref]
     if rank:
         render_args += ["--rank", rank]

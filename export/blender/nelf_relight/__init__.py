@@ -214,7 +214,10 @@ def write_terms(material, p_mean, p):
 
 
 def relight_object(obj, scene, force=True):
-    """Relights one imported asset under the scene's world (RelightError / VdbMetaError on failure)."""
+    """Relights one imported asset under the scene's world (RelightError / VdbMetaError on failure).
+
+    With `force` False nothing is done when nothing it depends on changed (the handler's case).
+    """
     settings = obj.nelf
     asset = read_asset(settings.vdb_path)
     rank = max(0, min(settings.rank, asset.rank))
@@ -270,7 +273,7 @@ def _on_settings_changed(self, context):
     if obj is None or not obj.nelf.vdb_path:
         return
     try:
-        relight_object(obj, context.scene)
+        relight_object(obj, context.scene, force=False)
     except (relight.RelightError, vdbmeta.VdbMetaError, OSError) as err:
         obj.nelf.lighting = f"not relit: {err}"
 
@@ -362,7 +365,14 @@ class OBJECT_OT_nelf_relight(bpy.types.Operator):
 
     def execute(self, context):
         obj = context.object
+        settings = obj.nelf
         try:
+            asset = read_asset(settings.vdb_path)
+            if asset.rank == 0:
+                raise relight.RelightError(f"{asset.path}: no PCA grids to relight with")
+            # Check the world before switching, so a failure leaves the material as it was.
+            world_environment(context.scene.world)
+            settings.emission = "RELIT"
             relight_object(obj, context.scene, force=True)
         except (relight.RelightError, vdbmeta.VdbMetaError, OSError) as err:
             self.report({"ERROR"}, str(err))
@@ -397,9 +407,8 @@ def menu_import(self, _context):
 
 
 @bpy.app.handlers.persistent
-def _auto_relight(scene, depsgraph):
-    if not any(depsgraph.id_type_updated(kind) for kind in ("WORLD", "IMAGE", "NODETREE", "OBJECT")):
-        return
+def _auto_relight(scene, _depsgraph):
+    # Cheap when nothing changed: the signature walks the world's few nodes, no pixels.
     for obj in scene.objects:
         settings = getattr(obj, "nelf", None)
         if settings is None or not settings.vdb_path or not settings.auto_update:
