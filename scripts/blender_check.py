@@ -14,6 +14,7 @@ Options (KEY=VALUE):
   fov=30                                the camera's horizontal field of view, degrees
   shift=-0.5 or X,Y,Z                   the object's offset in voxels along the asset's axes
   nelf=target/release/nelf  rank=K      the nelf binary; components kept (default all)
+  pca_grids=vec3                        nelf export vdb --pca-grids (vec3 or float)
   scene=1                               also renders the head in front of the world (screenshots)
   pixel_grid=N                          compare pixel means (Cycles' 1-pixel box filter, nelf render --pixel-grid N)
                                         instead of one ray through each pixel centre
@@ -147,6 +148,7 @@ export_args = ["export", "vdb", asset_path, "-o", vdb, "--envmap", os.path.join(
 export_args += ["--rotate-deg", f"{nelf_rotate(first_beta):.12g}"]
 if rank:
     export_args += ["--rank", rank]
+export_args += ["--pca-grids", options.get("pca_grids", "vec3")]
 run(*export_args)
 
 bpy.ops.wm.read_factory_settings(use_empty=True)

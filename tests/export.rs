@@ -75,6 +75,7 @@ fn exports_what_the_library_encodes() {
         rank: Some(3),
         color_name: "Cd".into(),
         compression: Compression::None,
+        pca_grids: nelf_export::vdb::PcaGrids::Float,
     };
     let (want, _) = encode_vdb(&asset, &lighting, &options).unwrap();
     assert!(

@@ -20,7 +20,7 @@ use serde::{Deserialize, Serialize};
 
 use crate::openvdb::Compression;
 use crate::unreal::{UnrealReport, write_unreal};
-use crate::vdb::{Lighting, VdbOptions, VdbReport, write_vdb};
+use crate::vdb::{Lighting, PcaGrids, VdbOptions, VdbReport, write_vdb};
 use crate::web::{WebEnvmap, WebPageOptions, WebPageReport, url_encode, write_web_page};
 use crate::{ExportError, write_atomic};
 
@@ -62,6 +62,9 @@ pub struct VdbExportConfig {
     pub compression: Compression,
     /// A preset writing other files instead of one OpenVDB file.
     pub preset: Option<VdbPreset>,
+    /// One float grid per PCA component, or three per vec3s grid.
+    #[serde(default)]
+    pub pca_grids: PcaGrids,
 }
 
 /// What [`export_vdb`] wrote.
@@ -100,14 +103,16 @@ impl VdbExported {
                 record_path,
             } => {
                 let voxels = report.grids.first().map_or(0, |g| g.active_voxels);
+                let coefficient_grids = config.pca_grids.names(report.rank);
                 let _ = writeln!(
                     text,
-                    "exported {} ({} voxels, {} grids: density, {}, pca_00..pca_{:02}; rank {} of {}) in {write_seconds:.2} s -> {} ({} bytes; asset {} bytes)",
+                    "exported {} ({} voxels, {} grids: density, {}, {}..{}; rank {} of {}) in {write_seconds:.2} s -> {} ({} bytes; asset {} bytes)",
                     config.asset.display(),
                     voxels,
                     report.grids.len(),
                     config.color_name,
-                    report.rank.saturating_sub(1),
+                    coefficient_grids.first().map_or("", String::as_str),
+                    coefficient_grids.last().map_or("", String::as_str),
                     report.rank,
                     report.stored_rank,
                     config.out.display(),
@@ -165,8 +170,14 @@ pub fn export_vdb(config: &VdbExportConfig) -> Result<VdbExported, ExportError> 
         rank: config.rank,
         color_name: config.color_name.clone(),
         compression: config.compression,
+        pca_grids: config.pca_grids,
     };
     if config.preset == Some(VdbPreset::Unreal) {
+        if config.pca_grids != PcaGrids::Float {
+            return Err(ExportError::BadOption(
+                "--pca-grids applies to one OpenVDB file; the Unreal preset packs its own channels".into(),
+            ));
+        }
         let start = Instant::now();
         let report = write_unreal(&config.out, &asset, &lighting, &options).map_err(ExportError::step(
             format!("cannot export {asset_name} for Unreal"),

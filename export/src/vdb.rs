@@ -47,6 +47,37 @@ pub const DEFAULT_COLOR_GRID: &str = "color";
 /// estimated lighting (see [`stored_light`]).
 pub const STORED_LIGHT_KEY: &str = "estimated_light";
 
+/// How the PCA coefficients are laid out in grids ([`VdbOptions::pca_grids`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum PcaGrids {
+    /// One float grid per component, `pca_00` … `pca_{K−1}` (OpenVDB's tools, Houdini).
+    #[default]
+    Float,
+    /// Three components per vec3s grid, `pca3_00` holding components 0, 1, 2, `pca3_01`
+    /// 3, 4, 5, …, zero past the rank: a third of the texture lookups for a renderer that
+    /// relights in a shader (Blender's add-on: `BLENDER.md`).
+    Vec3,
+}
+
+impl PcaGrids {
+    /// The grid names for `rank` components.
+    pub fn names(self, rank: usize) -> Vec<String> {
+        match self {
+            Self::Float => (0..rank).map(pca_grid_name).collect(),
+            Self::Vec3 => (0..rank.div_ceil(3)).map(|g| format!("pca3_{g:02}")).collect(),
+        }
+    }
+
+    /// The `nelf_pca_grid_type` metadata value.
+    pub fn describe(self) -> &'static str {
+        match self {
+            Self::Float => "float: grid k holds component k",
+            Self::Vec3 => "vec3s: grid g holds components 3g, 3g+1, 3g+2 (0 past nelf_pca_rank)",
+        }
+    }
+}
+
 /// Name of PCA coefficient grid `k`: `pca_00`, `pca_01`, …
 pub fn pca_grid_name(k: usize) -> String {
     format!("pca_{k:02}")
@@ -65,6 +96,9 @@ pub struct VdbOptions {
     pub color_name: String,
     /// Per-grid compression.
     pub compression: Compression,
+    /// One float grid per PCA component, or three per vec3s grid.
+    #[serde(default)]
+    pub pca_grids: PcaGrids,
 }
 
 impl Default for VdbOptions {
@@ -74,6 +108,7 @@ impl Default for VdbOptions {
             rank: None,
             color_name: DEFAULT_COLOR_GRID.to_string(),
             compression: Compression::Zip,
+            pca_grids: PcaGrids::Float,
         }
     }
 }
@@ -100,7 +135,7 @@ impl VdbOptions {
         let name = &self.color_name;
         if name.is_empty()
             || name == DENSITY_GRID
-            || (0..rank).any(|k| *name == pca_grid_name(k))
+            || self.pca_grids.names(rank).contains(name)
             || name.chars().any(char::is_control)
         {
             return Err(ExportError::BadOption(format!(
@@ -298,9 +333,15 @@ pub fn build_vdb(
 
     let mut density = Grid::<f32>::new(DENSITY_GRID, GridClass::FogVolume, transform)?;
     let mut color = Grid::<[f32; 3]>::new(&options.color_name, GridClass::Unknown, transform)?;
-    let mut pca: Vec<Grid<f32>> = (0..rank)
-        .map(|k| Grid::new(&pca_grid_name(k), GridClass::Unknown, transform))
-        .collect::<Result<_, _>>()?;
+    let pca_names = options.pca_grids.names(rank);
+    let mut pca: Vec<Grid<f32>> = Vec::new();
+    let mut pca3: Vec<Grid<[f32; 3]>> = Vec::new();
+    for name in &pca_names {
+        match options.pca_grids {
+            PcaGrids::Float => pca.push(Grid::new(name, GridClass::Unknown, transform)?),
+            PcaGrids::Vec3 => pca3.push(Grid::new(name, GridClass::Unknown, transform)?),
+        }
+    }
     let stored_rank = asset.rank();
     let mut coefficients = vec![0.0f32; stored_rank];
     for (b, &origin) in origins.iter().enumerate() {
@@ -318,6 +359,15 @@ pub fn build_vdb(
         }
         density.insert_leaf(origin, sigma)?;
         color.insert_leaf(origin, rgb)?;
+        if options.pca_grids == PcaGrids::Vec3 {
+            for (g, grid) in pca3.iter_mut().enumerate() {
+                let component = |k: usize, slot: usize| coef.get(k).map_or(0.0, |c: &Vec<f32>| c[slot]);
+                let values = (0..LEAF_VOXELS)
+                    .map(|slot| [0, 1, 2].map(|j| component(3 * g + j, slot)))
+                    .collect();
+                grid.insert_leaf(origin, values)?;
+            }
+        }
         for (grid, values) in pca.iter_mut().zip(coef) {
             grid.insert_leaf(origin, values)?;
         }
@@ -341,12 +391,22 @@ pub fn build_vdb(
             "PCA coefficient of the light-transport vector (file metadata nelf_relight)",
         )?;
     }
+    for (g, grid) in pca3.iter_mut().enumerate() {
+        grid.insert_meta("nelf_pca_component", (3 * g) as i32)?;
+        grid.insert_meta(
+            "nelf_quantity",
+            "PCA coefficients 3g, 3g+1, 3g+2 of the light-transport vector, 0 past the rank (file metadata nelf_relight)",
+        )?;
+    }
 
     let mut file = VdbFile::new();
     file_metadata(&mut file, asset, lighting, options, rank)?;
     file.push_grid(density)?;
     file.push_grid(color)?;
     for grid in pca {
+        file.push_grid(grid)?;
+    }
+    for grid in pca3 {
         file.push_grid(grid)?;
     }
     let report = VdbReport {
@@ -382,7 +442,7 @@ fn file_metadata(
     let m = asset.world_from_light;
     let rows: [[f64; 3]; 3] = [0, 1, 2].map(|r| m.row(r).to_array());
     let basis: Vec<&[f32]> = (0..rank).map(|k| asset.pca.component(k)).collect();
-    let pca_names: Vec<String> = (0..rank).map(pca_grid_name).collect();
+    let pca_names = options.pca_grids.names(rank);
     file.insert_meta("nelf_vdb_layout", LAYOUT_VERSION);
     file.insert_meta(
         "nelf_generator",
@@ -401,6 +461,7 @@ fn file_metadata(
     file.insert_meta("nelf_color_grid", options.color_name.as_str());
     file.insert_meta("nelf_color_lighting", lighting.name());
     file.insert_meta("nelf_pca_grids", json(&pca_names)?);
+    file.insert_meta("nelf_pca_grid_type", options.pca_grids.describe());
     file.insert_meta("nelf_pca_rank", rank as i32);
     file.insert_meta("nelf_pca_stored_rank", asset.rank() as i32);
     file.insert_meta("nelf_pca_mean", json(&asset.pca.mean)?);
@@ -587,6 +648,43 @@ mod tests {
         for a in 0..3 {
             assert!((world[a] - centre[a]).abs() < 1e-12, "{world:?} vs {centre:?}");
         }
+    }
+
+    /// `PcaGrids::Vec3`: components 3g, 3g+1, 3g+2 in grid g, zero past the rank.
+    #[test]
+    fn vec3_grids_hold_three_components_each() {
+        let asset = asset();
+        let options = VdbOptions {
+            pca_grids: PcaGrids::Vec3,
+            ..VdbOptions::default()
+        };
+        let (file, report) = build_vdb(&asset, &white(), &options).unwrap();
+        let names: Vec<&str> = file.grids().iter().map(AnyGrid::name).collect();
+        assert_eq!(names, ["density", "color", "pca3_00", "pca3_01"]);
+        assert_eq!(report.rank, 4);
+        assert!(file.metadata()["nelf_pca_grids"] == MetaValue::String(r#"["pca3_00","pca3_01"]"#.into()));
+        let mut coefficients = vec![0.0; 4];
+        for (g, grid) in file.grids()[2..].iter().enumerate() {
+            let AnyGrid::Vec3s(grid) = grid else {
+                panic!("coefficient groups are vec3s")
+            };
+            for (b, brick) in asset.bricks.iter().enumerate() {
+                let origin = brick.map(|c| 8 * i32::from(c));
+                let (_, values) = grid.leaves().find(|(o, _)| **o == origin).unwrap();
+                for (i, j, k) in [(0, 0, 0), (3, 5, 7), (7, 7, 7)] {
+                    let v = b * 512 + i + 8 * j + 64 * k;
+                    asset.coefficients.voxel_f32(v, &mut coefficients);
+                    let want = [0, 1, 2].map(|c| coefficients.get(3 * g + c).copied().unwrap_or(0.0));
+                    assert_eq!(values[leaf_offset(i, j, k)], want);
+                }
+            }
+        }
+        // Its names are taken too.
+        let clash = VdbOptions {
+            color_name: "pca3_01".into(),
+            ..options
+        };
+        assert!(matches!(clash.validate(&asset), Err(ExportError::BadOption(_))));
     }
 
     #[test]

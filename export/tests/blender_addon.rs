@@ -20,6 +20,7 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 use glam::DMat3;
+use nelf_export::vdb::PcaGrids;
 use nelf_export::{VdbOptions, write_vdb};
 use nelf_format::conventions::{LatLong, project_envmap};
 use serde_json::Value;
@@ -152,11 +153,24 @@ json.dump([relight.project_envmap(texels, np.array(r)).tolist() for r in rotatio
 
 #[test]
 fn addon_reads_the_metadata_and_relights_to_the_colour_grid() {
+    relights_to_the_colour_grid(PcaGrids::Float);
+}
+
+#[test]
+fn addon_reads_vec3_coefficient_grids_too() {
+    relights_to_the_colour_grid(PcaGrids::Vec3);
+}
+
+fn relights_to_the_colour_grid(pca_grids: PcaGrids) {
     let dir = tempfile::tempdir().unwrap();
     let asset = common::asset();
     let lighting = common::lighting();
     let vdb = dir.path().join("asset.vdb");
-    write_vdb(&vdb, &asset, &lighting, &VdbOptions::default()).unwrap();
+    let options = VdbOptions {
+        pca_grids,
+        ..VdbOptions::default()
+    };
+    write_vdb(&vdb, &asset, &lighting, &options).unwrap();
     let expected = common::expected(&asset, &lighting, asset.rank(), 1.0);
     // The lighting's map and turn, and a few voxels' coefficients, for the add-on.
     let nelf_export::Lighting::World {
@@ -192,7 +206,8 @@ spec = json.load(open(sys.argv[3]))
 texels = np.fromfile(sys.argv[2], dtype="<f4").reshape(spec["height"], spec["width"], 3)
 e = np.array(spec["world_from_env"]).T @ np.array(asset.world_from_light)
 p_mean, p = relight.relight_terms(asset.mean, asset.basis, relight.project_envmap(texels, e))
-out = {"grids": asset.pca_grids, "density": asset.density_grid, "color": asset.color_grid,
+out = {"grids": asset.pca_grids, "per_grid": asset.components_per_grid, "rank": asset.rank,
+       "density": asset.density_grid, "color": asset.color_grid,
        "voxel_size": asset.voxel_size, "mean0": asset.mean[0], "radiance": []}
 for v in spec["voxels"]:
     out["radiance"].append((p_mean + np.array(v["c"]) @ p).tolist())
@@ -200,8 +215,9 @@ json.dump(out, sys.stdout)
 "#,
         &[&vdb, &map_path, &input_path],
     );
-    let names: Vec<String> = (0..asset.rank()).map(nelf_export::vdb::pca_grid_name).collect();
-    assert_eq!(got["grids"], serde_json::json!(names));
+    assert_eq!(got["grids"], serde_json::json!(pca_grids.names(asset.rank())));
+    assert_eq!(got["rank"], asset.rank());
+    assert_eq!(got["per_grid"], if pca_grids == PcaGrids::Vec3 { 3 } else { 1 });
     assert_eq!(got["density"], "density");
     assert_eq!(got["color"], "color");
     assert_eq!(got["voxel_size"].as_f64().unwrap(), asset.grid.voxel_size_m);

@@ -250,6 +250,7 @@ fn openvdb_reads_a_raw_scaled_cut_houdini_export() {
             rank: Some(2),
             color_name: "Cd".into(),
             compression: Compression::None,
+            pca_grids: nelf_export::vdb::PcaGrids::Float,
         },
         &common::white(),
     );

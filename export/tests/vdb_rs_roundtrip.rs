@@ -148,6 +148,7 @@ fn vdb_rs_reads_every_float_value_zipped_scaled_and_cut() {
         rank: Some(3),
         color_name: "Cd".into(),
         compression: Compression::Zip,
+        pca_grids: nelf_export::vdb::PcaGrids::Float,
     });
 }
 

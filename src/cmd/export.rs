@@ -112,6 +112,21 @@ pub struct VdbArgs {
     /// `<stem>.projected_light.exr` (export/UNREAL.md).
     #[arg(long, value_enum)]
     pub preset: Option<PresetArg>,
+    /// `float`: one grid per PCA component (`pca_00` …, what OpenVDB's tools and Houdini
+    /// expect); `vec3`: three components per vec3s grid (`pca3_00` …), a third of the
+    /// texture lookups for Blender's add-on (export/BLENDER.md).
+    #[arg(long, value_enum, default_value_t)]
+    pub pca_grids: PcaGridsArg,
+}
+
+/// `--pca-grids` of `nelf export vdb`.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, clap::ValueEnum)]
+pub enum PcaGridsArg {
+    /// One float grid per component.
+    #[default]
+    Float,
+    /// Three components per vec3s grid.
+    Vec3,
 }
 
 /// Target presets of `nelf export vdb`.
@@ -158,6 +173,10 @@ impl VdbArgs {
                 CompressionArg::Zip => Compression::Zip,
             },
             preset: self.preset.map(|PresetArg::Unreal| VdbPreset::Unreal),
+            pca_grids: match self.pca_grids {
+                PcaGridsArg::Float => nelf_export::vdb::PcaGrids::Float,
+                PcaGridsArg::Vec3 => nelf_export::vdb::PcaGrids::Vec3,
+            },
         }
     }
 }

@@ -172,6 +172,45 @@ def build_material(obj, asset, rank, emission):
         color.attribute_name = asset.color_grid
         color.location = (0, -100)
         links.new(color.outputs["Color"], principled.inputs["Emission Color"])
+    elif asset.components_per_grid == 3:
+        # radiance_c = P_mean_c + sum_g dot(pca3_g, (P_3g,c, P_3g+1,c, P_3g+2,c)): one
+        # lookup per three components, three Dot Products and three Adds per grid.
+        channels = []
+        groups = -(-rank // 3)
+        for c in range(3):
+            total = None
+            for g in range(groups):
+                if c == 0:
+                    attribute = nodes.new("ShaderNodeAttribute")
+                    attribute.attribute_name = asset.pca_grids[g]
+                    attribute.name = f"nelf_pca3_{g}"
+                    attribute.location = (-1500, -200 - 200 * g)
+                dot = nodes.new("ShaderNodeVectorMath")
+                dot.operation = "DOT_PRODUCT"
+                dot.name = dot.label = f"nelf_P3_{g}_{c}"
+                dot.location = (-1200 + 150 * c, -200 - 200 * g)
+                links.new(nodes[f"nelf_pca3_{g}"].outputs["Vector"], dot.inputs[0])
+                if total is None:
+                    total = dot.outputs["Value"]
+                else:
+                    add = nodes.new("ShaderNodeMath")
+                    add.operation = "ADD"
+                    add.location = (-750 + 150 * c, -200 - 200 * g)
+                    links.new(total, add.inputs[0])
+                    links.new(dot.outputs["Value"], add.inputs[1])
+                    total = add.outputs[0]
+            channels.append(total)
+        combine = nodes.new("ShaderNodeCombineXYZ")
+        combine.location = (-300, -200)
+        for c, socket in enumerate(channels):
+            if socket is not None:
+                links.new(socket, combine.inputs[c])
+        mean = nodes.new("ShaderNodeVectorMath")
+        mean.operation = "ADD"
+        mean.name = mean.label = P_MEAN_NODE
+        mean.location = (-100, -200)
+        links.new(combine.outputs["Vector"], mean.inputs[1])
+        links.new(mean.outputs["Vector"], principled.inputs["Emission Color"])
     else:
         # radiance = P_mean + sum_k pca_k * P_k, one Scale and one Add per component.
         total = nodes.new("ShaderNodeVectorMath")
@@ -205,12 +244,19 @@ def build_material(obj, asset, rank, emission):
 
 
 def write_terms(material, p_mean, p):
+    """Writes P_mean and the P_k (K x 3) into the material's nodes (either layout)."""
     nodes = material.node_tree.nodes
     nodes[P_MEAN_NODE].inputs[0].default_value = tuple(float(v) for v in p_mean)
     for k, row in enumerate(p):
         node = nodes.get(f"nelf_P_{k}")
         if node is not None:
             node.inputs[0].default_value = tuple(float(v) for v in row)
+    for g in range(-(-len(p) // 3)):
+        for c in range(3):
+            node = nodes.get(f"nelf_P3_{g}_{c}")
+            if node is not None:
+                # Components past the rank get 0: the slider may cut a group.
+                node.inputs[1].default_value = tuple(float(p[3 * g + j][c]) if 3 * g + j < len(p) else 0.0 for j in range(3))
 
 
 def relight_object(obj, scene, force=True):

@@ -112,6 +112,12 @@ class NelfVdb:
         self.color_grid = need("nelf_color_grid", str)
         self.color_lighting = need("nelf_color_lighting", str)
         self.pca_grids = floats("nelf_pca_grids")
+        # "float: ..." (one component per grid) or "vec3s: ..." (three per grid); files
+        # from before the key are float.
+        grid_type = meta.get("nelf_pca_grid_type", "float")
+        if not isinstance(grid_type, str) or grid_type.split(":")[0] not in ("float", "vec3s"):
+            raise VdbMetaError(f"{path}: unknown nelf_pca_grid_type {grid_type!r}")
+        self.components_per_grid = 3 if grid_type.startswith("vec3s") else 1
         self.mean = floats("nelf_pca_mean")
         self.basis = floats("nelf_pca_basis")
         rows = floats("nelf_world_from_light")
@@ -121,7 +127,7 @@ class NelfVdb:
             or not isinstance(self.mean, list)
             or len(self.mean) != LT_DIM
             or not isinstance(self.basis, list)
-            or len(self.basis) != len(self.pca_grids)
+            or -(-len(self.basis) // self.components_per_grid) != len(self.pca_grids)
             or any(not isinstance(b, list) or len(b) != LT_DIM for b in self.basis)
             or not (isinstance(rows, list) and len(rows) == 3 and all(isinstance(r, list) and len(r) == 3 for r in rows))
         ):
@@ -138,7 +144,8 @@ class NelfVdb:
 
     @property
     def rank(self):
-        return len(self.pca_grids)
+        """PCA components exported (basis vectors in the metadata)."""
+        return len(self.basis)
 
     @property
     def voxel_size(self):

@@ -36,7 +36,13 @@ def terms(obj):
     nodes = bpy.data.materials[nelf_relight.MATERIAL_PREFIX + obj.name].node_tree.nodes
     p_mean = tuple(nodes[nelf_relight.P_MEAN_NODE].inputs[0].default_value)
     p = [tuple(n.inputs[0].default_value) for n in nodes if n.name.startswith("nelf_P_") and n.name != nelf_relight.P_MEAN_NODE]
+    # Grids of three components (`nelf export vdb --pca-grids vec3`): three dot products each.
+    p += [tuple(n.inputs[1].default_value) for n in nodes if n.name.startswith("nelf_P3_")]
     return p_mean, p
+
+
+def expected_terms(rank):
+    return rank if asset.components_per_grid == 1 else 3 * -(-rank // 3)
 
 
 def world_with_image(name, pixels, width, height, z_deg=0.0):
@@ -86,7 +92,7 @@ world, mapping = world_with_image("sky", sky, width, height)
 scene.world = world
 obj.nelf.emission = "RELIT"
 p_mean, p = terms(obj)
-check("switching to relit builds one term per component", len(p) == asset.rank, f"{len(p)} terms, rank {asset.rank}")
+check("switching to relit builds the terms of every component", len(p) == expected_terms(asset.rank), f"{len(p)} terms, rank {asset.rank}")
 check("and relights from the world", any(abs(v) > 0 for v in p_mean), str(p_mean))
 
 # Automatic: turning the world's mapping changes the terms after a depsgraph update. Blender's
@@ -116,7 +122,7 @@ check("turning the object relights automatically", terms(obj) != before)
 
 # Rank slider.
 obj.nelf.rank = 3
-check("rank 3 keeps three terms", len(terms(obj)[1]) == min(3, asset.rank))
+check("rank 3 keeps three components", len(terms(obj)[1]) == expected_terms(min(3, asset.rank)))
 obj.nelf.rank = asset.rank
 
 # A file that is not ours: a clear error in the report, nothing imported.
