@@ -247,6 +247,7 @@ pub struct ShellMeshField {
     sheet_thickness_m: f32,
     hollow_depth_m: Option<f32>,
     share_cell_m: Option<f32>,
+    albedo_footprint_m: Option<f32>,
 }
 
 /// Below this traced albedo a shared vector is not rescaled to a point's own albedo.
@@ -295,7 +296,27 @@ impl ShellMeshField {
             sheet_thickness_m,
             hollow_depth_m,
             share_cell_m: None,
+            albedo_footprint_m: None,
         })
+    }
+
+    /// Each point's own albedo (what a shared vector is rescaled to) averaged over a
+    /// square of this side around its closest surface point (`Mesh::albedo_footprint`),
+    /// instead of read at that point: a voxel then carries the texture it covers, not
+    /// a pore that happens to lie under its centre (`None`: read at the point).
+    #[must_use]
+    pub fn with_albedo_footprint(mut self, footprint_m: Option<f32>) -> Self {
+        self.albedo_footprint_m = footprint_m.filter(|f| f.is_finite() && *f > 0.0);
+        self
+    }
+
+    /// A located point's own albedo (see [`Self::with_albedo_footprint`]).
+    fn own_albedo(&self, mesh: &Mesh, cp: &ClosestPoint) -> [f32; 3] {
+        let t = cp.triangle as usize;
+        match self.albedo_footprint_m {
+            Some(footprint) => mesh.albedo_footprint(t, cp.b1, cp.b2, footprint),
+            None => mesh.albedo_at(t, cp.b1, cp.b2),
+        }
     }
 
     /// Shares light transport among points whose closest points lie on the same
@@ -500,7 +521,7 @@ impl ShellMeshField {
                         back,
                         cell: (cp.point / cell_m).floor().as_ivec3().to_array(),
                     };
-                    (key, mesh.albedo_at(cp.triangle as usize, cp.b1, cp.b2))
+                    (key, self.own_albedo(mesh, &cp))
                 })
             })
             .collect();
@@ -583,7 +604,7 @@ impl ShellMeshField {
                             cell,
                         })
                         .collect();
-                    (keys, mesh.albedo_at(cp.triangle as usize, cp.b1, cp.b2))
+                    (keys, self.own_albedo(mesh, &cp))
                 })
             })
             .collect();
@@ -745,7 +766,8 @@ pub fn mesh_field(
         ShellPlacement::Centred => Box::new(field),
         ShellPlacement::Inside => Box::new(
             ShellMeshField::new(field, ShellProfile::Inside { width_m: width }, sheet, None)?
-                .with_shared_transport(share),
+                .with_shared_transport(share)
+                .with_albedo_footprint(Some(voxel)),
         ),
         ShellPlacement::Signed => Box::new(
             ShellMeshField::new(
@@ -757,7 +779,8 @@ pub fn mesh_field(
                 sheet,
                 (config.hollow_voxels > 0.0).then_some(config.hollow_voxels * voxel),
             )?
-            .with_shared_transport(share),
+            .with_shared_transport(share)
+            .with_albedo_footprint(Some(voxel)),
         ),
     })
 }
@@ -945,6 +968,90 @@ mod tests {
             keys.len() * 3 <= answered * 2,
             "{} traces for {answered} points",
             keys.len()
+        );
+    }
+
+    /// A texture finer than a voxel (a checkerboard of 0.4 mm black and white texels
+    /// under 2 mm voxels): read at each point's closest surface point, neighbouring
+    /// voxels flip between black and white (the specks of docs/measurements/
+    /// 2026-12-07-specks.md); averaged over the voxel's footprint they carry its grey.
+    #[test]
+    fn albedo_footprint_removes_texture_finer_than_a_voxel() {
+        use nelf_scene::defects::textured_quad;
+        use nelf_scene::mesh::Texture;
+        let side = 256;
+        let texels = (0..side * side)
+            .map(|i| {
+                if (i / side + i % side) % 2 == 0 {
+                    [0.9; 3]
+                } else {
+                    [0.05; 3]
+                }
+            })
+            .collect();
+        let texture = Texture {
+            width: side,
+            height: side,
+            texels,
+        };
+        let mesh = textured_quad(
+            Vec3::new(-0.05, -0.05, 0.0),
+            Vec3::new(0.1, 0.0, 0.0),
+            Vec3::new(0.0, 0.1, 0.0),
+            4,
+            texture,
+        );
+        let voxel = 2e-3f32;
+        let trace = TraceSettings {
+            texel_samples: 1,
+            indirect_samples: 1,
+            bounces: 0,
+            ..TraceSettings::default()
+        };
+        let field = || MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
+        let profile = ShellProfile::Signed {
+            lead_m: 0.25 * voxel,
+            voxel_m: voxel,
+        };
+        let share = Some(BakeConfig::default().lt_share_voxels * voxel);
+        let point = ShellMeshField::new(field(), profile, 2.0 * voxel, None)
+            .unwrap()
+            .with_shared_transport(share);
+        let footprint = ShellMeshField::new(field(), profile, 2.0 * voxel, None)
+            .unwrap()
+            .with_shared_transport(share)
+            .with_albedo_footprint(Some(voxel));
+        // Voxel centres in the band in front of the quad, away from its edges.
+        let points: Vec<Vec3> = (0..30)
+            .flat_map(|i| {
+                (0..30).map(move |j| Vec3::new(-0.03 + 0.002 * i as f32, -0.03 + 0.002 * j as f32, 0.0003))
+            })
+            .collect();
+        let view = ViewPolicy::AverageDirections(vec![Vec3::Z]);
+        let spread = |f: &ShellMeshField| {
+            let mut d = vec![0.0; points.len()];
+            let mut t = vec![0.0; points.len() * LT_DIM];
+            f.evaluate(&points, &view, &mut d, &mut t).unwrap();
+            // Radiance under uniform white light (red channel), per point.
+            let r: Vec<f32> = t.chunks(LT_DIM).map(|c| c[..ENV_TEXELS].iter().sum()).collect();
+            let mean = r.iter().sum::<f32>() / r.len() as f32;
+            let sd = (r.iter().map(|v| (v - mean).powi(2)).sum::<f32>() / r.len() as f32).sqrt();
+            (mean, sd / mean)
+        };
+        let (point_mean, point_spread) = spread(&point);
+        let (footprint_mean, footprint_spread) = spread(&footprint);
+        assert!(
+            point_spread > 0.5,
+            "point-sampled albedo flips between texels: spread {point_spread}"
+        );
+        assert!(
+            footprint_spread < 0.1,
+            "footprint albedo is the voxel's grey: spread {footprint_spread}"
+        );
+        // The same mean light (the average albedo is kept).
+        assert!(
+            (footprint_mean - point_mean).abs() < 0.15 * point_mean,
+            "{footprint_mean} vs {point_mean}"
         );
     }
 

@@ -54,6 +54,9 @@ impl Texture {
     }
 }
 
+/// Widest box [`Mesh::albedo_footprint`] averages, texels a side.
+pub const MAX_FOOTPRINT_TEXELS: usize = 64;
+
 /// Diffuse albedo over a mesh, linear RGB in `[0, 1]`.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Albedo {
@@ -197,6 +200,66 @@ impl Mesh {
         }
     }
 
+    /// Albedo averaged over a square of side `footprint_m` metres around barycentric
+    /// `(b1, b2)` of triangle `t`, within that triangle: what a voxel of that size sees
+    /// of a texture finer than itself (a box filter in the triangle's texture space).
+    /// Read at one point instead ([`Self::albedo_at`]), a pore or stubble texel that
+    /// happens to lie there darkens the whole voxel: a speck the surface does not show at
+    /// that scale. Texels are averaged whose centres lie in the triangle's UV triangle
+    /// and within the square (at most [`MAX_FOOTPRINT_TEXELS`] a side, so a texel from
+    /// another island of an atlas never leaks in); with none, or for uniform and
+    /// per-vertex albedo, the point value.
+    pub fn albedo_footprint(&self, t: usize, b1: f32, b2: f32, footprint_m: f32) -> [f32; 3] {
+        let Albedo::Texture { uvs, texture } = &self.albedo else {
+            return self.albedo_at(t, b1, b2);
+        };
+        let [a, b, c] = self.corners(t);
+        let world_area = 0.5 * (b - a).cross(c - a).length();
+        let size = Vec2::new(texture.width as f32, texture.height as f32);
+        // Corners in texel units (x right, y up as v).
+        let [p0, p1, p2] = [uvs[3 * t], uvs[3 * t + 1], uvs[3 * t + 2]].map(|uv| uv * size);
+        let texel_area = 0.5 * (p1 - p0).perp_dot(p2 - p0).abs();
+        if !(world_area > 0.0 && texel_area > 0.0 && footprint_m > 0.0) {
+            return self.albedo_at(t, b1, b2);
+        }
+        let half =
+            (0.5 * footprint_m * (texel_area / world_area).sqrt()).min(0.5 * MAX_FOOTPRINT_TEXELS as f32);
+        if half < 0.5 {
+            return self.albedo_at(t, b1, b2);
+        }
+        let centre = (1.0 - b1 - b2) * p0 + b1 * p1 + b2 * p2;
+        let inside = |q: Vec2| {
+            let d0 = (p1 - p0).perp_dot(q - p0);
+            let d1 = (p2 - p1).perp_dot(q - p1);
+            let d2 = (p0 - p2).perp_dot(q - p2);
+            (d0 >= 0.0 && d1 >= 0.0 && d2 >= 0.0) || (d0 <= 0.0 && d1 <= 0.0 && d2 <= 0.0)
+        };
+        let (x0, x1) = ((centre.x - half).floor() as i64, (centre.x + half).ceil() as i64);
+        let (y0, y1) = ((centre.y - half).floor() as i64, (centre.y + half).ceil() as i64);
+        let mut sum = [0.0f64; 3];
+        let mut count = 0u32;
+        for y in y0..y1 {
+            for x in x0..x1 {
+                let q = Vec2::new(x as f32 + 0.5, y as f32 + 0.5);
+                if (q - centre).abs().max_element() > half || !inside(q) {
+                    continue;
+                }
+                let col = x.rem_euclid(texture.width as i64) as usize;
+                // Texel row 0 is the top (v = 1).
+                let row = (texture.height as i64 - 1 - y.rem_euclid(texture.height as i64)) as usize;
+                let texel = texture.texels[row * texture.width + col];
+                for ch in 0..3 {
+                    sum[ch] += f64::from(texel[ch]);
+                }
+                count += 1;
+            }
+        }
+        if count == 0 {
+            return self.albedo_at(t, b1, b2);
+        }
+        sum.map(|v| (v / f64::from(count)) as f32)
+    }
+
     /// Translates and uniformly scales the mesh so its bounding box is centred at
     /// `centre` and its height (y extent) is `height_m` metres.
     pub fn fit_height(&mut self, centre: Vec3, height_m: f32) {
@@ -220,6 +283,54 @@ mod tests {
             triangles: vec![[0, 1, 2], [0, 2, 3]],
             albedo: Albedo::PerVertex(vec![[0.0; 3], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0; 3]]),
         }
+    }
+
+    /// A 64 × 64 texture on a right triangle of 1 m legs spanning `uv` (0,0)–(1,0)–(0,1):
+    /// texels whose centres lie in the triangle (`col ≤ row`, row 0 at the top) get
+    /// `inside(row, col)`, the others (another island of an atlas) grey.
+    fn textured_triangle(inside: impl Fn(usize, usize) -> f32) -> Mesh {
+        let texels = (0..64 * 64)
+            .map(|i| {
+                let (row, col) = (i / 64, i % 64);
+                if col <= row {
+                    [inside(row, col); 3]
+                } else {
+                    [0.5; 3]
+                }
+            })
+            .collect();
+        Mesh {
+            positions: vec![Vec3::ZERO, Vec3::X, Vec3::Y],
+            triangles: vec![[0, 1, 2]],
+            albedo: Albedo::Texture {
+                uvs: vec![Vec2::ZERO, Vec2::X, Vec2::Y],
+                texture: Texture {
+                    width: 64,
+                    height: 64,
+                    texels,
+                },
+            },
+        }
+    }
+
+    #[test]
+    fn footprint_albedo_averages_fine_texture_within_the_triangle() {
+        // A checkerboard of 1-texel squares: a point reads black or white.
+        let m = textured_triangle(|row, col| ((row + col) % 2) as f32);
+        let point = m.albedo_at(0, 0.25, 0.25)[0];
+        assert!(point == 0.0 || point == 1.0, "{point}");
+        // A 10 cm footprint (6.4 texels) averages it to about one half.
+        let box_mean = m.albedo_footprint(0, 0.25, 0.25, 0.1)[0];
+        assert!((box_mean - 0.5).abs() < 0.05, "{box_mean}");
+        // At the hypotenuse the grey texels outside the triangle do not leak in.
+        let white = textured_triangle(|_, _| 1.0);
+        assert_eq!(white.albedo_footprint(0, 0.49, 0.49, 0.2), [1.0; 3]);
+        // Below a texel, and for other albedo kinds, the point value.
+        assert_eq!(m.albedo_footprint(0, 0.25, 0.25, 0.001)[0], point);
+        assert_eq!(
+            quad().albedo_footprint(0, 0.5, 0.5, 1.0),
+            quad().albedo_at(0, 0.5, 0.5)
+        );
     }
 
     #[test]
