@@ -871,38 +871,47 @@ mod tests {
         }
     }
 
-    /// Sharing light transport among the band's voxels: the result is a function of
-    /// each point alone (any batch split gives the same bits), a textured sheet keeps
-    /// its texture (each point rescales to its own albedo), and the shared field
-    /// stays within a few per cent of tracing every point.
-    #[test]
-    fn shared_transport_is_per_point_and_close_to_tracing_each_point() {
-        use nelf_scene::defects::{striped_texture, textured_quad};
-        let texture = striped_texture(32, 32, 4, [[0.8, 0.2, 0.1], [0.1, 0.6, 0.9], [0.5, 0.5, 0.5]]);
-        let mesh = textured_quad(
+    /// Voxel edge of the textured-sheet tests, metres.
+    const SHEET_VOXEL: f32 = 2e-3;
+
+    /// A 10 cm square sheet in `z = 0` with `texture`, a one-sample tracer, as a signed
+    /// shell field of [`SHEET_VOXEL`] voxels (tracing every point).
+    fn textured_sheet_field(texture: nelf_scene::mesh::Texture) -> ShellMeshField {
+        let mesh = nelf_scene::defects::textured_quad(
             Vec3::new(-0.05, -0.05, 0.0),
             Vec3::new(0.1, 0.0, 0.0),
             Vec3::new(0.0, 0.1, 0.0),
             4,
             texture,
         );
-        let voxel = 2e-3f32;
         let trace = TraceSettings {
             texel_samples: 1,
             indirect_samples: 1,
             bounces: 0,
             ..TraceSettings::default()
         };
-        let config = BakeConfig::default();
-        let field = || MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
+        let voxel = SHEET_VOXEL;
+        let field = MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
         let profile = ShellProfile::Signed {
             lead_m: 0.25 * voxel,
             voxel_m: voxel,
         };
-        let own = ShellMeshField::new(field(), profile, 2.0 * voxel, None).unwrap();
-        let shared = ShellMeshField::new(field(), profile, 2.0 * voxel, None)
-            .unwrap()
-            .with_shared_transport(Some(config.lt_share_voxels * voxel));
+        ShellMeshField::new(field, profile, 2.0 * voxel, None).unwrap()
+    }
+
+    /// Sharing light transport among the band's voxels: the result is a function of
+    /// each point alone (any batch split gives the same bits), a textured sheet keeps
+    /// its texture (each point rescales to its own albedo), and the shared field
+    /// stays within a few per cent of tracing every point.
+    #[test]
+    fn shared_transport_is_per_point_and_close_to_tracing_each_point() {
+        use nelf_scene::defects::striped_texture;
+        let texture = striped_texture(32, 32, 4, [[0.8, 0.2, 0.1], [0.1, 0.6, 0.9], [0.5, 0.5, 0.5]]);
+        let voxel = SHEET_VOXEL;
+        let config = BakeConfig::default();
+        let own = textured_sheet_field(texture.clone());
+        let shared =
+            textured_sheet_field(texture).with_shared_transport(Some(config.lt_share_voxels * voxel));
         // A lattice of points in the band on both sides of the sheet.
         let points: Vec<Vec3> = (0..40)
             .flat_map(|i| (0..40).flat_map(move |j| (-1..=1).map(move |k| (i, j, k))))
@@ -977,7 +986,6 @@ mod tests {
     /// 2026-12-07-specks.md); averaged over the voxel's footprint they carry its grey.
     #[test]
     fn albedo_footprint_removes_texture_finer_than_a_voxel() {
-        use nelf_scene::defects::textured_quad;
         use nelf_scene::mesh::Texture;
         let side = 256;
         let texels = (0..side * side)
@@ -994,31 +1002,10 @@ mod tests {
             height: side,
             texels,
         };
-        let mesh = textured_quad(
-            Vec3::new(-0.05, -0.05, 0.0),
-            Vec3::new(0.1, 0.0, 0.0),
-            Vec3::new(0.0, 0.1, 0.0),
-            4,
-            texture,
-        );
-        let voxel = 2e-3f32;
-        let trace = TraceSettings {
-            texel_samples: 1,
-            indirect_samples: 1,
-            bounces: 0,
-            ..TraceSettings::default()
-        };
-        let field = || MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
-        let profile = ShellProfile::Signed {
-            lead_m: 0.25 * voxel,
-            voxel_m: voxel,
-        };
+        let voxel = SHEET_VOXEL;
         let share = Some(BakeConfig::default().lt_share_voxels * voxel);
-        let point = ShellMeshField::new(field(), profile, 2.0 * voxel, None)
-            .unwrap()
-            .with_shared_transport(share);
-        let footprint = ShellMeshField::new(field(), profile, 2.0 * voxel, None)
-            .unwrap()
+        let point = textured_sheet_field(texture.clone()).with_shared_transport(share);
+        let footprint = textured_sheet_field(texture)
             .with_shared_transport(share)
             .with_albedo_footprint(Some(voxel));
         // Voxel centres in the band in front of the quad, away from its edges.
