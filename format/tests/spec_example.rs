@@ -1249,42 +1249,17 @@ fn reflection_values() -> Vec<(String, Expected)> {
     let (n, s) = part.voxel(VOXEL);
     let n = Vec3::from_array(n);
     let light = sky();
-    // The PCA part under the sky, projected as `nelf_render::light` does.
-    let project = |v: &[f32]| -> [f32; 3] {
-        std::array::from_fn(|c| {
-            v[c * ENV_TEXELS..(c + 1) * ENV_TEXELS]
-                .iter()
-                .zip(light.texels())
-                .map(|(&t, l)| f64::from(t) * f64::from(l[c]))
-                .sum::<f64>() as f32
-        })
-    };
-    let mut pca = project(&asset.pca.mean);
-    let mut coefficients = [0.0f32; 2];
-    asset.coefficients_f32(VOXEL, &mut coefficients);
-    for (k, ck) in coefficients.iter().enumerate() {
-        let p = project(asset.pca.component(k));
-        for c in 0..3 {
-            pca[c] += ck * p[c];
-        }
-    }
+    let pca = radiance_pca(&asset, &light);
     let centre = asset.voxel_position_m(VOXEL);
     let light_from_world = asset.world_from_light.transpose().as_mat3();
     let camera = seen_from(DVec3::from_array(CAMERA_M), centre, n, light_from_world, &light);
     let share = 1.0 / part.eyes_m.len() as f32;
     let mut mean = [0.0f32; 3];
-    let mut out = vec![
-        (
-            "version_minor".to_string(),
-            Expected::Int(vec![i64::from(u16::from_le_bytes([file[10], file[11]]))]),
-        ),
-        (
-            "VREF.raw_length".into(),
-            Expected::Int(vec![vref.raw_length as i64]),
-        ),
+    let mut out = version_and_length(&file, "VREF", vref.raw_length);
+    out.extend([
         ("VREF.E".into(), Expected::Int(vec![eyes as i64])),
         ("VREF.exponent".into(), Expected::F32(vec![real(4)])),
-    ];
+    ]);
     for e in 0..eyes {
         out.push((
             format!("VREF.eye{e}_m"),
@@ -1430,6 +1405,36 @@ fn view_asset() -> Asset {
     }
 }
 
+/// The PCA part of voxel `VOXEL` under `light`: `P_mean + Σ_k c_k P_k`, the projections
+/// as [`projected`], the sum in f32 with `k` ascending (`nelf_render::light`).
+fn radiance_pca(asset: &Asset, light: &LatLong) -> [f32; 3] {
+    let mut pca = projected(&asset.pca.mean, light);
+    let mut coefficients = vec![0.0f32; asset.rank()];
+    asset.coefficients_f32(VOXEL, &mut coefficients);
+    for (k, ck) in coefficients.iter().enumerate() {
+        let p = projected(asset.pca.component(k), light);
+        for ch in 0..3 {
+            pca[ch] += ck * p[ch];
+        }
+    }
+    pca
+}
+
+/// The first lines of a worked example's block: the file's minor version and the decoded
+/// length of its section `tag`.
+fn version_and_length(file: &[u8], tag: &str, raw_length: u64) -> Vec<(String, Expected)> {
+    vec![
+        (
+            "version_minor".to_string(),
+            Expected::Int(vec![i64::from(u16::from_le_bytes([file[10], file[11]]))]),
+        ),
+        (
+            format!("{tag}.raw_length"),
+            Expected::Int(vec![raw_length as i64]),
+        ),
+    ]
+}
+
 /// `Σ_j v[c·128 + j] · L[j][c]` per channel, in f64, rounded once (`nelf_render::light`).
 fn projected(v: &[f32], light: &LatLong) -> [f32; 3] {
     std::array::from_fn(|c| {
@@ -1487,15 +1492,7 @@ fn view_values() -> (Vec<(String, Expected)>, [f32; 3]) {
         .collect();
 
     let light = sky();
-    let mut pca = projected(&asset.pca.mean, &light);
-    let mut c = [0.0f32; 2];
-    asset.coefficients_f32(VOXEL, &mut c);
-    for (k, ck) in c.iter().enumerate() {
-        let p = projected(asset.pca.component(k), &light);
-        for ch in 0..3 {
-            pca[ch] += ck * p[ch];
-        }
-    }
+    let pca = radiance_pca(&asset, &light);
     // ω: the difference in f64, rounded to f32, normalised by `view_harmonics`.
     let diff = (DVec3::from_array(CAMERA_M) - asset.voxel_position_m(VOXEL))
         .as_vec3()
@@ -1536,19 +1533,12 @@ fn view_values() -> (Vec<(String, Expected)>, [f32; 3]) {
         }
     }
 
-    let mut out = vec![
-        (
-            "version_minor".to_string(),
-            Expected::Int(vec![i64::from(u16::from_le_bytes([file[10], file[11]]))]),
-        ),
-        (
-            "VDEP.raw_length".into(),
-            Expected::Int(vec![vdep.raw_length as i64]),
-        ),
+    let mut out = version_and_length(&file, "VDEP", vdep.raw_length);
+    out.extend([
         ("VDEP.J".into(), Expected::Int(vec![lobes as i64])),
         ("VDEP.K_v".into(), Expected::Int(vec![rank as i64])),
         ("VDEP.encoding".into(), Expected::Int(vec![encoding as i64])),
-    ];
+    ]);
     for j in 0..lobes {
         out.push((
             format!("VDEP.lobe{j}"),
