@@ -89,8 +89,14 @@ pub fn describe_bake(out: &Path, r: &BakeReport) -> String {
                 v.requested,
                 if let Some(p) = v.probe.as_ref().filter(|p| !p.band_fitted) {
                     format!(
-                        "fitted on {} of {} band voxels, the best candidate would gain about {:+.3} dB over the whole band at {}, below a quarter of --view-min-gain-db; the band was not fitted",
-                        p.voxels, p.band_voxels, p.best_extrapolated_gain_db, v.judged_at
+                        "probed on {} of {} band voxels ({:.1} s): the best candidate would gain at most about {:+.3} dB over the whole band at {} (extrapolated {:+.3} / {}), below --view-min-gain-db; the band was not fitted",
+                        p.voxels,
+                        p.band_voxels,
+                        p.secs,
+                        p.best_extrapolated_gain_db / nelf_bake::view::PROBE_OVERSELL,
+                        v.judged_at,
+                        p.best_extrapolated_gain_db,
+                        nelf_bake::view::PROBE_OVERSELL
                     )
                 } else if let (true, Some(residual)) = (v.candidates.is_empty(), v.residual_ratio) {
                     format!("residual {residual:.1e} of the transport, nothing to fit")

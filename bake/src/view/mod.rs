@@ -44,8 +44,8 @@ pub mod harmonic;
 pub mod reflection;
 
 pub use choice::{
-    AUTO_GAIN_SLACK_DB, DEFAULT_VIEW_RANK, JUDGE_PIXEL_GRID, PROBE_MARGIN, ViewCandidate, ViewProbe,
-    ViewReport, ViewSettings, choose_view, extrapolated_gain_db, judge_psnr,
+    AUTO_GAIN_SLACK_DB, DEFAULT_VIEW_RANK, JUDGE_PIXEL_GRID, PROBE_OVERSELL, PROBE_PIXEL_GRID, ViewCandidate,
+    ViewProbe, ViewReport, ViewSettings, choose_view, extrapolated_gain_db, judge_psnr,
 };
 pub use directions::{VIEW_DIRECTIONS, sample_directions, seen_weights};
 pub use harmonic::{BASIS_SAMPLE, FitScope, NO_VIEW_DEPENDENCE, PROBE_SAMPLE, ViewChoice, ViewFit, fit_view};
