@@ -127,6 +127,12 @@ impl EncodingChoice {
     }
 }
 
+/// `--ramp-voxels`' default (and the value of bakes saved before it existed, whose
+/// ramp was their lead).
+fn default_ramp_voxels() -> f32 {
+    0.25
+}
+
 /// Every setting of a bake (the `nelf bake` options); saved beside the asset in
 /// `<asset>.bake.json` and recorded in its metadata.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize, clap::Args)]
@@ -162,11 +168,21 @@ pub struct BakeConfig {
     /// Ground-truth field, `inside`/`centred` shells: ramp width, voxels.
     #[arg(long, default_value_t = 2.0)]
     pub shell_voxels: f32,
-    /// Signed density (the ground-truth field's `signed` shell, a network field's
-    /// `--network-skin-mm`): how far outside the surface the density crosses zero,
-    /// voxels (the slope puts transmittance ½ at the surface).
-    #[arg(long, default_value_t = 0.25)]
+    /// Ground-truth field, `signed` shell: how far outside the surface the density
+    /// crosses zero, voxels; its slope is set by `--ramp-voxels`. 0.05 against the
+    /// ramp's 0.25 keeps rays that graze the surface from seeing a silhouette grown by
+    /// ~¼ voxel (+0.8 to +3.5 dB on three scans, bake/README.md "Where the shell sits").
+    #[arg(long, default_value_t = 0.05)]
     pub lead_voxels: f32,
+    /// Signed density (the ground-truth field's `signed` shell, a network field's
+    /// `--network-skin-mm`): the density's ramp, voxels: transmittance along the
+    /// normal reaches ½ this far past the zero crossing (the slope is `2 ln 2 /
+    /// ramp²`; a steeper ramp than the march step resolves renders a staircase). A
+    /// network field's zero crossing is this far outside its surface, so that
+    /// transmittance ½ falls on it.
+    #[arg(long, default_value_t = 0.25)]
+    #[serde(default = "default_ramp_voxels")]
+    pub ramp_voxels: f32,
     /// Ground-truth field: thickness, voxels, given to open sheets and parts thinner
     /// than it (a collar, a flap of cloth, an ear's rim), so that they come out
     /// opaque and each side keeps its own shading.
@@ -278,7 +294,8 @@ impl Default for BakeConfig {
             max_optical_depth: 10.0,
             shell_placement: ShellPlacement::Signed,
             shell_voxels: 2.0,
-            lead_voxels: 0.25,
+            lead_voxels: 0.05,
+            ramp_voxels: 0.25,
             sheet_voxels: 2.0,
             hollow_voxels: 0.0,
             lt_share_voxels: DEFAULT_LT_SHARE_VOXELS,
@@ -366,6 +383,9 @@ impl BakeConfig {
         }
         if !(self.lead_voxels.is_finite() && self.lead_voxels > 0.0 && self.lead_voxels <= 2.0) {
             return bad(format!("--lead-voxels {} must be in (0, 2]", self.lead_voxels));
+        }
+        if !(self.ramp_voxels.is_finite() && self.ramp_voxels > 0.0 && self.ramp_voxels <= 2.0) {
+            return bad(format!("--ramp-voxels {} must be in (0, 2]", self.ramp_voxels));
         }
         if !(1..=LT_DIM).contains(&self.max_view_rank) {
             return bad(format!(

@@ -146,9 +146,20 @@ pub enum ShellProfile {
         width_m: f32,
     },
     /// `σ = clamp(s · (ℓ − d), −σ_cap, σ_cap)`: zero at the *lead* `ℓ` outside the
-    /// surface, slope `s = 2 ln 2 / ℓ²` so that a ray arriving along the normal has
-    /// optical depth `ln 2` (transmittance ½) exactly at the surface, and linear over
-    /// `ℓ` plus two voxels on either side of the zero (`σ_cap = s · (ℓ + 2Δ)`).
+    /// surface, slope `s = 2 ln 2 / r²` for a *ramp* `r`, so that a ray arriving along
+    /// the normal reaches optical depth `ln 2` (transmittance ½) a distance `r` past the
+    /// zero, and linear over `max(ℓ, r)` plus two voxels on either side of the zero
+    /// (`σ_cap = s · (max(ℓ, r) + 2Δ)`).
+    ///
+    /// With `ℓ = r` the surface has transmittance ½ along its normal; but a ray that
+    /// grazes a convex surface of radius `R` crosses the positive layer outside it along
+    /// a chord, and reaches transmittance ½ at a distance `δ` outside where
+    /// `(ℓ − δ)^{3/2} = 3 r² / (8 √(2R))` (voxels): about 0.23 voxels for `ℓ = r = ¼`
+    /// and `R` = 40 voxels, so the silhouette of a head grows by ~0.45 mm at 1.9 mm
+    /// voxels. A smaller lead at the same ramp keeps the ramp the march can resolve
+    /// and puts the grazing silhouette on the surface; the visible surface along the
+    /// normal then lies `r − ℓ` inside, where the transport is the same closest
+    /// point's (measured in bake/README.md, "Where the shell sits").
     /// Trilinear interpolation reproduces an affine function exactly, and the
     /// renderer takes `max(0, ·)` of the interpolated value (SPEC §8), so a plane
     /// renders at its true position whatever its offset from the voxel lattice: no
@@ -156,6 +167,8 @@ pub enum ShellProfile {
     Signed {
         /// Lead `ℓ`, metres.
         lead_m: f32,
+        /// Ramp `r`, metres.
+        ramp_m: f32,
         /// Voxel edge `Δ`, metres.
         voxel_m: f32,
     },
@@ -174,9 +187,13 @@ impl ShellProfile {
                     _ => 0.0,
                 }
             }
-            Self::Signed { lead_m, voxel_m } => {
-                let slope = 2.0 * std::f32::consts::LN_2 / (lead_m * lead_m);
-                let cap = slope * (lead_m + 2.0 * voxel_m);
+            Self::Signed {
+                lead_m,
+                ramp_m,
+                voxel_m,
+            } => {
+                let slope = 2.0 * std::f32::consts::LN_2 / (ramp_m * ramp_m);
+                let cap = slope * (lead_m.max(ramp_m) + 2.0 * voxel_m);
                 let signed_d = match d_m {
                     Some(d) => {
                         if inside {
@@ -192,11 +209,29 @@ impl ShellProfile {
         }
     }
 
+    /// How much thicker a sheet's positive layer is made on each side than the lead
+    /// alone would make it, metres: `r − ℓ` (at least 0) for [`Self::Signed`], so that
+    /// a sheet's visible faces stay where a lead equal to the ramp puts them, `t/2`
+    /// from its middle. A sheet is seen face-on, not along its chord, and with the
+    /// closed surfaces' smaller lead its faces came 0.2 voxels nearer the middle,
+    /// where the interpolation mixes in the other side's shading (measured:
+    /// `bake/tests/defects.rs`, a one-sided sheet's interior 21.8 dB instead of ≥ 27).
+    pub fn sheet_extra_m(&self) -> f32 {
+        match *self {
+            Self::Inside { .. } => 0.0,
+            Self::Signed { lead_m, ramp_m, .. } => (ramp_m - lead_m).max(0.0),
+        }
+    }
+
     /// Distance from the surface beyond which the density is constant, metres.
     pub fn reach_m(&self) -> f32 {
         match *self {
             Self::Inside { width_m } => width_m,
-            Self::Signed { lead_m, voxel_m } => 2.0 * lead_m + 2.0 * voxel_m,
+            Self::Signed {
+                lead_m,
+                ramp_m,
+                voxel_m,
+            } => 2.0 * lead_m.max(ramp_m) + 2.0 * voxel_m,
         }
     }
 
@@ -204,7 +239,11 @@ impl ShellProfile {
         let ok = |v: f32| v.is_finite() && v > 0.0;
         let good = match *self {
             Self::Inside { width_m } => ok(width_m),
-            Self::Signed { lead_m, voxel_m } => ok(lead_m) && ok(voxel_m),
+            Self::Signed {
+                lead_m,
+                ramp_m,
+                voxel_m,
+            } => ok(lead_m) && ok(ramp_m) && ok(voxel_m),
         };
         if good {
             Ok(())
@@ -376,7 +415,7 @@ impl ShellMeshField {
         let behind = bvh.winding_number(cp.point - normal * probe);
         if 0.5 * (front + behind) < 0.25 {
             // An open sheet, or a part thinner than the sheet thickness.
-            let d = cp.distance - 0.5 * self.sheet_thickness_m;
+            let d = cp.distance - 0.5 * self.sheet_thickness_m - self.profile.sheet_extra_m();
             out.density = self.profile.density(Some(d.abs()), d < 0.0);
             out.back = side < 0.0;
             out.tie = side.abs() < 0.05 * self.sheet_thickness_m;
@@ -774,6 +813,7 @@ pub fn mesh_field(
                 field,
                 ShellProfile::Signed {
                     lead_m: config.lead_voxels * voxel,
+                    ramp_m: config.ramp_voxels * voxel,
                     voxel_m: voxel,
                 },
                 sheet,
@@ -798,6 +838,7 @@ pub fn describe_trace(trace: &TraceSettings, config: &BakeConfig) -> serde_json:
         "shell_placement": config.shell_placement,
         "shell_voxels": config.shell_voxels,
         "lead_voxels": config.lead_voxels,
+        "ramp_voxels": config.ramp_voxels,
         "sheet_voxels": config.sheet_voxels,
         "lt_share_voxels": config.lt_share_voxels,
         "hollow_voxels": config.hollow_voxels,
@@ -818,6 +859,7 @@ mod tests {
         let (lead, voxel) = (0.25e-3f32, 1e-3f32);
         let p = ShellProfile::Signed {
             lead_m: lead,
+            ramp_m: lead,
             voxel_m: voxel,
         };
         // Zero at the lead outside, negative beyond, linear through the surface.
@@ -894,6 +936,7 @@ mod tests {
         let field = MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
         let profile = ShellProfile::Signed {
             lead_m: 0.25 * voxel,
+            ramp_m: 0.25 * voxel,
             voxel_m: voxel,
         };
         ShellMeshField::new(field, profile, 2.0 * voxel, None).unwrap()
@@ -1074,6 +1117,7 @@ mod tests {
         let field = || MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
         let profile = ShellProfile::Signed {
             lead_m: 0.25 * voxel,
+            ramp_m: 0.25 * voxel,
             voxel_m: voxel,
         };
         let own = ShellMeshField::new(field(), profile, 2.0 * voxel, None).unwrap();

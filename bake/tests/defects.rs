@@ -197,7 +197,10 @@ fn textured_quad_keeps_its_texture() {
 
 #[test]
 fn flipped_triangles_and_a_non_manifold_fin() {
-    // Measured: worst 31.06 dB whole / 34.77 dB interior, coverage 0.0107; before the
-    // closed/open test from both sides of the surface: 23.2 dB, 20.0 dB.
-    check(&case("flipped_fin"), "flipped + fin", 29.5, 33.0, 0.015);
+    // Measured: worst 34.57 dB whole / 30.92 dB interior, coverage 0.0011 (the view
+    // from above, the fin edge-on: its root a darker streak than the truth's); with
+    // the lead equal to the ramp (before 2026-12-07) 31.06 / 34.77, coverage 0.0107:
+    // the sphere's silhouette sat ~¼ voxel out; before the closed/open test from both
+    // sides of the surface: 23.2 dB, 20.0 dB.
+    check(&case("flipped_fin"), "flipped + fin", 33.0, 29.5, 0.004);
 }

@@ -104,7 +104,7 @@ pub fn bake_network_field(
         signed = SignedLogDensity::with_skin(
             &filtered,
             config.network_skin_mm / 1000.0,
-            bake.lead_voxels * voxel_m,
+            bake.ramp_voxels * voxel_m,
             voxel_m,
         )?;
         if config.no_network_hull_carve {

@@ -89,7 +89,7 @@ pub fn describe_bake(out: &Path, r: &BakeReport) -> String {
                 v.requested,
                 if let Some(p) = v.probe.as_ref().filter(|p| !p.band_fitted) {
                     format!(
-                        "probed on {} of {} band voxels ({:.1} s): the best candidate would gain at most about {:+.3} dB over the whole band at {} (extrapolated {:+.3} / {}), below --view-min-gain-db; the band was not fitted",
+                        "probed on {} of {} band voxels ({:.1} s): the best candidate would gain about {:+.3} dB over the whole band at {} (extrapolated {:+.3} / {}), below --view-min-gain-db; the band was not fitted",
                         p.voxels,
                         p.band_voxels,
                         p.secs,

@@ -96,6 +96,9 @@ pub fn add_view_dependence(
         let mut recorded = serde_json::to_value(&report).unwrap_or_default();
         if let Some(fields) = recorded.as_object_mut() {
             fields.remove("secs");
+            if let Some(probe) = fields.get_mut("probe").and_then(|p| p.as_object_mut()) {
+                probe.remove("secs");
+            }
         }
         meta.insert("view_dependence".into(), recorded);
     }
