@@ -1,8 +1,8 @@
 //! Measures a fine reflectance layer over coarse light transport (issue 51) before it
 //! is built into the format: bakes a synthetic mesh capture at `RESOLUTION`, then
 //! renders the asset at its held-aside targets (a) as it is, (b) with each voxel's
-//! radiance divided by the albedo it was baked with (the albedo at the voxel centre's
-//! closest surface point: the mesh field's rule) and each sample multiplied by a
+//! radiance divided by the albedo it was baked with (the texture averaged over one
+//! voxel round the voxel centre's closest surface point: the mesh field's rule) and each sample multiplied by a
 //! finer albedo — the mesh's own at the sample's closest surface point (`inf`, the
 //! ceiling), or trilinear from a lattice `FACTOR` times finer than the voxels, each
 //! lattice point the mean albedo of `SUPER³` points of its cell's closest surface
@@ -43,6 +43,16 @@ impl Surface<'_> {
     fn albedo(&self, p: DVec3) -> Option<[f32; 3]> {
         let c = self.bvh.closest_point(p.as_vec3(), f32::INFINITY)?;
         Some(self.mesh.albedo_at(c.triangle as usize, c.b1, c.b2))
+    }
+
+    /// The albedo the mesh field bakes a point with: the texture averaged over a
+    /// voxel-sized footprint round its closest surface point (`Mesh::albedo_footprint`).
+    fn baked_albedo(&self, p: DVec3, voxel_m: f32) -> Option<[f32; 3]> {
+        let c = self.bvh.closest_point(p.as_vec3(), f32::INFINITY)?;
+        Some(
+            self.mesh
+                .albedo_footprint(c.triangle as usize, c.b1, c.b2, voxel_m),
+        )
     }
 }
 
@@ -104,7 +114,11 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let t = Instant::now();
     let coarse: Vec<[f32; 3]> = (0..density.len())
         .into_par_iter()
-        .map(|v| surface.albedo(centre(v)).unwrap_or([1.0; 3]))
+        .map(|v| {
+            surface
+                .baked_albedo(centre(v), voxel_m as f32)
+                .unwrap_or([1.0; 3])
+        })
         .collect();
     println!("coarse albedo {:.1} s", t.elapsed().as_secs_f64());
     let description = capture.description().ok_or("no cameras.json")?;
