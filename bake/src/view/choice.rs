@@ -168,20 +168,30 @@ pub struct ViewSettings {
 /// One judged candidate and the part it would attach (a view part or a reflection part).
 type JudgedPart = (ViewCandidate, (Option<ViewDependence>, Option<Reflection>));
 
-/// Builds and judges the view part of each of `choices` and, with `reflect`, the
-/// reflection part of each exponent, from `fit` (whose [`ViewFit::entries`] index
+/// What [`judge_candidates`] builds and how it renders them.
+struct JudgeList<'a> {
+    /// View parts: kind and view rank.
+    choices: &'a [(ViewChoice, usize)],
+    /// Reflection parts (with a reflection target): indices into [`REFLECT_EXPONENTS`].
+    exponents: &'a [usize],
+    /// Rays per pixel along each axis.
+    pixel_grid: u32,
+}
+
+/// Builds and judges the view part of each of `list.choices` and, with `reflect`, the
+/// reflection part of each of `list.exponents`, from `fit` (whose [`ViewFit::entries`] index
 /// `lt_voxels`) on top of `asset`; `base_psnr_db` is the view-independent asset's.
 #[allow(clippy::too_many_arguments)] // the asset, the fit and its band, what to judge and where
 fn judge_candidates(
     asset: &nelf_format::Asset,
     fit: &ViewFit,
     lt_voxels: &[usize],
-    choices: &[(ViewChoice, usize)],
+    list: &JudgeList,
     reflect: Option<&ReflectionTarget>,
     views: &crate::eval::HeldAside,
     base_psnr_db: Option<f64>,
     bytes: &crate::eval::ExtraBytes,
-    (step_voxels, pixel_grid): (f32, u32),
+    step_voxels: f32,
 ) -> Result<Vec<JudgedPart>> {
     let encoding = asset.coefficients.encoding();
     let voxels = asset.voxel_count();
@@ -189,11 +199,11 @@ fn judge_candidates(
         if views.is_empty() {
             Ok(None)
         } else {
-            Ok(Some(judge_psnr(with, views, step_voxels, pixel_grid)?))
+            Ok(Some(judge_psnr(with, views, step_voxels, list.pixel_grid)?))
         }
     };
     let mut out = Vec::new();
-    for &(choice, rank) in choices {
+    for &(choice, rank) in list.choices {
         let lobes = fit.lobes(choice);
         let part = if fit.skipped {
             // A field without view dependence asked for one explicitly: an all-zero part.
@@ -223,16 +233,10 @@ fn judge_candidates(
         };
         out.push((candidate, (with.view, None)));
     }
-    // The reflection part, one candidate per exponent (only the middle one without
-    // judging views, and in the probe: the exponents gain within 20 % of each other).
+    // The reflection part, one candidate per exponent.
     if let Some(target) = reflect {
-        let exponents: Vec<usize> = if views.is_empty() || pixel_grid == PROBE_PIXEL_GRID {
-            vec![REFLECT_EXPONENTS.len() / 2]
-        } else {
-            (0..REFLECT_EXPONENTS.len()).collect()
-        };
         let eyes_m: Vec<[f32; 3]> = target.eyes.iter().map(Vec3::to_array).collect();
-        for k in exponents {
+        for &k in list.exponents {
             let mut normals = vec![[0.0f32, 0.0, 1.0]; voxels];
             let mut scales = vec![0.0f32; voxels];
             for ((n, s), &e) in fit.reflection.iter().zip(&fit.entries) {
@@ -401,31 +405,33 @@ pub fn choose_view(
             Ok(Some(judge_psnr(asset, views, settings.step_voxels, pixel_grid)?))
         }
     };
-    let judge_fit = |fit: &ViewFit, base_psnr_db: Option<f64>, pixel_grid: u32| {
+    let judge_fit = |fit: &ViewFit, base_psnr_db: Option<f64>, list: &JudgeList| {
         judge_candidates(
             asset,
             fit,
             lt_voxels,
-            &choices,
+            list,
             reflect,
             views,
             base_psnr_db,
             &bytes,
-            (settings.step_voxels, pixel_grid),
+            settings.step_voxels,
         )
     };
+    // The middle exponent alone where nothing can choose between them (no judging
+    // views) and in the probe (the exponents gain within 20 % of each other).
+    let middle_exponent = [REFLECT_EXPONENTS.len() / 2];
+    let every_exponent: Vec<usize> = (0..REFLECT_EXPONENTS.len()).collect();
     if probing {
         let probe_base = base_at(PROBE_PIXEL_GRID)?;
-        let probed = judge_candidates(
-            asset,
+        let probed = judge_fit(
             &fit,
-            lt_voxels,
-            &probe_choices(&choices),
-            reflect,
-            views,
             probe_base,
-            &bytes,
-            (settings.step_voxels, PROBE_PIXEL_GRID),
+            &JudgeList {
+                choices: &probe_choices(&choices),
+                exponents: &middle_exponent,
+                pixel_grid: PROBE_PIXEL_GRID,
+            },
         )?;
         let fraction = fit.entries.len() as f64 / lt_voxels.len() as f64;
         let best = probed
@@ -450,10 +456,21 @@ pub fn choose_view(
         fit = fit_in(FitScope::Band)?;
     }
     report.base_psnr_db = base_at(JUDGE_PIXEL_GRID)?;
-    let (candidates, mut parts): (Vec<ViewCandidate>, Vec<_>) =
-        judge_fit(&fit, report.base_psnr_db, JUDGE_PIXEL_GRID)?
-            .into_iter()
-            .unzip();
+    let (candidates, mut parts): (Vec<ViewCandidate>, Vec<_>) = judge_fit(
+        &fit,
+        report.base_psnr_db,
+        &JudgeList {
+            choices: &choices,
+            exponents: if views.is_empty() {
+                &middle_exponent
+            } else {
+                &every_exponent
+            },
+            pixel_grid: JUDGE_PIXEL_GRID,
+        },
+    )?
+    .into_iter()
+    .unzip();
     report.candidates = candidates;
     let best_psnr = |list: &[ViewCandidate]| {
         (0..list.len()).max_by(|&a, &b| {
