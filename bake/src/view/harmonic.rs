@@ -121,10 +121,10 @@ fn identity_rows(rows: usize, width: usize) -> Vec<f64> {
 /// One voxel's weighted normal equations over the harmonics: `G = Σ_d w_d y_d y_dᵀ`
 /// (9 × 9, row-major) and `h = Σ_d w_d y_d r_dᵀ` (9 × `dim`, row-major) for residuals
 /// `r_d` of `dim` numbers.
-fn normal_equations(
+fn normal_equations<R: Copy + Into<f64>>(
     weights: &[f64],
     harmonics: &[[f32; VIEW_HARMONICS]],
-    residuals: &[f64],
+    residuals: &[R],
     dim: usize,
 ) -> (Vec<f64>, Vec<f64>) {
     let mut g = vec![0.0f64; VIEW_HARMONICS * VIEW_HARMONICS];
@@ -140,7 +140,7 @@ fn normal_equations(
                 g[a * VIEW_HARMONICS + b] += wy * f64::from(y[b]);
             }
             for (o, &x) in h[a * dim..(a + 1) * dim].iter_mut().zip(r) {
-                *o += wy * x;
+                *o += wy * x.into();
             }
         }
     }
@@ -201,6 +201,9 @@ pub struct ViewFit {
     /// Whether the residual was below [`NO_VIEW_DEPENDENCE`] on the subsample, so the
     /// band was not fitted (the per-voxel equations are empty).
     pub skipped: bool,
+    /// Whether the harmonic normal equations were kept (`false`: only the reflection
+    /// part was fitted, and [`ViewFit::view_part`] has nothing to solve).
+    pub harmonic: bool,
     /// Per band voxel, the reflection part's normal and its scale under each of
     /// [`REFLECT_EXPONENTS`] (empty unless asked for and fitted).
     pub reflection: Vec<([f32; 3], Vec<f32>)>,
@@ -223,7 +226,9 @@ pub enum FitScope {
 
 /// Samples and fits the residual of `field` over the band voxels `lt_voxels` (whose
 /// view-independent vectors are `lt`, `384` each, and visibility weights `weights`).
-/// `max_rank` caps the view basis; `scope` says which voxels' equations are kept.
+/// `max_rank` caps the view basis; `scope` says which voxels' equations are kept;
+/// `harmonic: false` keeps none (only the reflection part with `reflect`: `auto` after
+/// a probe that ruled the harmonic parts out), skipping their projection.
 #[allow(clippy::too_many_arguments)] // the band's five arrays, where and how to sample
 pub fn fit_view(
     field: &dyn FieldSource,
@@ -235,6 +240,7 @@ pub fn fit_view(
     eyes: &[DVec3],
     max_rank: usize,
     reflect: Option<&ReflectionTarget>,
+    harmonic: bool,
     scope: FitScope,
     progress: &Progress,
 ) -> Result<ViewFit> {
@@ -262,8 +268,9 @@ pub fn fit_view(
         let x = position(v);
         seen_weights(x, density_normal(grid, density, x), eyes, &directions)
     };
-    // Transport toward every direction of a batch of band entries, minus T̄, in f64.
-    let residuals = |entries: &[usize]| -> Result<Vec<f64>> {
+    // Transport toward every direction of a batch of band entries, minus T̄ (in place:
+    // 512 voxels × 64 directions × 384 floats, 50 MB a batch).
+    let residuals = |entries: &[usize]| -> Result<Vec<f32>> {
         let points: Vec<Vec3> = entries
             .iter()
             .map(|&e| position(lt_voxels[e]).as_vec3())
@@ -278,15 +285,17 @@ pub fn fit_view(
                 points[i / (LT_DIM * VIEW_DIRECTIONS)]
             )));
         }
-        Ok(out
-            .par_chunks_exact(VIEW_DIRECTIONS * LT_DIM)
+        out.par_chunks_exact_mut(VIEW_DIRECTIONS * LT_DIM)
             .zip(entries.par_iter())
-            .flat_map_iter(|(t, &e)| {
+            .for_each(|(t, &e)| {
                 let mean = &lt[e * LT_DIM..(e + 1) * LT_DIM];
-                t.chunks_exact(LT_DIM)
-                    .flat_map(move |td| td.iter().zip(mean).map(|(a, b)| f64::from(a - b)))
-            })
-            .collect())
+                for td in t.chunks_exact_mut(LT_DIM) {
+                    for (a, b) in td.iter_mut().zip(mean) {
+                        *a -= b;
+                    }
+                }
+            });
+        Ok(out)
     };
 
     // 1. The basis, from the harmonic fit of a strided subsample.
@@ -301,7 +310,7 @@ pub fn fit_view(
         (0..sample_size).map(|i| i * n / sample_size).collect()
     };
     // A probe fits the same voxels twice: the first pass's residuals are kept.
-    let mut kept: Vec<Vec<f64>> = Vec::new();
+    let mut kept: Vec<Vec<f32>> = Vec::new();
     let mut rows: Vec<f64> = Vec::with_capacity(sample.len() * VIEW_HARMONICS * LT_DIM);
     let (mut residual_energy, mut mean_energy) = (0.0f64, 0.0f64);
     let identity = identity_rows(VIEW_HARMONICS, VIEW_HARMONICS);
@@ -324,6 +333,7 @@ pub fn fit_view(
                 residual_ratio: (residual_energy / mean_energy.max(1e-300)).sqrt(),
                 secs: start.elapsed().as_secs_f64(),
                 skipped: true,
+                harmonic,
                 reflection: Vec::new(),
             });
         }
@@ -343,7 +353,7 @@ pub fn fit_view(
                     .map(|(d, wd)| {
                         wd * rv[d * LT_DIM..(d + 1) * LT_DIM]
                             .iter()
-                            .map(|x| x * x)
+                            .map(|&x| f64::from(x) * f64::from(x))
                             .sum::<f64>()
                     })
                     .sum::<f64>()
@@ -397,6 +407,7 @@ pub fn fit_view(
             residual_ratio,
             secs: start.elapsed().as_secs_f64(),
             skipped: true,
+            harmonic,
             reflection: Vec::new(),
         });
     }
@@ -408,8 +419,9 @@ pub fn fit_view(
     };
     let m = entries.len();
     let bar = progress.bar("view", m as u64, "voxels");
-    let mut normal = vec![0.0f64; m * VIEW_HARMONICS * VIEW_HARMONICS];
-    let mut projected = vec![0.0f64; m * VIEW_HARMONICS * k_max];
+    let kept_equations = if harmonic { m } else { 0 };
+    let mut normal = vec![0.0f64; kept_equations * G_LEN];
+    let mut projected = vec![0.0f64; kept_equations * VIEW_HARMONICS * k_max];
     let mut reflection = Vec::with_capacity(if reflect.is_some() { m } else { 0 });
     for (c, chunk) in entries.chunks(BATCH).enumerate() {
         let r = match kept.get_mut(c) {
@@ -428,8 +440,11 @@ pub fn fit_view(
                     let summed: Vec<f32> = rv
                         .chunks_exact(LT_DIM)
                         .flat_map(|r| {
-                            (0..ENV_TEXELS)
-                                .map(move |i| (r[i] + r[ENV_TEXELS + i] + r[2 * ENV_TEXELS + i]) as f32)
+                            (0..ENV_TEXELS).map(move |i| {
+                                (f64::from(r[i])
+                                    + f64::from(r[ENV_TEXELS + i])
+                                    + f64::from(r[2 * ENV_TEXELS + i])) as f32
+                            })
                         })
                         .collect();
                     fit_reflection_voxel(
@@ -442,6 +457,9 @@ pub fn fit_view(
                         &summed,
                     )
                 });
+                if !harmonic {
+                    return ((Vec::new(), Vec::new()), fitted);
+                }
                 let mut p = vec![0.0f64; VIEW_DIRECTIONS * k_max];
                 for (d, pd) in p.chunks_exact_mut(k_max).enumerate() {
                     let rd = &rv[d * LT_DIM..(d + 1) * LT_DIM];
@@ -449,7 +467,7 @@ pub fn fit_view(
                         *o = basis_f64[k * LT_DIM..(k + 1) * LT_DIM]
                             .iter()
                             .zip(rd)
-                            .map(|(a, b)| a * b)
+                            .map(|(a, &b)| a * f64::from(b))
                             .sum();
                     }
                 }
@@ -458,6 +476,9 @@ pub fn fit_view(
             .collect();
         for (i, ((g, h), fitted)) in per.into_iter().enumerate() {
             reflection.extend(fitted);
+            if !harmonic {
+                continue;
+            }
             let e = c * BATCH + i;
             normal[e * G_LEN..(e + 1) * G_LEN].copy_from_slice(&g);
             projected[e * VIEW_HARMONICS * k_max..(e + 1) * VIEW_HARMONICS * k_max].copy_from_slice(&h);
@@ -475,6 +496,7 @@ pub fn fit_view(
         residual_ratio,
         secs: start.elapsed().as_secs_f64(),
         skipped: false,
+        harmonic,
         reflection,
     })
 }
@@ -494,6 +516,7 @@ impl ViewFit {
             ViewChoice::Off | ViewChoice::Auto | ViewChoice::Reflect => Vec::new(),
             ViewChoice::Sh1 => rows(4),
             ViewChoice::Sh2 => rows(VIEW_HARMONICS),
+            ViewChoice::Learned(_) if !self.harmonic => Vec::new(),
             ViewChoice::Learned(j) => {
                 let identity = rows(VIEW_HARMONICS);
                 let k = self.max_rank();
@@ -527,6 +550,11 @@ impl ViewFit {
         lt_voxels: &[usize],
         encoding: CoefficientEncoding,
     ) -> Result<ViewDependence> {
+        if !self.harmonic && !self.skipped {
+            return Err(BakeError::Settings(
+                "view fit: the harmonic parts were not fitted (only the reflection part)".into(),
+            ));
+        }
         let j = lobes.len() / VIEW_HARMONICS;
         let k_max = self.max_rank();
         let rank = rank.clamp(1, k_max);
