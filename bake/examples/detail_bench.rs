@@ -8,8 +8,11 @@
 //! lattice point the mean albedo of `SUPER³` points of its cell's closest surface
 //! points. Prints whole and foreground PSNR (8-bit sRGB) against the targets and how
 //! the squared error splits between the inside, the silhouette's edge and the outside.
+//! `swapRES` bakes the capture at a second resolution too and swaps the two assets'
+//! parts: the fine density with the coarse radiance (trilinear at each sample) and the
+//! coarse density with the fine radiance, to say which of the two a finer lattice buys.
 //!
-//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|hitFACTOR|inf|hit ...] [super=N] [grid=N] [errors=DIR] [coverage=truth]`
+//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|hitFACTOR|inf|hit|swapRES ...] [super=N] [grid=N] [errors=DIR] [coverage=truth]`
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -244,8 +247,87 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &settings,
         )?)
     };
+    // Radiance of an asset under target `t`'s lighting, trilinear at `p` (normalised over
+    // the corners the grid has; zero off its bricks).
+    let radiance_at = |grid: &BrickGrid, values: &[[f32; 3]], p: DVec3| {
+        let mut corners = [(0usize, 0.0f32); 8];
+        let n = grid.trilinear(p, &mut corners);
+        let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
+        for &(v, w) in &corners[..n] {
+            for ch in 0..3 {
+                sum[ch] += w * values[v][ch];
+            }
+            wsum += w;
+        }
+        sum.map(|x| x / wsum.max(1e-6))
+    };
+    let radiance_of =
+        |asset: &nelf_format::Asset, t: usize| -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>> {
+            let light = project_light(&asset.pca, asset.world_from_light, &held.envs[t], DMat3::IDENTITY)?;
+            Ok(voxel_radiance(asset, &light, None))
+        };
     for mode in &modes {
         let t0 = Instant::now();
+        if let Some(fine_res) = mode.strip_prefix("swap") {
+            let fine_config = BakeConfig {
+                resolution: fine_res.parse()?,
+                ..config.clone()
+            };
+            let fine_output = bake_capture(&capture, &truth, &fine_config, &Progress::hidden())?;
+            let fine = &fine_output.asset;
+            let fine_grid = BrickGrid::from_asset(fine)?;
+            let fine_density = asset_density(fine);
+            let (fine_bytes, _) = encode_asset(fine, &WriteOptions::default())?;
+            println!(
+                "resolution {fine_res}: bake {:.1} s, {} bytes, {} bricks, {} density values",
+                t0.elapsed().as_secs_f64(),
+                fine_bytes.len(),
+                fine.bricks.len(),
+                fine_density.len()
+            );
+            score_all(&format!("resolution {fine_res} as baked"), &|t| {
+                Ok(render_asset(
+                    fine,
+                    &held.cameras[t],
+                    &held.envs[t],
+                    DMat3::IDENTITY,
+                    None,
+                    &settings,
+                )?)
+            })?;
+            let ones = |n: usize| vec![[1.0f32; 3]; n];
+            score_all(
+                &format!("density of {fine_res}, radiance of {resolution}"),
+                &|t| {
+                    let values = radiance_of(asset, t)?;
+                    let factor = |p: DVec3| radiance_at(&grid, &values, p);
+                    Ok(render_volume_factored(
+                        &fine_grid,
+                        &fine_density,
+                        &ones(fine_density.len()),
+                        &factor,
+                        &held.cameras[t],
+                        &settings,
+                    )?)
+                },
+            )?;
+            score_all(
+                &format!("density of {resolution}, radiance of {fine_res}"),
+                &|t| {
+                    let values = radiance_of(fine, t)?;
+                    let factor = |p: DVec3| radiance_at(&fine_grid, &values, p);
+                    Ok(render_volume_factored(
+                        &grid,
+                        &density,
+                        &ones(density.len()),
+                        &factor,
+                        &held.cameras[t],
+                        &settings,
+                    )?)
+                },
+            )?;
+            continue;
+        }
         if mode == "hit" {
             // The albedo where the camera's ray through the sample first meets the
             // mesh: the fine layer on a perfectly sharp surface.
