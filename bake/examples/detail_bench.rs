@@ -12,7 +12,7 @@
 //! parts: the fine density with the coarse radiance (trilinear at each sample) and the
 //! coarse density with the fine radiance, to say which of the two a finer lattice buys.
 //!
-//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|hitFACTOR|inf|hit|swapRES ...] [super=N] [grid=N] [errors=DIR] [coverage=truth]`
+//! `cargo run --release -p nelf-bake --example detail_bench -- CAPTURE RESOLUTION [FACTOR|hitFACTOR|inf|hit|swapRES ...] [super=N] [grid=N] [step=VOXELS] [errors=DIR] [coverage=truth]`
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -132,6 +132,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .iter()
             .find_map(|a| a.strip_prefix("grid="))
             .map_or(Ok(nelf_bake::eval::EVAL_PIXEL_GRID), str::parse)?,
+        step_voxels: args
+            .iter()
+            .find_map(|a| a.strip_prefix("step="))
+            .map_or(Ok(MarchSettings::default().step_voxels), str::parse)?,
         ..MarchSettings::default()
     };
     let score_all = |name: &str, render: &dyn Fn(usize) -> Result<Image, Box<dyn std::error::Error>>| {

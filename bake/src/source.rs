@@ -411,8 +411,21 @@ impl ShellMeshField {
         let normal = self.inner.tracer().mesh().face_normal(cp.triangle as usize);
         let side = (x - cp.point).dot(normal);
         let probe = self.sheet_thickness_m;
-        let front = bvh.winding_number(cp.point + normal * probe);
-        let behind = bvh.winding_number(cp.point - normal * probe);
+        // The winding number is read along the direction from the closest point to `x`
+        // (turned into the face normal's hemisphere), which is the face normal where
+        // the closest point lies inside a triangle. Where it lies on an edge — a crease
+        // such as the rim of a cut neck — the face normal would probe along the other
+        // face's plane, read ~½ there and take the crease for an open sheet, thickening
+        // it into a tube a voxel round (a dark band below a scan's neck).
+        let offset = x - cp.point;
+        let probe_dir = if cp.distance > 1e-3 * probe {
+            let dir = offset / cp.distance;
+            if dir.dot(normal) < 0.0 { -dir } else { dir }
+        } else {
+            normal
+        };
+        let front = bvh.winding_number(cp.point + probe_dir * probe);
+        let behind = bvh.winding_number(cp.point - probe_dir * probe);
         if 0.5 * (front + behind) < 0.25 {
             // An open sheet, or a part thinner than the sheet thickness.
             let d = cp.distance - 0.5 * self.sheet_thickness_m - self.profile.sheet_extra_m();
@@ -911,6 +924,68 @@ mod tests {
                 "{a}: {box_hi}"
             );
         }
+    }
+
+    /// A closed solid's sharp edges are creases, not open sheets: just outside an
+    /// edge the density is the signed profile's (zero a lead away from the surface),
+    /// not a sheet's tube a voxel round. Before the winding number was read along the
+    /// direction to the point, the probe from a 60° edge along a face's inward normal
+    /// left the solid through the other face, both readings said "outside", and the
+    /// edge grew a tube (the dark band below a scan's cut neck).
+    #[test]
+    fn a_sharp_edge_of_a_closed_solid_stays_sharp() {
+        let voxel = 2e-3f32;
+        // A prism along z, its cross-section an equilateral triangle (60° edges).
+        let (r, h) = (0.05f32, 0.05f32);
+        let corner = |k: u32, z: f32| {
+            let a = std::f32::consts::FRAC_PI_2 + k as f32 * std::f32::consts::TAU / 3.0;
+            Vec3::new(r * a.cos(), r * a.sin(), z)
+        };
+        let positions: Vec<Vec3> = (0..3)
+            .map(|k| corner(k, -h))
+            .chain((0..3).map(|k| corner(k, h)))
+            .collect();
+        let mut triangles = vec![[0u32, 2, 1], [3, 4, 5]];
+        for k in 0..3u32 {
+            let j = (k + 1) % 3;
+            triangles.push([k, j, j + 3]);
+            triangles.push([k, j + 3, k + 3]);
+        }
+        let mesh = Mesh {
+            positions,
+            triangles,
+            albedo: nelf_scene::mesh::Albedo::Uniform([0.5; 3]),
+        };
+        mesh.validate().unwrap();
+        let trace = TraceSettings {
+            texel_samples: 1,
+            indirect_samples: 1,
+            bounces: 0,
+            ..TraceSettings::default()
+        };
+        let field = MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
+        let profile = ShellProfile::Signed {
+            lead_m: 0.05 * voxel,
+            ramp_m: 0.25 * voxel,
+            voxel_m: voxel,
+        };
+        let shell = ShellMeshField::new(field, profile, 2.0 * voxel, None).unwrap();
+        let apex = corner(0, 0.0);
+        for along in [-0.03f32, 0.0, 0.02] {
+            for d in [0.2f32, 0.5, 1.0, 1.5].map(|k| k * voxel) {
+                // Straight out of the apex edge, along its bisector.
+                let x = apex + Vec3::new(0.0, d, along);
+                let sigma = shell.density(x);
+                let expected = profile.density(Some(d), false);
+                assert!(
+                    (sigma - expected).abs() <= 1e-3 * expected.abs().max(1.0),
+                    "{d} m off the edge at z = {along}: σ = {sigma}, the signed profile's {expected}"
+                );
+                assert!(sigma <= 0.0, "{d} m off the edge is outside: σ = {sigma}");
+            }
+        }
+        // Inside, near the edge: dense.
+        assert!(shell.density(apex - Vec3::new(0.0, 0.5 * voxel, 0.0)) > 0.0);
     }
 
     /// Voxel edge of the textured-sheet tests, metres.

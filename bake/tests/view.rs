@@ -490,8 +490,8 @@ fn auto_keeps_the_sheen_of_a_glossy_head() {
     let chosen = &report.candidates[report.chosen_index.unwrap()];
     assert!(chosen.gain_db.unwrap() > 0.25, "{chosen:?}");
     // The band is larger than the probe's sample, so `auto` probed first and fitted
-    // the band, and the probe's extrapolation oversold the band's gain by about the
-    // measured 1.5–2.4× (docs/measurements/settings.md).
+    // the band, and the probe's extrapolation oversold the band's gain, by 1.05–3.6×
+    // on the seven fields measured (docs/measurements/settings.md; this head 1.22×).
     let probe = report
         .probe
         .as_ref()
@@ -500,7 +500,7 @@ fn auto_keeps_the_sheen_of_a_glossy_head() {
     assert!(probe.band_fitted);
     let ratio = report.best_gain_db() / probe.best_extrapolated_gain_db;
     assert!(
-        (0.35..=0.75).contains(&ratio),
+        (0.25..=1.0).contains(&ratio),
         "band gain / extrapolated gain {ratio}: {probe:?}"
     );
 }

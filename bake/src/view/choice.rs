@@ -73,8 +73,8 @@ pub struct ViewReport {
 
 /// How much the probe's extrapolated gain oversells the band's fit, typically: the
 /// band is fitted only where the best extrapolated gain, divided by this, reaches
-/// `--view-min-gain-db`. Measured on five fields, band gain / extrapolated gain
-/// 0.42–0.67 (`docs/measurements/settings.md`); 2 is the middle, so the band is fitted
+/// `--view-min-gain-db`. Measured on seven fields, band gain / extrapolated gain
+/// 0.28–0.95, most 0.5–0.6 (`docs/measurements/settings.md`); 2 is the middle, so the band is fitted
 /// where it is expected to pay. Near the threshold either mistake is cheap in quality
 /// (a part gaining about `--view-min-gain-db` kept or dropped); a band that falls short
 /// skips minutes of sampling on a 600k-voxel scan.
@@ -120,7 +120,7 @@ pub struct ViewProbe {
 /// gain `probe_gain_db` of one fitted on a fraction `fraction` of them, over a
 /// view-independent asset of PSNR `base_psnr_db`: the squared error the probe removed,
 /// scaled by `1/fraction`. An estimate, not a bound: with [`PROBE_SAMPLE`] strided
-/// voxels it oversells the band's fit 1.5–2.4× (an isolated voxel's correction is
+/// voxels it oversells the band's fit 1.05–3.6× (an isolated voxel's correction is
 /// fitted to its own residual alone, while the band's neighbours share theirs through
 /// interpolation; the measurements are in `docs/measurements/settings.md`): hence
 /// [`PROBE_OVERSELL`]. Capped at 30 dB (99.9 % of the error removed).

@@ -27,7 +27,7 @@ pub const BASIS_SAMPLE: usize = 2048;
 
 /// Band voxels (evenly strided) `auto`'s probe fits ([`FitScope::Sample`]): eight
 /// batches. With 512 the extrapolated gain ranged from half to twice the band's on
-/// three fields; with 4096 it oversells it 1.5–2.4× on five, consistently
+/// three fields; with 4096 it oversells it 1.05–3.6× on seven, never undersells
 /// (`docs/measurements/settings.md`).
 pub const PROBE_SAMPLE: usize = 4096;
 
