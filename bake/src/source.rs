@@ -381,6 +381,32 @@ impl ShellMeshField {
         self.locate(x, self.reach_m()).density
     }
 
+    /// The winding numbers half as deep, in front of and behind `cp`, where the probe
+    /// from `cp` into the surface along `-probe_dir` left a closed solid only because it
+    /// ran out under a crease: it exits within `probe` through a
+    /// face across its path (the face's normal within 60° of square to it), and half way
+    /// to that exit the winding number says closed. A part thinner than `probe` exits
+    /// through a face that looks back along the probe and stays a sheet, as does an
+    /// open sheet (±½ on its two sides). Points beside a scan's flat-cut neck, whose
+    /// closest point lies on the side wall a hair above the cut, would otherwise take
+    /// the wall's rim for a sheet's and grow a tube below it.
+    fn beside_a_crease(&self, cp: &ClosestPoint, probe_dir: Vec3, probe: f32) -> Option<(f32, f32)> {
+        let bvh = self.inner.tracer().bvh();
+        let inward = -probe_dir;
+        let lift = 1e-4 * probe;
+        let hit = bvh.closest_hit(cp.point + inward * lift, inward, 0.0, probe)?;
+        let exit_normal = self.inner.tracer().mesh().face_normal(hit.triangle as usize);
+        if exit_normal.dot(inward).abs() >= 0.5 {
+            return None;
+        }
+        let half = 0.5 * (hit.t + lift);
+        let readings = (
+            bvh.winding_number(cp.point + probe_dir * half),
+            bvh.winding_number(cp.point + inward * half),
+        );
+        (0.5 * (readings.0 + readings.1) >= 0.25).then_some(readings)
+    }
+
     /// Density, closest point (searched up to `max_distance_m`) and side at `x`.
     ///
     /// Near a surface (within [`Self::reach_m`]) the winding number is read on both
@@ -424,8 +450,13 @@ impl ShellMeshField {
         } else {
             normal
         };
-        let front = bvh.winding_number(cp.point + probe_dir * probe);
-        let behind = bvh.winding_number(cp.point - probe_dir * probe);
+        let mut front = bvh.winding_number(cp.point + probe_dir * probe);
+        let mut behind = bvh.winding_number(cp.point - probe_dir * probe);
+        if 0.5 * (front + behind) < 0.25
+            && let Some((f, b)) = self.beside_a_crease(&cp, probe_dir, probe)
+        {
+            (front, behind) = (f, b);
+        }
         if 0.5 * (front + behind) < 0.25 {
             // An open sheet, or a part thinner than the sheet thickness.
             let d = cp.distance - 0.5 * self.sheet_thickness_m - self.profile.sheet_extra_m();
@@ -986,6 +1017,47 @@ mod tests {
         }
         // Inside, near the edge: dense.
         assert!(shell.density(apex - Vec3::new(0.0, 0.5 * voxel, 0.0)) > 0.0);
+
+        // Beside a face a hair below a crease: a box whose top is dented into a
+        // shallow pyramid (a scan's flat-cut neck, closed by a fan). The probe along the
+        // side's normal runs out under the dented top within a sheet thickness.
+        let (h, dent) = (0.05f32, 0.005f32);
+        let mut positions = Vec::new();
+        for y in [-h, h] {
+            for (x, z) in [(-h, -h), (h, -h), (h, h), (-h, h)] {
+                positions.push(Vec3::new(x, y, z));
+            }
+        }
+        positions.push(Vec3::new(0.0, h - dent, 0.0));
+        let mut triangles: Vec<[u32; 3]> = vec![[0, 1, 2], [0, 2, 3]];
+        for k in 0..4u32 {
+            let j = (k + 1) % 4;
+            triangles.extend([[k, j, j + 4], [k, j + 4, k + 4], [k + 4, j + 4, 8]]);
+        }
+        // Wound outward (the box is star-shaped about its centre).
+        for t in &mut triangles {
+            let [a, b, c] = t.map(|i| positions[i as usize]);
+            if (b - a).cross(c - a).dot(a + b + c) < 0.0 {
+                t.swap(1, 2);
+            }
+        }
+        let mesh = Mesh {
+            positions,
+            triangles,
+            albedo: nelf_scene::mesh::Albedo::Uniform([0.5; 3]),
+        };
+        mesh.validate().unwrap();
+        let field = MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
+        let shell = ShellMeshField::new(field, profile, 2.0 * voxel, None).unwrap();
+        for d in [0.5f32, 1.0, 1.5].map(|k| k * voxel) {
+            let x = Vec3::new(h + d, h - 0.15 * voxel, 0.01);
+            let sigma = shell.density(x);
+            let expected = profile.density(Some(d), false);
+            assert!(
+                (sigma - expected).abs() <= 1e-3 * expected.abs().max(1.0),
+                "{d} m beside the face below the crease: σ = {sigma}, the signed profile's {expected}"
+            );
+        }
     }
 
     /// Voxel edge of the textured-sheet tests, metres.
