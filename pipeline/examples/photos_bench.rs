@@ -6,7 +6,7 @@
 //! bake (8-bit sRGB PSNR, foreground and whole image, at the held-aside targets)
 //! beside the ground-truth bake and the flat colour.
 //!
-//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [geometry=stereo|network] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform|truth-white] [region=STEP] [refine=N] [refine_smoothness=A] [refine_truth=N]`
+//! `cargo run --release -p nelf-pipeline --example photos_bench -- CAPTURE_DIR [RESOLUTION] [unnamed] [jpeg] [hull] [geometry=stereo|network] [depth] [smoothing=N] [blur=MM] [mesh=truth] [albedo=truth] [highlight=T|off] [texel_samples=N] [bounces=N] [light=uniform|truth-white] [region=STEP] [refine=N] [refine_smoothness=A] [refine_truth=N] [lead=VOXELS]`
 //! (a synthetic capture with `synth_config.json` and targets, e.g. `nelf demo`'s
 //! `out/demo/capture`). `unnamed` reconstructs as if the capture named no lighting
 //! and scores after one exposure gain; `hull` keeps the visual hull uncarved;
@@ -60,9 +60,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let capture = load_capture(&dir, &CaptureLoadOptions::default())?;
     let truth = GroundTruth::from_synth_capture(&dir)?;
     let truth_mesh = truth.mesh()?;
+    // `lead=VOXELS`: the signed shell's lead of every bake here (`--lead-voxels` and
+    // `--photo-lead-voxels`; without it each bake takes its own default).
+    let lead_voxels = args
+        .iter()
+        .find_map(|a| a.strip_prefix("lead="))
+        .map_or(Ok(BakeConfig::default().lead_voxels), str::parse)?;
     let config = PipelineConfig::from(BakeConfig {
         resolution,
         view_dependence: ViewChoice::Off,
+        lead_voxels,
         ..BakeConfig::default()
     });
     let mut photographs = capture.clone();
@@ -109,6 +116,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         photo_refine_iterations: option("refine").map_or(Ok(0), str::parse)?,
         photo_refine_smoothness: option("refine_smoothness")
             .map_or(Ok(nelf_pipeline::photo::refine::DEFAULT_SMOOTHNESS), str::parse)?,
+        photo_lead_voxels: option("lead")
+            .map_or(Ok(nelf_pipeline::config::DEFAULT_PHOTO_LEAD_VOXELS), str::parse)?,
         ..Default::default()
     };
     if args.iter().any(|a| a == "depth") {
@@ -293,7 +302,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             mesh: Box::new(reconstruction.mesh.clone()),
             description,
         },
-        &config.bake,
+        &nelf_pipeline::photo::reconstruction_bake_config(&config.bake, &settings),
         &Progress::hidden(),
     )?;
     let photo_secs = t.elapsed().as_secs_f64();

@@ -200,6 +200,21 @@ pub struct PhotoBake {
     pub reconstruct_secs: f64,
 }
 
+/// The settings the reconstructed surface is baked with: `bake`'s, without view
+/// dependence (a photographed capture has no views to judge it at) and with the lead
+/// `--photo-lead-voxels` (the reconstructed surface lies a little inside the true
+/// silhouette; [`crate::config::DEFAULT_PHOTO_LEAD_VOXELS`]).
+pub fn reconstruction_bake_config(
+    bake: &nelf_bake::BakeConfig,
+    settings: &PhotoSettings,
+) -> nelf_bake::BakeConfig {
+    nelf_bake::BakeConfig {
+        view_dependence: ViewChoice::Off,
+        lead_voxels: settings.photo_lead_voxels,
+        ..bake.clone()
+    }
+}
+
 /// Reconstructs `capture` and bakes the result (see the module documentation).
 pub fn bake_photographs(
     capture: &LoadedCapture,
@@ -218,10 +233,7 @@ pub fn bake_photographs(
         mesh: Box::new(reconstruction.mesh.clone()),
         description,
     };
-    let bake_config = nelf_bake::BakeConfig {
-        view_dependence: ViewChoice::Off,
-        ..config.bake.clone()
-    };
+    let bake_config = reconstruction_bake_config(&config.bake, settings);
     let output = bake_capture(capture, &truth, &bake_config, &progress)
         .with_context(|| format!("baking the surface reconstructed from {}", capture.dir.display()))?;
     Ok(PhotoBake {
