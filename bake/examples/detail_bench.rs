@@ -230,9 +230,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &settings,
         )?)
     })?;
+    // Per-voxel values trilinear at `p`, normalised over the corners the grid has (zero
+    // off its bricks).
+    let radiance_at = |grid: &BrickGrid, values: &[[f32; 3]], p: DVec3| {
+        let mut corners = [(0usize, 0.0f32); 8];
+        let n = grid.trilinear(p, &mut corners);
+        let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
+        for &(v, w) in &corners[..n] {
+            for ch in 0..3 {
+                sum[ch] += w * values[v][ch];
+            }
+            wsum += w;
+        }
+        sum.map(|x| x / wsum.max(1e-6))
+    };
+    // An asset's voxel radiance under target `t`'s lighting.
+    let radiance_of =
+        |asset: &nelf_format::Asset, t: usize| -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>> {
+            let light = project_light(&asset.pca, asset.world_from_light, &held.envs[t], DMat3::IDENTITY)?;
+            Ok(voxel_radiance(asset, &light, None))
+        };
     let white = |t: usize| -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>> {
-        let light = project_light(&asset.pca, asset.world_from_light, &held.envs[t], DMat3::IDENTITY)?;
-        Ok(voxel_radiance(asset, &light, None)
+        Ok(radiance_of(asset, t)?
             .iter()
             .zip(&coarse)
             .map(|(r, a)| std::array::from_fn(|ch| r[ch] / a[ch].max(1e-3)))
@@ -251,25 +270,6 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             &settings,
         )?)
     };
-    // Radiance of an asset under target `t`'s lighting, trilinear at `p` (normalised over
-    // the corners the grid has; zero off its bricks).
-    let radiance_at = |grid: &BrickGrid, values: &[[f32; 3]], p: DVec3| {
-        let mut corners = [(0usize, 0.0f32); 8];
-        let n = grid.trilinear(p, &mut corners);
-        let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
-        for &(v, w) in &corners[..n] {
-            for ch in 0..3 {
-                sum[ch] += w * values[v][ch];
-            }
-            wsum += w;
-        }
-        sum.map(|x| x / wsum.max(1e-6))
-    };
-    let radiance_of =
-        |asset: &nelf_format::Asset, t: usize| -> Result<Vec<[f32; 3]>, Box<dyn std::error::Error>> {
-            let light = project_light(&asset.pca, asset.world_from_light, &held.envs[t], DMat3::IDENTITY)?;
-            Ok(voxel_radiance(asset, &light, None))
-        };
     for mode in &modes {
         let t0 = Instant::now();
         if let Some(fine_res) = mode.strip_prefix("swap") {
@@ -299,36 +299,29 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                     &settings,
                 )?)
             })?;
-            let ones = |n: usize| vec![[1.0f32; 3]; n];
+            // One asset's density (its grid) with the other's radiance at every sample.
+            let swapped = |(density_grid, density_values): (&BrickGrid, &[f32]),
+                           (radiance_asset, radiance_grid): (&nelf_format::Asset, &BrickGrid),
+                           t: usize|
+             -> Result<Image, Box<dyn std::error::Error>> {
+                let values = radiance_of(radiance_asset, t)?;
+                let factor = |p: DVec3| radiance_at(radiance_grid, &values, p);
+                Ok(render_volume_factored(
+                    density_grid,
+                    density_values,
+                    &vec![[1.0f32; 3]; density_values.len()],
+                    &factor,
+                    &held.cameras[t],
+                    &settings,
+                )?)
+            };
             score_all(
                 &format!("density of {fine_res}, radiance of {resolution}"),
-                &|t| {
-                    let values = radiance_of(asset, t)?;
-                    let factor = |p: DVec3| radiance_at(&grid, &values, p);
-                    Ok(render_volume_factored(
-                        &fine_grid,
-                        &fine_density,
-                        &ones(fine_density.len()),
-                        &factor,
-                        &held.cameras[t],
-                        &settings,
-                    )?)
-                },
+                &|t| swapped((&fine_grid, &fine_density), (asset, &grid), t),
             )?;
             score_all(
                 &format!("density of {resolution}, radiance of {fine_res}"),
-                &|t| {
-                    let values = radiance_of(fine, t)?;
-                    let factor = |p: DVec3| radiance_at(&fine_grid, &values, p);
-                    Ok(render_volume_factored(
-                        &grid,
-                        &density,
-                        &ones(density.len()),
-                        &factor,
-                        &held.cameras[t],
-                        &settings,
-                    )?)
-                },
+                &|t| swapped((&grid, &density), (fine, &fine_grid), t),
             )?;
             continue;
         }
@@ -401,18 +394,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             lattice.len() as f64 * 3.0 / 1e6,
             t0.elapsed().as_secs_f64()
         );
-        let coarse_at = |p: DVec3| {
-            let mut corners = [(0usize, 0.0f32); 8];
-            let n = grid.trilinear(p, &mut corners);
-            let (mut sum, mut wsum) = ([0.0f32; 3], 0.0f32);
-            for &(v, w) in &corners[..n] {
-                for ch in 0..3 {
-                    sum[ch] += w * coarse[v][ch];
-                }
-                wsum += w;
-            }
-            sum.map(|x| x / wsum.max(1e-6))
-        };
+        let coarse_at = |p: DVec3| radiance_at(&grid, &coarse, p);
         let factor = |p: DVec3| {
             let u = (p - origin) / fine_m - 0.5;
             let base = u.floor();

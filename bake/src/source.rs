@@ -988,19 +988,7 @@ mod tests {
             albedo: nelf_scene::mesh::Albedo::Uniform([0.5; 3]),
         };
         mesh.validate().unwrap();
-        let trace = TraceSettings {
-            texel_samples: 1,
-            indirect_samples: 1,
-            bounces: 0,
-            ..TraceSettings::default()
-        };
-        let field = MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
-        let profile = ShellProfile::Signed {
-            lead_m: 0.05 * voxel,
-            ramp_m: 0.25 * voxel,
-            voxel_m: voxel,
-        };
-        let shell = ShellMeshField::new(field, profile, 2.0 * voxel, None).unwrap();
+        let (shell, profile) = one_sample_shell(&mesh, voxel, 0.05);
         let apex = corner(0, 0.0);
         for along in [-0.03f32, 0.0, 0.02] {
             for d in [0.2f32, 0.5, 1.0, 1.5].map(|k| k * voxel) {
@@ -1047,8 +1035,7 @@ mod tests {
             albedo: nelf_scene::mesh::Albedo::Uniform([0.5; 3]),
         };
         mesh.validate().unwrap();
-        let field = MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
-        let shell = ShellMeshField::new(field, profile, 2.0 * voxel, None).unwrap();
+        let (shell, profile) = one_sample_shell(&mesh, voxel, 0.05);
         for d in [0.5f32, 1.0, 1.5].map(|k| k * voxel) {
             let x = Vec3::new(h + d, h - 0.15 * voxel, 0.01);
             let sigma = shell.density(x);
@@ -1058,6 +1045,27 @@ mod tests {
                 "{d} m beside the face below the crease: σ = {sigma}, the signed profile's {expected}"
             );
         }
+    }
+
+    /// `mesh`'s field with a one-sample tracer (tracing every point) as a signed shell of
+    /// `voxel` voxels with lead `lead_voxels` and a quarter-voxel ramp, sheets 2 voxels thick.
+    fn one_sample_shell(mesh: &Mesh, voxel: f32, lead_voxels: f32) -> (ShellMeshField, ShellProfile) {
+        let trace = TraceSettings {
+            texel_samples: 1,
+            indirect_samples: 1,
+            bounces: 0,
+            ..TraceSettings::default()
+        };
+        let field = MeshField::new(mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
+        let profile = ShellProfile::Signed {
+            lead_m: lead_voxels * voxel,
+            ramp_m: 0.25 * voxel,
+            voxel_m: voxel,
+        };
+        (
+            ShellMeshField::new(field, profile, 2.0 * voxel, None).unwrap(),
+            profile,
+        )
     }
 
     /// Voxel edge of the textured-sheet tests, metres.
@@ -1073,20 +1081,7 @@ mod tests {
             4,
             texture,
         );
-        let trace = TraceSettings {
-            texel_samples: 1,
-            indirect_samples: 1,
-            bounces: 0,
-            ..TraceSettings::default()
-        };
-        let voxel = SHEET_VOXEL;
-        let field = MeshField::new(&mesh, trace, DensityProfile::with_shell_width(2.0 * voxel)).unwrap();
-        let profile = ShellProfile::Signed {
-            lead_m: 0.25 * voxel,
-            ramp_m: 0.25 * voxel,
-            voxel_m: voxel,
-        };
-        ShellMeshField::new(field, profile, 2.0 * voxel, None).unwrap()
+        one_sample_shell(&mesh, SHEET_VOXEL, 0.25).0
     }
 
     /// Sharing light transport among the band's voxels: the result is a function of

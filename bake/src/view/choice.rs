@@ -311,8 +311,7 @@ pub fn kinds_worth_fitting(extrapolated: &[(ViewChoice, f64)], min_gain_db: f64)
 fn probe_choices(choices: &[(ViewChoice, usize)]) -> Vec<(ViewChoice, usize)> {
     let mut out: Vec<(ViewChoice, usize)> = Vec::new();
     for &(choice, rank) in choices {
-        let kind = |c: ViewChoice| if c == ViewChoice::Sh1 { ViewChoice::Sh2 } else { c };
-        match out.iter_mut().find(|(c, _)| kind(*c) == kind(choice)) {
+        match out.iter_mut().find(|(c, _)| probe_kind(*c) == probe_kind(choice)) {
             Some(kept) => {
                 if (choice == ViewChoice::Sh2 && kept.0 == ViewChoice::Sh1)
                     || (choice == kept.0 && rank > kept.1)
