@@ -1,4 +1,4 @@
-/* Prints a .nelf file's size, the radiance of one voxel under white light and its reflection part.
+/* Prints a .nelf file's size, the radiance of one voxel under white light, its reflection part and fine density.
  * cc -std=c99 -O2 -I include include/example.c -o nelf_example -lzstd -lxxhash -lm */
 #define NELF_IMPLEMENTATION
 #include "nelf.h"
@@ -21,6 +21,8 @@ int main(int argc, char **argv) {
            1000.0 * h->voxel_size_m);
     const nelf_reflection *part = nelf_get_reflection(reader); /* format 1.3, NULL without one */
     if (part) printf("reflection part: lobe exponent %g, %u eyes\n", part->exponent, (unsigned)part->eye_count);
+    if (h->fine_density_factor) /* format 1.4: the density again, on a lattice F times finer per axis */
+        printf("fine density: %u x finer per axis\n", (unsigned)h->fine_density_factor);
     for (int t = 0; t < NELF_ENV_TEXELS * 3; t++) white[t] = 1.0f;
     nelf_project_light(reader, white, &light);          /* once per lighting change */
     if (h->brick_count > 0 && (rc = nelf_read_brick(reader, 0, &brick)) == NELF_OK) {
@@ -31,6 +33,10 @@ int main(int argc, char **argv) {
         if (brick.reflection) { /* its normal and the scale of its glossy lobe */
             float n[3], s = nelf_reflection_voxel(brick.reflection + 100 * NELF_REFLECTION_VALUES, n);
             printf("voxel 100 reflects: normal %.3f %.3f %.3f, scale %g\n", n[0], n[1], n[2], s);
+        }
+        if (brick.fine_density) { /* 512 F^3 values; fine voxel (i, j, k) at i + 8F (j + 8F k) */
+            unsigned edge = 8 * h->fine_density_factor, last = edge * edge * edge - 1;
+            printf("fine voxel %u: density %g 1/m\n", last, brick.fine_density[last]);
         }
     }
     if (rc != NELF_OK) fprintf(stderr, "%s\n", nelf_error_detail(reader));

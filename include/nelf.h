@@ -2,7 +2,9 @@
  * nelf.h: single-header C99 reader for `.nelf` relightable light-transport files
  * (format version 1.x, see format/SPEC.md in the nelf repository), including the
  * optional view-dependent parts of version 1.2 (sections VDEP and VCOF: harmonic lobes)
- * and 1.3 (sections VREF and VRCO: a glossy lobe about the mirror direction).
+ * and 1.3 (sections VREF and VRCO: a glossy lobe about the mirror direction), and the
+ * optional fine density of version 1.4 (section DNSF: the density on a lattice 2 or 4
+ * times finer per axis, header field fine_density_factor).
  *
  * Use:   in exactly one .c file,
  *            #define NELF_IMPLEMENTATION
@@ -15,7 +17,8 @@
  * bounded before it is made: by the actual file length (brick list, chunk tables,
  * stored bytes of a section read from a FILE), or by the format's limits (PCA model
  * <= 591 360 bytes, QPRM <= 3 KiB, VDEP <= 593 236 bytes, VREF <= 224 bytes, metadata
- * <= 1 MiB, one decoded chunk <= 4 MiB and <= 32768 x its stored size).
+ * <= 1 MiB, one decoded chunk <= 4 MiB and <= 32768 x its stored size, one brick of fine
+ * density <= 128 KiB as floats).
  *
  * Numbers: reconstruction, relighting and shading follow the reference's arithmetic
  * operation by operation (float sums in ascending index order starting from -0.0f,
@@ -71,6 +74,7 @@ extern "C" {
 #define NELF_MAX_REFLECTION_EXPONENT 200.0f /* the lobe exponent lies in 1..200 (1.3) */
 #define NELF_LOBE_TABLE_HEIGHT 64    /* rows of the reflection lobe's direction table (1.3) */
 #define NELF_LOBE_TABLE_WIDTH 128    /* columns of the reflection lobe's direction table (1.3) */
+#define NELF_MAX_FINE_DENSITY_FACTOR 4 /* fine_density_factor F: 0 (none), 2 or 4 (1.4) */
 #define NELF_DETAIL_SIZE 512
 
 /*
@@ -130,7 +134,8 @@ extern "C" {
     X(NELF_ERR_NONZERO_PADDING, "non-zero padding byte between sections")                    \
     X(NELF_ERR_BRICK_OUT_OF_RANGE, "brick index out of range")                               \
     X(NELF_ERR_BAD_VIEW, "malformed view-dependent part (VDEP and VCOF, or VREF and VRCO)")  \
-    X(NELF_ERR_NONFINITE_VIEW, "non-finite value in the view part (lobes, basis, eyes, parameters)")
+    X(NELF_ERR_NONFINITE_VIEW, "non-finite value in the view part (lobes, basis, eyes, parameters)") \
+    X(NELF_ERR_FINE_DENSITY_FACTOR, "fine_density_factor is not 0, 2 or 4, or disagrees with section DNSF")
 
 #define NELF__ENUM_ENTRY(name, text) name,
 typedef enum nelf_result { NELF__RESULTS(NELF__ENUM_ENTRY) NELF_RESULT_COUNT } nelf_result;
@@ -156,6 +161,7 @@ typedef struct nelf_header {
     uint16_t env_width;
     uint32_t pca_rank;             /* K */
     uint32_t coefficient_encoding; /* NELF_ENCODING_U8_AFFINE or NELF_ENCODING_F16 */
+    uint32_t fine_density_factor;  /* F (1.4): 0 = no fine density, else 2 or 4 (section DNSF) */
     uint64_t file_size;
     uint64_t header_checksum;
 } nelf_header;
@@ -189,6 +195,11 @@ typedef struct nelf_brick {
      * the 512 x 3 stored u8 codes. */
     const float *reflection;
     const unsigned char *stored_reflection;
+    /* The fine density (1.4), NULL without one: 512 F^3 sigma values (1/m) on the brick's
+     * 8F x 8F x 8F fine voxels, fine voxel (i, j, k) (each 0..8F-1) at i + 8F (j + 8F k);
+     * nelf_fine_voxel_center gives its centre. A renderer that reads it takes the density
+     * from it instead of `density` (SPEC.md section 8, "Fine density"). */
+    const float *fine_density;
 } nelf_brick;
 
 /* The view-dependent part's parameters (format 1.2, section VDEP, SPEC.md section 6):
@@ -279,13 +290,21 @@ NELF_API const nelf_view *nelf_get_view(const nelf_reader *reader);
 NELF_API const nelf_reflection *nelf_get_reflection(const nelf_reader *reader);
 
 /* --- bricks and voxels --- */
-/* Reads brick `index`: decodes (and checksums) only the chunk holding it, keeping
- * that chunk so that bricks read in order decode each chunk once. */
+/* Reads brick `index`: decodes (and checksums) only the chunk holding it (of DENS, COEF,
+ * VCOF or VRCO, and DNSF), keeping that chunk so that bricks read in order decode each
+ * chunk once; checks the brick's densities (fine ones too) and f16 values. */
 NELF_API nelf_result nelf_read_brick(nelf_reader *reader, uint32_t index, nelf_brick *out);
 /* Centre (metres) of voxel (i, j, k), each 0..7, of brick `index`; local voxel index
  * is i + 8 (j + 8 k). Returns NELF_ERR_BRICK_OUT_OF_RANGE for a bad index. */
 NELF_API nelf_result nelf_voxel_center(const nelf_reader *reader, uint32_t brick_index, unsigned i,
                                        unsigned j, unsigned k, double out_m[3]);
+/* Centre (metres) of fine voxel (i, j, k), each 0..8F-1, of brick `index` in a file with a
+ * fine density (1.4, F = header fine_density_factor): per axis, in double,
+ * bbox_min + (8F brick + i + 0.5) voxel_size / F; its local index (brick.fine_density) is
+ * i + 8F (j + 8F k). NELF_ERR_INVALID_ARGUMENT without a fine density or for an index
+ * out of range, NELF_ERR_BRICK_OUT_OF_RANGE for a bad brick. */
+NELF_API nelf_result nelf_fine_voxel_center(const nelf_reader *reader, uint32_t brick_index, unsigned i,
+                                            unsigned j, unsigned k, double out_m[3]);
 /* T = mean + sum_{k < count} c_k B_k (count clamped to K), summed k = 0, 1, ... in float. */
 NELF_API void nelf_reconstruct(const nelf_reader *reader, const float *coefficients, uint32_t count,
                                float out_lt[NELF_LT_DIM]);
@@ -388,14 +407,15 @@ NELF_API float nelf_half_to_float(uint16_t bits);
 #define NELF__REFLECTION_BYTES_PER_BRICK ((uint64_t)NELF_REFLECTION_VALUES * NELF_BRICK_VOXELS)
 
 enum {
-    NELF__BRCK, NELF__DENS, NELF__PCAB, NELF__QPRM, NELF__COEF, NELF__VDEP, NELF__VCOF, NELF__VREF, NELF__VRCO,
-    NELF__META, NELF__KNOWN
+    NELF__BRCK, NELF__DENS, NELF__DNSF, NELF__PCAB, NELF__QPRM, NELF__COEF, NELF__VDEP, NELF__VCOF, NELF__VREF,
+    NELF__VRCO, NELF__META, NELF__KNOWN
 };
-static const char nelf__kinds[NELF__KNOWN][5] = {"BRCK", "DENS", "PCAB", "QPRM", "COEF",
+static const char nelf__kinds[NELF__KNOWN][5] = {"BRCK", "DENS", "DNSF", "PCAB", "QPRM", "COEF",
                                                  "VDEP", "VCOF", "VREF", "VRCO", "META"};
 /* The chunked sections, in the order a full read visits them (index "which"): DENS, COEF,
- * then the view-dependent part's values (VCOF or VRCO; a file holds at most one part). */
-#define NELF__CHUNKED 3
+ * then the view-dependent part's values (VCOF or VRCO; a file holds at most one part),
+ * then the fine density (DNSF). */
+#define NELF__CHUNKED 4
 
 struct nelf_reader {
     nelf_result status;
@@ -419,8 +439,10 @@ struct nelf_reader {
     float *view_params;            /* lobes, basis, scale[R], offset[R] (see view) */
     int has_reflection;            /* VREF and VRCO present */
     nelf_reflection reflection;
-    int chunked;                   /* chunked sections: 2, or 3 with a view or reflection part */
-    int chunked_kind[NELF__CHUNKED]; /* the known kind of each: DENS, COEF, then VCOF or VRCO */
+    int fine_slot;                 /* index "which" of DNSF among the chunked sections, or -1 */
+    uint64_t fine_voxels;          /* fine voxels per brick, 512 F^3 (0 without DNSF) */
+    int chunked;                   /* chunked sections: DENS, COEF, the view part's, DNSF: 2 to 4 */
+    int chunked_kind[NELF__CHUNKED]; /* the known kind of each: DENS, COEF, then VCOF or VRCO, then DNSF */
     unsigned char *chunk_table[NELF__CHUNKED]; /* 24 bytes per chunk */
     uint64_t chunk_count;
     uint64_t bytes_per_brick[NELF__CHUNKED];
@@ -434,6 +456,7 @@ struct nelf_reader {
     float *brick_coef;      /* 512 K */
     float *brick_view;      /* 512 R */
     float *brick_reflection; /* 512 x 3 */
+    float *brick_fine_density; /* 512 F^3 */
 };
 
 /* ---------------------------------------------------------------- small helpers */
@@ -910,6 +933,12 @@ static uint64_t nelf__coef_bytes_per_brick(const nelf_header *h) {
     return (uint64_t)NELF_BRICK_VOXELS * h->pca_rank * (h->coefficient_encoding == NELF_ENCODING_F16 ? 2u : 1u);
 }
 
+/* Decoded bytes of one brick of DNSF: 2 x 512 F^3 (0 without a fine density). */
+static uint64_t nelf__fine_bytes_per_brick(const nelf_header *h) {
+    uint64_t f = h->fine_density_factor;
+    return 2u * NELF_BRICK_VOXELS * f * f * f;
+}
+
 static uint64_t nelf__bricks_in_chunk(const nelf_header *h, uint64_t chunk) {
     uint64_t start = chunk * h->chunk_bricks, b = h->brick_count;
     uint64_t left = b - (start < b ? start : b);
@@ -1049,10 +1078,17 @@ static nelf_result nelf__parse_header(nelf_reader *r, const unsigned char *b, ui
     if (h->coefficient_encoding != NELF_ENCODING_U8_AFFINE && h->coefficient_encoding != NELF_ENCODING_F16)
         return nelf__fail(r, NELF_ERR_BAD_ENCODING, "invalid header field coefficient_encoding: unknown encoding %lu",
                           (unsigned long)h->coefficient_encoding);
+    /* Reserved before 1.4 (written 0), so an older file reads as factor 0. */
+    h->fine_density_factor = nelf__u32(b + 196);
+    if (h->fine_density_factor != 0 && h->fine_density_factor != 2 && h->fine_density_factor != 4)
+        return nelf__fail(r, NELF_ERR_FINE_DENSITY_FACTOR,
+                          "invalid header field fine_density_factor: %lu, must be 0 (none), 2 or 4",
+                          (unsigned long)h->fine_density_factor);
     if (h->chunk_bricks == 0)
         return nelf__fail(r, NELF_ERR_CHUNK_BRICKS, "invalid header field chunk_bricks: 0, must be at least 1");
     per_brick = nelf__coef_bytes_per_brick(h);
     if (per_brick < 2u * NELF_BRICK_VOXELS) per_brick = 2u * NELF_BRICK_VOXELS;
+    if (per_brick < nelf__fine_bytes_per_brick(h)) per_brick = nelf__fine_bytes_per_brick(h);
     chunk_raw = (uint64_t)h->chunk_bricks * per_brick;
     if (chunk_raw > NELF__MAX_CHUNK_RAW_BYTES)
         return nelf__fail(r, NELF_ERR_CHUNK_TOO_LARGE,
@@ -1081,7 +1117,7 @@ static uint64_t nelf__expected_raw(const nelf_header *h, int kind) {
     }
 }
 
-/* Checks a chunked section's entry (DENS, COEF, VCOF, VRCO) whose bricks decode to `per_brick`
+/* Checks a chunked section's entry (DENS, DNSF, COEF, VCOF, VRCO) whose bricks decode to `per_brick`
  * bytes: decoded length B x per_brick, shuffle dividing a brick, a chunk <= 4 MiB. */
 static nelf_result nelf__check_chunked_entry(nelf_reader *r, const nelf_section *s, uint64_t per_brick) {
     const nelf_header *h = &r->header;
@@ -1104,12 +1140,15 @@ static nelf_result nelf__check_chunked_entry(nelf_reader *r, const nelf_section 
 static nelf_result nelf__check_entry(nelf_reader *r, const nelf_section *s, int kind) {
     const nelf_header *h = &r->header;
     char name[17];
-    int chunked = kind == NELF__DENS || kind == NELF__COEF || kind == NELF__VCOF || kind == NELF__VRCO;
+    int chunked = kind == NELF__DENS || kind == NELF__DNSF || kind == NELF__COEF || kind == NELF__VCOF ||
+                  kind == NELF__VRCO;
     uint64_t width = s->shuffle;
     nelf__kind_text(s->kind, name);
     if (!((s->codec == 0 && !chunked) || (s->codec == 2 && chunked) || (s->codec == 1 && !chunked && kind != NELF__BRCK)))
         return nelf__fail(r, NELF_ERR_BAD_CODEC, "section %s: codec %u is not allowed for this section", name, s->codec);
     if (kind == NELF__DENS) return nelf__check_chunked_entry(r, s, 2u * NELF_BRICK_VOXELS);
+    /* nelf__check_table checked that the factor is not 0 when DNSF is present. */
+    if (kind == NELF__DNSF) return nelf__check_chunked_entry(r, s, nelf__fine_bytes_per_brick(h));
     if (kind == NELF__COEF) return nelf__check_chunked_entry(r, s, nelf__coef_bytes_per_brick(h));
     if (kind == NELF__VCOF) return NELF_OK; /* checked once VDEP gives its brick size */
     if (kind == NELF__VRCO) return nelf__check_chunked_entry(r, s, NELF__REFLECTION_BYTES_PER_BRICK);
@@ -1198,6 +1237,17 @@ static nelf_result nelf__check_table(nelf_reader *r) {
             return nelf__fail(r, NELF_ERR_SECTIONS_OVERLAP, "sections %s and %s overlap", nelf__kind_text(a->kind, name),
                               nelf__kind_text(b->kind, other));
     }
+    /* The fine density (1.4) is there exactly when the header declares its factor. */
+    {
+        int has_fine = 0;
+        for (i = 0; i < n; i++)
+            if (memcmp(r->sections[i].kind, nelf__kinds[NELF__DNSF], 4) == 0) has_fine = 1;
+        if (h->fine_density_factor == 0 && has_fine)
+            return nelf__fail(r, NELF_ERR_FINE_DENSITY_FACTOR,
+                              "invalid header field fine_density_factor: 0, but section DNSF is present");
+        if (h->fine_density_factor != 0 && !has_fine)
+            return nelf__fail(r, NELF_ERR_MISSING_SECTION, "required section DNSF is missing");
+    }
     for (i = 0; i < NELF__KNOWN; i++) r->known[i] = -1;
     for (i = 0; i < n; i++) {
         const nelf_section *s = &r->sections[i];
@@ -1233,8 +1283,15 @@ static nelf_result nelf__check_table(nelf_reader *r) {
     r->has_reflection = r->known[NELF__VREF] >= 0;
     r->chunked_kind[0] = NELF__DENS;
     r->chunked_kind[1] = NELF__COEF;
-    r->chunked_kind[2] = r->has_view ? NELF__VCOF : NELF__VRCO;
-    r->chunked = r->has_view || r->has_reflection ? 3 : 2;
+    r->chunked = 2;
+    if (r->has_view || r->has_reflection) r->chunked_kind[r->chunked++] = r->has_view ? NELF__VCOF : NELF__VRCO;
+    r->fine_slot = -1;
+    r->fine_voxels = 0;
+    if (r->known[NELF__DNSF] >= 0) {
+        r->fine_slot = r->chunked;
+        r->fine_voxels = nelf__fine_bytes_per_brick(h) / 2u;
+        r->chunked_kind[r->chunked++] = NELF__DNSF;
+    }
     return NELF_OK;
 }
 
@@ -1266,7 +1323,7 @@ static nelf_result nelf__whole_section(nelf_reader *r, const nelf_section *s, un
 }
 
 /* Reads and checks the chunk table at the start of chunked section `which` (DENS, COEF,
- * then VCOF or VRCO). */
+ * then VCOF or VRCO, then DNSF). */
 static nelf_result nelf__chunk_table(nelf_reader *r, int which) {
     const nelf_header *h = &r->header;
     const nelf_section *s = &r->sections[r->known[r->chunked_kind[which]]];
@@ -1450,6 +1507,8 @@ static void nelf__release(nelf_reader *r) {
     r->has_view = 0;
     memset(&r->reflection, 0, sizeof r->reflection);
     r->has_reflection = 0;
+    r->fine_slot = -1;
+    r->fine_voxels = 0;
     r->chunked = 0;
     for (i = 0; i < NELF__CHUNKED; i++) {
         NELF_FREE(r->chunk_table[i]);
@@ -1466,6 +1525,8 @@ static void nelf__release(nelf_reader *r) {
     r->brick_view = NULL;
     NELF_FREE(r->brick_reflection);
     r->brick_reflection = NULL;
+    NELF_FREE(r->brick_fine_density);
+    r->brick_fine_density = NULL;
     r->bricks = NULL;
     r->pca = NULL;
     r->qparams = NULL;
@@ -1483,6 +1544,7 @@ NELF_API nelf_reader *nelf_create(void) {
     if (!r) return NULL;
     memset(r, 0, sizeof *r);
     r->cached_chunk = -1;
+    r->fine_slot = -1;
     r->status = NELF_ERR_NOT_OPEN;
     return r;
 }
@@ -1535,6 +1597,7 @@ static nelf_result nelf__open(nelf_reader *r) {
     r->chunk_count = ((uint64_t)h->brick_count + h->chunk_bricks - 1) / h->chunk_bricks;
     r->bytes_per_brick[0] = 2u * NELF_BRICK_VOXELS;
     r->bytes_per_brick[1] = nelf__coef_bytes_per_brick(h);
+    if (r->fine_slot >= 0) r->bytes_per_brick[r->fine_slot] = nelf__fine_bytes_per_brick(h);
 
     /* BRCK: raw, 6 bytes a brick, so B is bounded by the file size. */
     if ((rc = nelf__whole_section(r, &r->sections[r->known[NELF__BRCK]], &bytes)) != NELF_OK) return rc;
@@ -1651,6 +1714,10 @@ static nelf_result nelf__open(nelf_reader *r) {
         r->brick_reflection = (float *)NELF_MALLOC((size_t)NELF__REFLECTION_BYTES_PER_BRICK * sizeof(float));
         if (!r->brick_reflection) return nelf__fail(r, NELF_ERR_OUT_OF_MEMORY, "out of memory for brick buffers");
     }
+    if (r->fine_slot >= 0) { /* at most 512 x 64 floats */
+        r->brick_fine_density = (float *)NELF_MALLOC((size_t)r->fine_voxels * sizeof(float));
+        if (!r->brick_fine_density) return nelf__fail(r, NELF_ERR_OUT_OF_MEMORY, "out of memory for brick buffers");
+    }
     r->is_open = 1;
     return nelf__ok(r);
 }
@@ -1708,7 +1775,7 @@ NELF_API const char *nelf_error_detail(const nelf_reader *r) {
 
 /* ---------------------------------------------------------------- chunks and values */
 
-/* Reads chunk `index` of chunked section `which` (DENS, COEF, VCOF or VRCO), checks its checksum,
+/* Reads chunk `index` of chunked section `which` (DENS, COEF, VCOF or VRCO, DNSF), checks its checksum,
  * decodes it into r->raw[which]; feeds the stored bytes to `section_hash` if given. */
 static nelf_result nelf__decode_chunk(nelf_reader *r, int which, uint64_t index, XXH3_state_t *section_hash) {
     const nelf_section *s = &r->sections[r->known[r->chunked_kind[which]]];
@@ -1729,19 +1796,21 @@ static nelf_result nelf__decode_chunk(nelf_reader *r, int which, uint64_t index,
     return nelf__decode(r, stored, length, r->raw[which], raw_length, s->shuffle, what);
 }
 
-/* Checks `count` f16 densities starting at global voxel `first`. */
-static nelf_result nelf__check_density(nelf_reader *r, const unsigned char *raw, uint64_t count, uint64_t first) {
+/* Checks `count` f16 densities of `section` (DENS, or DNSF counted in fine voxels)
+ * starting at global (fine) voxel `first`. */
+static nelf_result nelf__check_density(nelf_reader *r, const char *section, const unsigned char *raw, uint64_t count,
+                                       uint64_t first) {
     int is_signed = (r->header.flags & NELF_FLAG_SIGNED_DENSITY) != 0;
     uint64_t i;
     for (i = 0; i < count; i++) {
         uint16_t d = nelf__u16(raw + 2 * i);
         if (!nelf__half_finite(d))
-            return nelf__fail(r, NELF_ERR_NONFINITE_DENSITY, "non-finite value in section DENS voxel %llu",
+            return nelf__fail(r, NELF_ERR_NONFINITE_DENSITY, "non-finite value in section %s voxel %llu", section,
                               (unsigned long long)(first + i));
         if (!is_signed && nelf__half_negative(d))
             return nelf__fail(r, NELF_ERR_NEGATIVE_DENSITY,
-                              "invalid value in section DENS voxel %llu: negative density %.9g in a file without the signed-density flag",
-                              (unsigned long long)(first + i), (double)nelf_half_to_float(d));
+                              "invalid value in section %s voxel %llu: negative density %.9g in a file without the signed-density flag",
+                              section, (unsigned long long)(first + i), (double)nelf_half_to_float(d));
     }
     return NELF_OK;
 }
@@ -1759,10 +1828,15 @@ static nelf_result nelf__check_f16_coefficients(nelf_reader *r, int which, const
     return NELF_OK;
 }
 
-/* Checks one decoded chunk's (or brick's) values: `values` voxels from `first_voxel`. */
+/* Checks one decoded chunk's (or brick's) values: `values` voxels from `first_voxel` (for
+ * DNSF, their F^3 fine voxels each). */
 static nelf_result nelf__check_values(nelf_reader *r, int which, const unsigned char *raw, uint64_t voxels,
                                       uint64_t first_voxel) {
-    if (which == 0) return nelf__check_density(r, raw, voxels, first_voxel);
+    if (which == 0) return nelf__check_density(r, "DENS", raw, voxels, first_voxel);
+    if (which == r->fine_slot) {
+        uint64_t per_voxel = r->fine_voxels / NELF_BRICK_VOXELS;
+        return nelf__check_density(r, "DNSF", raw, voxels * per_voxel, first_voxel * per_voxel);
+    }
     if (which == 1 && r->header.coefficient_encoding == NELF_ENCODING_F16)
         return nelf__check_f16_coefficients(r, 1, raw, voxels * r->header.pca_rank, r->header.pca_rank, first_voxel);
     if (which == 2 && r->has_view && r->view.encoding == NELF_ENCODING_F16)
@@ -1850,8 +1924,10 @@ static nelf_result nelf__verify(nelf_reader *r, XXH3_state_t *state) {
     }
     for (a = 0; a < n; a++) {
         const nelf_section *s = &r->sections[a];
-        if ((int)a == r->known[NELF__DENS] || (int)a == r->known[NELF__COEF] || (int)a == r->known[r->chunked_kind[2]])
-            continue;
+        int chunked = 0;
+        for (which = 0; which < r->chunked; which++)
+            if ((int)a == r->known[r->chunked_kind[which]]) chunked = 1;
+        if (chunked) continue;
         if ((rc = nelf__stream_checksum(r, s, state)) != NELF_OK) return rc;
     }
     /* Every byte outside the header, the table and the sections is zero. */
@@ -1890,7 +1966,7 @@ NELF_API nelf_result nelf_verify(nelf_reader *r) {
 NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick *out) {
     const nelf_header *h;
     uint64_t chunk, within, i, rank, first_voxel;
-    const unsigned char *dens, *coef, *view = NULL, *reflection = NULL;
+    const unsigned char *dens, *coef, *view = NULL, *reflection = NULL, *fine = NULL;
     int which;
     nelf_result rc;
     if (!r || !out) return NELF_ERR_INVALID_ARGUMENT;
@@ -1925,6 +2001,11 @@ NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick 
         nelf__dequantize(r->brick_reflection, reflection, NELF__REFLECTION_BYTES_PER_BRICK, NELF_REFLECTION_VALUES,
                          r->reflection.scale, r->reflection.offset);
     }
+    if (r->fine_slot >= 0) {
+        fine = r->raw[r->fine_slot] + within * r->bytes_per_brick[r->fine_slot];
+        if ((rc = nelf__check_values(r, r->fine_slot, fine, NELF_BRICK_VOXELS, first_voxel)) != NELF_OK) return rc;
+        for (i = 0; i < r->fine_voxels; i++) r->brick_fine_density[i] = nelf_half_to_float(nelf__u16(fine + 2 * i));
+    }
     for (i = 0; i < NELF_BRICK_VOXELS; i++) r->brick_density[i] = nelf_half_to_float(nelf__u16(dens + 2 * i));
     out->index = index;
     memcpy(out->coord, r->bricks + 3 * (uint64_t)index, sizeof out->coord);
@@ -1935,6 +2016,7 @@ NELF_API nelf_result nelf_read_brick(nelf_reader *r, uint32_t index, nelf_brick 
     out->stored_view_coefficients = view;
     out->reflection = reflection ? r->brick_reflection : NULL;
     out->stored_reflection = reflection;
+    out->fine_density = fine ? r->brick_fine_density : NULL;
     return nelf__ok(r);
 }
 
@@ -2000,6 +2082,25 @@ NELF_API nelf_result nelf_voxel_center(const nelf_reader *r, uint32_t brick_inde
     for (a = 0; a < 3; a++) {
         double index = (double)r->bricks[3 * (uint64_t)brick_index + (uint64_t)a] * 8.0 + (double)local[a] + 0.5;
         out_m[a] = r->header.bbox_min_m[a] + index * r->header.voxel_size_m;
+    }
+    return NELF_OK;
+}
+
+NELF_API nelf_result nelf_fine_voxel_center(const nelf_reader *r, uint32_t brick_index, unsigned i, unsigned j,
+                                            unsigned k, double out_m[3]) {
+    unsigned local[3], edge;
+    int a;
+    if (!r || !out_m) return NELF_ERR_INVALID_ARGUMENT;
+    if (!r->is_open) return NELF_ERR_NOT_OPEN;
+    edge = NELF_BRICK_SIZE * r->header.fine_density_factor;
+    if (edge == 0 || i >= edge || j >= edge || k >= edge) return NELF_ERR_INVALID_ARGUMENT;
+    if (brick_index >= r->header.brick_count) return NELF_ERR_BRICK_OUT_OF_RANGE;
+    local[0] = i;
+    local[1] = j;
+    local[2] = k;
+    for (a = 0; a < 3; a++) {
+        double index = (double)r->bricks[3 * (uint64_t)brick_index + (uint64_t)a] * (double)edge + (double)local[a] + 0.5;
+        out_m[a] = r->header.bbox_min_m[a] + index * r->header.voxel_size_m / (double)r->header.fine_density_factor;
     }
     return NELF_OK;
 }

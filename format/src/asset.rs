@@ -743,6 +743,8 @@ pub struct Asset {
     /// The reflection-aligned view-dependent part (format 1.3); at most one of `view`
     /// and `reflection` is present.
     pub reflection: Option<Reflection>,
+    /// The density on a finer lattice (format 1.4); `None` renders `density`.
+    pub fine_density: Option<FineDensity>,
     /// Metadata, a JSON object (provenance, bake settings, measured error).
     pub metadata: serde_json::Value,
 }
@@ -762,6 +764,56 @@ pub struct BrickData {
     /// Dequantized reflection values (format 1.3), `512 × 3`, voxel-major (octahedral
     /// `u`, `v`, scale); empty when the file has no reflection part.
     pub reflection: Vec<f32>,
+    /// Fine density σ (1/m, format 1.4), `512·F³` values in the brick's fine-voxel order
+    /// ([`FineDensity`]); empty when the file has none.
+    pub fine_density: Vec<f32>,
+}
+
+/// The density on a lattice `F` times finer per axis than the voxels (format 1.4,
+/// optional section `DNSF`, SPEC.md §6 and §8). Each brick holds `8F × 8F × 8F` fine
+/// voxels; fine voxel `(i, j, k)` of brick `(bx, by, bz)` (each of `i, j, k` in `0..8F`)
+/// is centred at `bbox_min + (8F·(bx, by, bz) + (i, j, k) + ½) · Δ/F` and stored at
+/// `brick_index · 512F³ + i + 8F·(j + 8F·k)`. A renderer that reads it takes the density
+/// at a point as `max(0, trilinear)` over this lattice, exactly the rule of `DENS` on a
+/// grid of voxel size `Δ/F` (fine voxels outside every brick are 0), and the radiance
+/// from the voxels as before; one that does not renders `DENS`, the coarse asset.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FineDensity {
+    /// `F`, one of [`crate::spec::FINE_DENSITY_FACTORS`] (2 or 4).
+    pub factor: u32,
+    /// σ (1/m) per fine voxel, `bricks × 512·F³`, brick order, x fastest inside a brick.
+    pub values: Vec<f16>,
+}
+
+impl FineDensity {
+    /// Fine voxels per brick, `512·F³`.
+    pub fn voxels_per_brick(&self) -> usize {
+        BRICK_VOXELS * (self.factor as usize).pow(3)
+    }
+
+    /// Fine voxels along a brick's edge, `8F`.
+    pub fn brick_edge(&self) -> usize {
+        crate::spec::BRICK_SIZE * self.factor as usize
+    }
+
+    /// Checks the factor, the count for `bricks` bricks and the values (finite).
+    pub fn validate(&self, bricks: usize) -> Result<()> {
+        if !crate::spec::FINE_DENSITY_FACTORS.contains(&self.factor) {
+            return Err(FormatError::InvalidAsset(format!(
+                "fine density factor {} must be 2 or 4",
+                self.factor
+            )));
+        }
+        let expected = bricks * self.voxels_per_brick();
+        if self.values.len() != expected {
+            return Err(FormatError::InvalidAsset(format!(
+                "{} fine density values for {bricks} bricks at factor {} ({expected} expected)",
+                self.values.len(),
+                self.factor
+            )));
+        }
+        validate_density_values(&self.values, 0, true, "DNSF")
+    }
 }
 
 impl Asset {
@@ -876,6 +928,9 @@ impl Asset {
             }
             reflection.validate(voxels)?;
         }
+        if let Some(fine) = &self.fine_density {
+            fine.validate(self.bricks.len())?;
+        }
         if !self.metadata.is_object() {
             return Err(FormatError::MetadataNotObject {
                 found: json_type_name(&self.metadata),
@@ -906,15 +961,26 @@ pub(crate) fn validate_bricks(bricks: &[[u16; 3]], grid_bricks: [u32; 3]) -> Res
 /// Checks densities are finite, and not negative unless `signed` (the file's
 /// [`crate::spec::FLAG_SIGNED_DENSITY`]); `first_voxel` numbers them in messages.
 pub(crate) fn validate_density(density: &[f16], first_voxel: usize, signed: bool) -> Result<()> {
+    validate_density_values(density, first_voxel, signed, "DENS")
+}
+
+/// Checks density values of section `section` (`DENS`, or `DNSF` counted in fine
+/// voxels): finite, and not negative unless `signed`.
+pub(crate) fn validate_density_values(
+    density: &[f16],
+    first_voxel: usize,
+    signed: bool,
+    section: &str,
+) -> Result<()> {
     for (i, d) in density.iter().enumerate() {
         if !d.is_finite() {
             return Err(FormatError::NonFinite {
-                what: format!("section DENS voxel {}", first_voxel + i),
+                what: format!("section {section} voxel {}", first_voxel + i),
             });
         }
         if !signed && d.to_f32() < 0.0 {
             return Err(FormatError::InvalidValue {
-                what: format!("section DENS voxel {}", first_voxel + i),
+                what: format!("section {section} voxel {}", first_voxel + i),
                 reason: format!("negative density {d} in a file without the signed-density flag"),
             });
         }

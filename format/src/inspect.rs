@@ -1,6 +1,7 @@
 //! A summary of a `.nelf` file for people and scripts (`nelf inspect`): header,
 //! sections with stored and decoded sizes, counts, bounding box, the view-dependent part
-//! (harmonic lobes of format 1.2, or the reflection part of 1.3), metadata, and the
+//! (harmonic lobes of format 1.2, or the reflection part of 1.3), the fine density (1.4),
+//! metadata, and the
 //! result of checking every checksum and value ([`crate::read::AssetReader::verify`]).
 
 use std::fmt::Write as _;
@@ -12,8 +13,8 @@ use crate::asset::{Coefficients, Reflection};
 use crate::error::Result;
 use crate::read::AssetReader;
 use crate::spec::{
-    BRICK_SIZE, KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, SectionEntry,
-    SectionKind, is_known_kind,
+    BRICK_SIZE, BRICK_VOXELS, KIND_FINE_DENSITY, KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW,
+    KIND_VIEW_COEFFICIENTS, SectionEntry, SectionKind, is_known_kind,
 };
 
 /// One section as `nelf inspect` reports it.
@@ -109,7 +110,7 @@ impl ReflectionSummary {
             }
             _ => [0.0, 0.0],
         };
-        let (stored_bytes, raw_bytes) = section_bytes(sections, [KIND_REFLECTION, KIND_REFLECTION_VALUES]);
+        let (stored_bytes, raw_bytes) = section_bytes(sections, &[KIND_REFLECTION, KIND_REFLECTION_VALUES]);
         Self {
             exponent: part.exponent,
             eyes_m: part.eyes_m.clone(),
@@ -120,8 +121,27 @@ impl ReflectionSummary {
     }
 }
 
+/// The fine density (format 1.4, section `DNSF`) as `nelf inspect` reports it.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct FineDensitySummary {
+    /// The factor `F` (2 or 4): the fine lattice is `F` times finer per axis.
+    pub factor: u32,
+    /// Fine voxels along a brick's edge, `8F`.
+    pub brick_edge: usize,
+    /// Fine voxels per brick, `512·F³`.
+    pub voxels_per_brick: u64,
+    /// Fine voxels stored, `512·F³` per brick.
+    pub voxel_count: u64,
+    /// Fine voxel edge, metres (`voxel_size_m / F`).
+    pub voxel_size_m: f64,
+    /// Stored bytes of `DNSF`.
+    pub stored_bytes: u64,
+    /// Decoded bytes of `DNSF` (`1024·F³` per brick).
+    pub raw_bytes: u64,
+}
+
 /// Stored and decoded bytes of the sections of kinds `kinds` together.
-fn section_bytes(sections: &[SectionEntry], kinds: [SectionKind; 2]) -> (u64, u64) {
+fn section_bytes(sections: &[SectionEntry], kinds: &[SectionKind]) -> (u64, u64) {
     sections
         .iter()
         .filter(|s| kinds.contains(&s.kind))
@@ -171,6 +191,8 @@ pub struct Inspection {
     pub view: Option<ViewSummary>,
     /// The reflection part (1.3), if the file has one (a file holds at most one of the two).
     pub reflection: Option<ReflectionSummary>,
+    /// The fine density (1.4), if the file has one.
+    pub fine_density: Option<FineDensitySummary>,
     /// Sections in table order.
     pub sections: Vec<SectionSummary>,
     /// Decoded bytes over all sections.
@@ -198,7 +220,8 @@ pub fn inspect(path: &Path) -> Result<Inspection> {
     let rows = h.world_from_light.transpose().to_cols_array_2d();
     let voxel_count = h.voxel_count();
     let view = reader.view_params().map(|v| {
-        let (stored_bytes, raw_bytes) = section_bytes(reader.sections(), [KIND_VIEW, KIND_VIEW_COEFFICIENTS]);
+        let (stored_bytes, raw_bytes) =
+            section_bytes(reader.sections(), &[KIND_VIEW, KIND_VIEW_COEFFICIENTS]);
         ViewSummary {
             lobes: v.lobe_count(),
             rank: v.rank(),
@@ -211,6 +234,20 @@ pub fn inspect(path: &Path) -> Result<Inspection> {
     let reflection = reader
         .reflection_params()
         .map(|part| ReflectionSummary::new(part, reader.sections()));
+    let fine_density = (h.fine_density_factor != 0).then(|| {
+        let factor = h.fine_density_factor;
+        let (stored_bytes, raw_bytes) = section_bytes(reader.sections(), &[KIND_FINE_DENSITY]);
+        let voxels_per_brick = BRICK_VOXELS as u64 * u64::from(factor).pow(3);
+        FineDensitySummary {
+            factor,
+            brick_edge: BRICK_SIZE * factor as usize,
+            voxels_per_brick,
+            voxel_count: u64::from(h.brick_count) * voxels_per_brick,
+            voxel_size_m: h.grid.voxel_size_m / f64::from(factor),
+            stored_bytes,
+            raw_bytes,
+        }
+    });
     Ok(Inspection {
         file: path.display().to_string(),
         file_size: h.file_size,
@@ -231,6 +268,7 @@ pub fn inspect(path: &Path) -> Result<Inspection> {
         coefficient_encoding: h.coefficient_encoding.name().to_string(),
         view,
         reflection,
+        fine_density,
         sections,
         raw_payload_bytes: raw,
         stored_payload_bytes: stored,
@@ -329,6 +367,24 @@ impl Inspection {
             }
             None => {
                 let _ = writeln!(s, "reflection:        none");
+            }
+        }
+        match &self.fine_density {
+            Some(f) => {
+                let _ = writeln!(
+                    s,
+                    "fine density:      F = {}, {}³ fine voxels a brick ({} in all) of {:.6} m ({:.3} mm), {} bytes stored, {} decoded",
+                    f.factor,
+                    f.brick_edge,
+                    f.voxel_count,
+                    f.voxel_size_m,
+                    1e3 * f.voxel_size_m,
+                    f.stored_bytes,
+                    f.raw_bytes
+                );
+            }
+            None => {
+                let _ = writeln!(s, "fine density:      none");
             }
         }
         for (i, r) in self.world_from_light.iter().enumerate() {

@@ -20,8 +20,8 @@ pub mod synthetic;
 pub mod write;
 
 pub use asset::{
-    Asset, BrickData, CoefficientEncoding, Coefficients, GridGeometry, PcaModel, Reflection, ViewDependence,
-    encode_density, has_negative_density,
+    Asset, BrickData, CoefficientEncoding, Coefficients, FineDensity, GridGeometry, PcaModel, Reflection,
+    ViewDependence, encode_density, has_negative_density,
 };
 pub use error::FormatError;
 pub use read::{AssetReader, read_asset, read_asset_bytes};

@@ -17,10 +17,14 @@ pub use crate::grid::{BRICK_SIZE, BRICK_VOXELS, MAX_GRID_BRICKS};
 pub const MAGIC: [u8; 8] = [0x89, b'N', b'E', b'L', b'F', 0x0D, 0x0A, 0x1A];
 /// Major version this crate reads and writes; a reader rejects any other.
 pub const VERSION_MAJOR: u16 = 1;
-/// Newest minor version this crate writes: 3 for an asset with a reflection part (`VREF`,
-/// `VRCO`), [`VERSION_MINOR_VIEW`] for one with a harmonic view part, and
-/// [`VERSION_MINOR_WITHOUT_VIEW`] for one without. Readers accept any minor of their major.
-pub const VERSION_MINOR: u16 = 3;
+/// Newest minor version this crate writes: 4 for an asset with a fine density (`DNSF`),
+/// [`VERSION_MINOR_REFLECTION`] for one with a reflection part (`VREF`, `VRCO`),
+/// [`VERSION_MINOR_VIEW`] for one with a harmonic view part, and
+/// [`VERSION_MINOR_WITHOUT_VIEW`] for one without any. Readers accept any minor of their major.
+pub const VERSION_MINOR: u16 = 4;
+/// Minor version this crate writes for an asset with a reflection part and no fine
+/// density: such a file is exactly what a 1.3 writer wrote.
+pub const VERSION_MINOR_REFLECTION: u16 = 3;
 /// Minor version this crate writes for an asset with a harmonic view-dependent part
 /// (`VDEP`, `VCOF`): such a file is exactly what a 1.2 writer wrote.
 pub const VERSION_MINOR_VIEW: u16 = 2;
@@ -82,10 +86,20 @@ pub const KIND_REFLECTION: SectionKind = *b"VREF";
 /// The reflection part's per-voxel values (1.3, optional): octahedral normal and scale,
 /// `u8 × 3` per voxel, chunked like [`KIND_COEFFICIENTS`].
 pub const KIND_REFLECTION_VALUES: SectionKind = *b"VRCO";
+/// The fine density (1.4, optional): σ (1/m) as `f16` on a lattice `F` times finer per
+/// axis than the voxels, `512·F³` values per brick, chunked (SPEC.md §6 `DNSF`).
+pub const KIND_FINE_DENSITY: SectionKind = *b"DNSF";
+/// Fine-density factors `F` a file may declare (header `fine_density_factor`).
+pub const FINE_DENSITY_FACTORS: [u32; 2] = [2, 4];
+/// Decoded bytes of one brick of `DNSF` at factor `factor` (`2 · 512 · F³`).
+pub const fn fine_density_bytes_per_brick(factor: u32) -> u64 {
+    2 * BRICK_VOXELS as u64 * (factor as u64).pow(3)
+}
 /// Every kind this reader knows, in the order the writer lays them out.
-pub const KNOWN_KINDS: [SectionKind; 10] = [
+pub const KNOWN_KINDS: [SectionKind; 11] = [
     KIND_BRICKS,
     KIND_DENSITY,
+    KIND_FINE_DENSITY,
     KIND_PCA,
     KIND_QUANT_PARAMS,
     KIND_COEFFICIENTS,
@@ -259,6 +273,9 @@ pub struct Header {
     pub coefficient_encoding: CoefficientEncoding,
     /// Total file size in bytes.
     pub file_size: u64,
+    /// Fine-density factor `F` (format 1.4, header bytes 196..200): 0 for a file without
+    /// `DNSF`, otherwise one of [`FINE_DENSITY_FACTORS`].
+    pub fine_density_factor: u32,
 }
 
 impl Header {
@@ -287,6 +304,15 @@ impl Header {
         let start = chunk * u64::from(self.chunk_bricks);
         (u64::from(self.brick_count) - start.min(u64::from(self.brick_count)))
             .min(u64::from(self.chunk_bricks))
+    }
+
+    /// Decoded bytes of one brick of `DNSF` (0 without a fine density).
+    pub fn fine_density_bytes_per_brick(&self) -> u64 {
+        if self.fine_density_factor == 0 {
+            0
+        } else {
+            fine_density_bytes_per_brick(self.fine_density_factor)
+        }
     }
 
     /// Decoded bytes of one brick's coefficients.
@@ -322,7 +348,7 @@ impl Header {
         b[186..188].copy_from_slice(&self.env_width.to_le_bytes());
         b[188..192].copy_from_slice(&self.pca_rank.to_le_bytes());
         b[192..196].copy_from_slice(&self.coefficient_encoding.to_u32().to_le_bytes());
-        // 196..200 reserved.
+        b[196..200].copy_from_slice(&self.fine_density_factor.to_le_bytes());
         b[200..208].copy_from_slice(&self.file_size.to_le_bytes());
         // 208..248 reserved; 248..256 checksum.
         b
@@ -477,6 +503,14 @@ impl Header {
                 format!("unknown encoding {encoding_code}"),
             )
         })?;
+        // Reserved before 1.4 (writers wrote 0), so an older file reads as factor 0.
+        let fine_density_factor = u32_at(b, 196);
+        if fine_density_factor != 0 && !FINE_DENSITY_FACTORS.contains(&fine_density_factor) {
+            return Err(bad(
+                "fine_density_factor",
+                format!("{fine_density_factor}, must be 0 (none), 2 or 4"),
+            ));
+        }
         let header = Self {
             version_major,
             version_minor,
@@ -491,12 +525,16 @@ impl Header {
             pca_rank,
             coefficient_encoding,
             file_size,
+            fine_density_factor,
         };
         if chunk_bricks == 0 {
             return Err(bad("chunk_bricks", "0, must be at least 1".into()));
         }
-        let chunk_raw =
-            u64::from(chunk_bricks) * header.coefficient_bytes_per_brick().max(2 * BRICK_VOXELS as u64);
+        let chunk_raw = u64::from(chunk_bricks)
+            * header
+                .coefficient_bytes_per_brick()
+                .max(2 * BRICK_VOXELS as u64)
+                .max(header.fine_density_bytes_per_brick());
         if chunk_raw > MAX_CHUNK_RAW_BYTES {
             return Err(FormatError::CountTooLarge {
                 what: "chunk_bricks × bytes per brick".into(),

@@ -228,6 +228,7 @@ impl SyntheticField {
             coefficients,
             view: None,
             reflection: None,
+            fine_density: None,
             metadata: serde_json::json!({
                 "provenance": {
                     "generator": "nelf_format::synthetic",

@@ -2,7 +2,8 @@
 //! section table, 8-byte aligned sections, chunked zstd for density and
 //! coefficients; version 1.2 with the optional view-dependent sections `VDEP` and
 //! `VCOF` when the asset has a harmonic view-dependent part, 1.3 with `VREF` and `VRCO`
-//! when it has a reflection part, 1.1 otherwise) and writes it atomically (temporary file in the same folder,
+//! when it has a reflection part, 1.4 with `DNSF` when it has a fine density, 1.1
+//! otherwise) and writes it atomically (temporary file in the same folder,
 //! then rename). Output depends only on the asset and the options, so writing
 //! the same asset twice gives byte-identical files.
 
@@ -14,11 +15,12 @@ use crate::asset::{Asset, CoefficientEncoding, Coefficients, Reflection, has_neg
 use crate::error::{FormatError, Result};
 use crate::spec::{
     BRICK_VOXELS, CHUNK_ENTRY_SIZE, FLAG_SIGNED_DENSITY, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header,
-    KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS,
-    KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES,
-    MAX_METADATA_BYTES, REFLECTION_BYTES_PER_BRICK, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry,
-    SectionKind, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_VIEW, VERSION_MINOR_WITHOUT_VIEW, ViewHeader,
-    checksum, header_checksum, kind_name, shuffle,
+    KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_FINE_DENSITY, KIND_METADATA, KIND_PCA,
+    KIND_QUANT_PARAMS, KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS,
+    MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, REFLECTION_BYTES_PER_BRICK, SECTION_ENTRY_SIZE, SectionCodec,
+    SectionEntry, SectionKind, VERSION_MAJOR, VERSION_MINOR, VERSION_MINOR_REFLECTION, VERSION_MINOR_VIEW,
+    VERSION_MINOR_WITHOUT_VIEW, ViewHeader, checksum, fine_density_bytes_per_brick, header_checksum,
+    kind_name, shuffle,
 };
 
 /// Choices the writer makes; none of them changes what a reader gets back.
@@ -91,8 +93,13 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
         encoding: view.coefficients.encoding(),
     });
     let view_brick_bytes = view_header.map_or(0, |h| h.bytes_per_brick());
+    let fine_brick_bytes = asset
+        .fine_density
+        .as_ref()
+        .map_or(0, |f| fine_density_bytes_per_brick(f.factor));
     let largest_brick = coef_brick_bytes
         .max(view_brick_bytes)
+        .max(fine_brick_bytes)
         .max(REFLECTION_BYTES_PER_BRICK)
         .max(2 * BRICK_VOXELS as u64);
     let max_chunk_bricks = (MAX_CHUNK_RAW_BYTES / largest_brick).max(1);
@@ -123,6 +130,25 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
         chunk_bricks as usize,
         shuffle_width(2),
     )?);
+
+    // The fine density (1.4): optional, so that an older reader skips it and renders
+    // `DENS`, the coarse asset.
+    if let Some(fine) = &asset.fine_density {
+        let bytes: Vec<u8> = fine
+            .values
+            .iter()
+            .flat_map(|v| v.to_bits().to_le_bytes())
+            .collect();
+        let mut dnsf = zstd.chunked(
+            KIND_FINE_DENSITY,
+            &bytes,
+            fine_brick_bytes as usize,
+            chunk_bricks as usize,
+            shuffle_width(2),
+        )?;
+        dnsf.entry.required = false;
+        payloads.push(dnsf);
+    }
 
     let pca_bytes: Vec<u8> = asset
         .pca
@@ -212,15 +238,22 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
     let file_size = offset;
     let header = Header {
         version_major: VERSION_MAJOR,
-        version_minor: if asset.reflection.is_some() {
+        version_minor: if asset.fine_density.is_some() {
             VERSION_MINOR
+        } else if asset.reflection.is_some() {
+            VERSION_MINOR_REFLECTION
         } else if asset.view.is_some() {
             VERSION_MINOR_VIEW
         } else {
             VERSION_MINOR_WITHOUT_VIEW
         },
         section_count: section_count as u32,
-        flags: if has_negative_density(&asset.density) {
+        flags: if has_negative_density(&asset.density)
+            || asset
+                .fine_density
+                .as_ref()
+                .is_some_and(|f| has_negative_density(&f.values))
+        {
             FLAG_SIGNED_DENSITY
         } else {
             0
@@ -234,6 +267,7 @@ pub fn encode_asset(asset: &Asset, options: &WriteOptions) -> Result<(Vec<u8>, V
         pca_rank: rank as u32,
         coefficient_encoding: encoding,
         file_size,
+        fine_density_factor: asset.fine_density.as_ref().map_or(0, |f| f.factor),
     };
     let mut header_bytes = header.to_bytes();
     let table: Vec<u8> = payloads.iter().flat_map(|p| p.entry.to_bytes()).collect();

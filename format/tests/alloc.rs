@@ -13,8 +13,10 @@ mod common;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::sync::atomic::{AtomicUsize, Ordering};
 
-use common::{FileParts, boundaries, damage, resign, small_asset};
-use nelf_format::spec::{HEADER_SIZE, KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, SECTION_ENTRY_SIZE};
+use common::{FileParts, boundaries, damage, resign, small_asset, with_fine_density};
+use nelf_format::spec::{
+    HEADER_SIZE, KIND_FINE_DENSITY, KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES, SECTION_ENTRY_SIZE,
+};
 use nelf_format::synthetic::synthetic_view;
 use nelf_format::{CoefficientEncoding, WriteOptions, encode_asset, read_asset_bytes};
 use rand::{Rng, SeedableRng};
@@ -83,16 +85,22 @@ fn damaged_files_never_allocate_more_than_intact_ones() {
     let mut rng = Pcg64::seed_from_u64(3);
     let mut worst = 0usize;
     let cases = [
-        (CoefficientEncoding::U8Affine, false),
-        (CoefficientEncoding::F16, false),
-        (CoefficientEncoding::U8Affine, true),
-        (CoefficientEncoding::F16, true),
+        (CoefficientEncoding::U8Affine, false, false),
+        (CoefficientEncoding::F16, false, false),
+        (CoefficientEncoding::U8Affine, true, false),
+        (CoefficientEncoding::F16, true, false),
+        (CoefficientEncoding::U8Affine, false, true),
+        (CoefficientEncoding::F16, false, true),
     ];
-    for (encoding, view) in cases {
+    for (encoding, view, fine) in cases {
         let mut asset = small_asset(encoding, 8, 4);
         if view {
             // Format 1.2: a view part of 4 lobes × rank 6 (24 coefficients per voxel).
             asset.view = Some(synthetic_view(&asset, 4, 6, encoding, 2).unwrap());
+        }
+        if fine {
+            // Format 1.4: a fine density at factor 2 (8 KiB a brick).
+            asset = with_fine_density(asset, 2, false);
         }
         let options = WriteOptions {
             chunk_bricks: 2,
@@ -168,6 +176,22 @@ fn damaged_files_never_allocate_more_than_intact_ones() {
                     .map(|case| case.bytes),
             );
         }
+        if fine {
+            // DNSF lying about its decoded length, and every hostile fine density (header
+            // factors and chunk sizes included).
+            let parts = FileParts::parse(&bytes);
+            for raw in [0, 8192, u64::from(u32::MAX), u64::MAX / 2] {
+                let mut p = parts.clone();
+                p.section_mut(KIND_FINE_DENSITY).0.raw_length = raw;
+                damaged.push(p.build());
+            }
+            damaged.extend(
+                damage::hostile_fine_density_sections()
+                    .into_iter()
+                    .filter(|case| matches!(case.expect, damage::Expect::Error(_)))
+                    .map(|case| case.bytes),
+            );
+        }
         for b in &damaged {
             let (peak, ok) = peak_while_reading(b);
             assert!(
@@ -178,7 +202,7 @@ fn damaged_files_never_allocate_more_than_intact_ones() {
             worst = worst.max(peak);
         }
         eprintln!(
-            "{encoding:?} (view part: {view}): file {} bytes, intact read peak {intact} bytes, worst damaged {worst} bytes over {} cases",
+            "{encoding:?} (view part: {view}, fine density: {fine}): file {} bytes, intact read peak {intact} bytes, worst damaged {worst} bytes over {} cases",
             bytes.len(),
             damaged.len()
         );

@@ -14,7 +14,8 @@
 //!   projection mirrors `nelf_render::light`, which this crate cannot depend on); with a
 //!   view part its view coefficients and `T` toward an eye; with a reflection part its
 //!   parameters, every voxel's values, decoded normal and scale, and the octahedral
-//!   decoding and lobe-table corners of fixed directions;
+//!   decoding and lobe-table corners of fixed directions; with a fine density (1.4, at
+//!   factors 2 and 4) the header's factor, every fine voxel's density and centre;
 //! * on every damaged file of `common::damage` (the generator `damage.rs` uses) and on
 //!   metadata edge cases, checks that the C reader refuses exactly the files the Rust
 //!   reader refuses, with the matching error code and a message naming the same
@@ -35,7 +36,7 @@ use std::process::{Command, Output};
 use std::sync::OnceLock;
 
 use common::damage::{self, Expect};
-use common::{FileParts, small_asset};
+use common::{FileParts, small_asset, with_fine_density};
 use nelf_format::conventions::VIEW_HARMONICS;
 use nelf_format::conventions::{
     ENV_TEXELS, LT_DIM, LatLong, lobe_table_corners, octahedral_decode, shade, view_harmonics,
@@ -208,6 +209,9 @@ fn without_bricks(mut asset: Asset) -> Asset {
     }
     if let Some(part) = &mut asset.reflection {
         clear(&mut part.coefficients);
+    }
+    if let Some(fine) = &mut asset.fine_density {
+        fine.values.clear();
     }
     asset
 }
@@ -491,6 +495,59 @@ fn valid_files() -> Vec<(&'static str, Vec<u8>, bool)> {
             ),
             false,
         ),
+        (
+            "fine density F 2, PCA u8",
+            encode(
+                &with_fine_density(small_asset(U8Affine, 4, 21), 2, false),
+                default,
+            ),
+            true,
+        ),
+        (
+            "fine density F 4 with negatives, PCA f16, one-brick chunks",
+            encode(&with_fine_density(small_asset(F16, 3, 5), 4, true), one),
+            true,
+        ),
+        (
+            "fine density F 2 and signed density, unshuffled",
+            encode(
+                &with_fine_density(with_signed_density(small_asset(U8Affine, 2, 4), true), 2, true),
+                plain,
+            ),
+            true,
+        ),
+        (
+            "fine density F 4 and reflection λ 20",
+            encode(
+                &with_reflection(with_fine_density(small_asset(U8Affine, 4, 21), 4, false), 20.0),
+                default,
+            ),
+            true,
+        ),
+        (
+            "fine density F 2 and view f16 2 lobes rank 3",
+            encode(
+                &with_view(with_fine_density(small_asset(U8Affine, 3, 6), 2, true), 2, 3, F16),
+                one,
+            ),
+            true,
+        ),
+        (
+            "fine density F 4 zero bricks",
+            encode(
+                &without_bricks(with_fine_density(small_asset(F16, 2, 3), 4, false)),
+                default,
+            ),
+            true,
+        ),
+        (
+            "fine density F 4, PCA f16 rank 8, 40k voxels, 64-brick chunks",
+            encode(
+                &with_fine_density(SyntheticField::new(40_000, 3).asset(8, F16).unwrap(), 4, true),
+                huge_chunks,
+            ),
+            false,
+        ),
     ]
 }
 
@@ -624,11 +681,12 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
     let stored_checksum = u64::from_le_bytes(bytes[248..256].try_into().unwrap());
     writeln!(
         s,
-        " {} {} {} {} {} {stored_checksum:016x}",
+        " {} {} {} {} {} {} {stored_checksum:016x}",
         h.env_height,
         h.env_width,
         h.pca_rank,
         h.coefficient_encoding.to_u32(),
+        h.fine_density_factor,
         h.file_size
     )
     .unwrap();
@@ -848,6 +906,37 @@ fn expected_dump(bytes: &[u8], full: bool) -> String {
                 .unwrap();
             }
         }
+        if let Some(fine) = &asset.fine_density {
+            // Every fine density value, and the centres of the fine voxels by SPEC.md
+            // section 6: bbox_min + (8F·brick + (i, j, k) + ½)·Δ/F per axis, in f64.
+            let (n, edge, f) = (fine.voxels_per_brick(), fine.brick_edge(), f64::from(fine.factor));
+            let values: Vec<f32> = fine.values[b * n..(b + 1) * n]
+                .iter()
+                .map(|v| v.to_f32())
+                .collect();
+            let centres: Vec<f64> = (0..n)
+                .flat_map(|local| {
+                    let ijk = [local % edge, local / edge % edge, local / (edge * edge)];
+                    (0..3).map(move |a| {
+                        let index = f64::from(coord[a]) * edge as f64 + ijk[a] as f64 + 0.5;
+                        asset.grid.bbox_min_m[a] + index * asset.grid.voxel_size_m / f
+                    })
+                })
+                .collect();
+            if full {
+                write!(s, "fine {b}").unwrap();
+                hex32(&mut s, &values);
+                writeln!(s, " | {:016x}", hash_f64(&centres)).unwrap();
+            } else {
+                writeln!(
+                    s,
+                    "fine_brick {b} {:016x} {:016x}",
+                    hash_f32(&values),
+                    hash_f64(&centres)
+                )
+                .unwrap();
+            }
+        }
     }
     s.push_str("end\n");
     s
@@ -975,6 +1064,28 @@ fn example_program_runs() {
     );
     assert!(text.contains(&want), "{text} lacks {want}");
     assert!(s >= 0.0);
+    assert!(!text.contains("fine"), "{text}");
+    // With a fine density (format 1.4): its factor and the last fine voxel of brick 0.
+    let fine = with_fine_density(small_asset(CoefficientEncoding::U8Affine, 3, 1), 4, false);
+    std::fs::write(&path, encode_asset(&fine, &WriteOptions::default()).unwrap().0).unwrap();
+    let output = run(&programs.example, &[path.as_os_str()]);
+    let text = String::from_utf8(output.stdout).unwrap();
+    assert!(output.status.success(), "{text}");
+    assert!(text.contains("\nfine density: 4 x finer per axis\n"), "{text}");
+    let last = fine.fine_density.as_ref().unwrap().values[32_767].to_f32();
+    assert!(last > 0.0, "{last}");
+    // printf's %g: six significant digits.
+    let printed: f64 = text
+        .split_once("fine voxel 32767: density ")
+        .and_then(|(_, rest)| rest.split_once(" 1/m"))
+        .map_or_else(
+            || panic!("{text} lacks fine voxel 32767"),
+            |(number, _)| number.parse().unwrap(),
+        );
+    assert!(
+        (printed - f64::from(last)).abs() <= 1e-5 * f64::from(last),
+        "{printed} vs {last}"
+    );
     // A damaged file: a message and exit status 1.
     std::fs::write(&path, b"not a nelf file at all").unwrap();
     let output = Command::new(&programs.example).arg(&path).output().unwrap();
@@ -1005,6 +1116,7 @@ fn c_code(err: &FormatError) -> &'static str {
             "coefficient_encoding" if reason.contains("QPRM") => "NELF_ERR_UNEXPECTED_QPRM",
             "coefficient_encoding" => "NELF_ERR_BAD_ENCODING",
             "chunk_bricks" => "NELF_ERR_CHUNK_BRICKS",
+            "fine_density_factor" => "NELF_ERR_FINE_DENSITY_FACTOR",
             _ => "unmapped InvalidHeader field",
         },
         E::UnsupportedFeature { .. } => "NELF_ERR_UNSUPPORTED_FEATURE",
@@ -1012,7 +1124,9 @@ fn c_code(err: &FormatError) -> &'static str {
         E::NonFinite { what } if what.starts_with("PCA") => "NELF_ERR_NONFINITE_PCA",
         E::NonFinite { what } if what.contains("VDEP") || what.contains("VREF") => "NELF_ERR_NONFINITE_VIEW",
         E::NonFinite { what } if what.contains("QPRM") => "NELF_ERR_NONFINITE_QPRM",
-        E::NonFinite { what } if what.contains("DENS") => "NELF_ERR_NONFINITE_DENSITY",
+        E::NonFinite { what } if what.contains("DENS") || what.contains("DNSF") => {
+            "NELF_ERR_NONFINITE_DENSITY"
+        }
         E::NonFinite { what } if what.contains("COEF") || what.contains("VCOF") => {
             "NELF_ERR_NONFINITE_COEFFICIENT"
         }
@@ -1039,7 +1153,9 @@ fn c_code(err: &FormatError) -> &'static str {
         E::Json(_) => "NELF_ERR_METADATA_JSON",
         E::MetadataNotObject { .. } => "NELF_ERR_METADATA_NOT_OBJECT",
         E::InvalidBricks(_) => "NELF_ERR_INVALID_BRICKS",
-        E::InvalidValue { what, .. } if what.contains("DENS") => "NELF_ERR_NEGATIVE_DENSITY",
+        E::InvalidValue { what, .. } if what.contains("DENS") || what.contains("DNSF") => {
+            "NELF_ERR_NEGATIVE_DENSITY"
+        }
         E::InvalidValue { .. } => "NELF_ERR_NEGATIVE_SCALE",
         E::NonZeroPadding { .. } => "NELF_ERR_NONZERO_PADDING",
         E::BrickOutOfRange { .. } => "NELF_ERR_BRICK_OUT_OF_RANGE",
@@ -1052,7 +1168,7 @@ fn c_code(err: &FormatError) -> &'static str {
 /// "offset 1234", ...), which the C reader's message must name too.
 fn anchors(message: &str) -> Vec<String> {
     let mut out: Vec<String> = [
-        "BRCK", "DENS", "PCAB", "QPRM", "COEF", "VDEP", "VCOF", "VREF", "VRCO", "META",
+        "BRCK", "DENS", "DNSF", "PCAB", "QPRM", "COEF", "VDEP", "VCOF", "VREF", "VRCO", "META",
     ]
     .into_iter()
     .filter(|k| message.contains(k))
@@ -1136,10 +1252,10 @@ fn compare_with_rust(files: &[(String, Vec<u8>)]) -> usize {
             c.path, c.whole
         );
         // Bounded allocation: the reader's own blocks never exceed three times the file
-        // (brick list, its copy, chunk tables) plus the format's fixed limits (four
-        // 4 MiB chunk buffers, 1 MiB metadata and its unshuffle, the PCA model, VDEP
-        // and the brick buffers).
-        let bound = 3 * bytes.len() as u64 + (21 << 20);
+        // (brick list, its copy, chunk tables) plus the format's fixed limits (five
+        // 4 MiB chunk buffers: DENS, COEF, VCOF or VRCO, DNSF and the unshuffle; 1 MiB
+        // metadata and its unshuffle, the PCA model, VDEP and the brick buffers).
+        let bound = 3 * bytes.len() as u64 + (26 << 20);
         assert!(c.peak <= bound, "{what}: the C reader allocated {} bytes", c.peak);
         worst_margin = worst_margin.min(i128::from(bound) - i128::from(c.peak));
         match read_asset_bytes(bytes) {
@@ -1410,6 +1526,26 @@ fn fuzz_seeds_are_read_by_the_c_reader() {
         };
         seeds.push((
             format!("seed-reflection-{i}.nelf"),
+            encode_asset(&asset, &options).unwrap().0,
+        ));
+    }
+    // Fine densities (format 1.4): factor 2 with negative values (signed-density flag) in
+    // one-brick chunks, and factor 4 beside a reflection part.
+    let base = field.asset(2, U8Affine).unwrap();
+    for (i, asset) in [
+        with_fine_density(base.clone(), 2, true),
+        with_reflection(with_fine_density(base, 4, false), 20.0),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        let options = WriteOptions {
+            zstd_level: 3,
+            chunk_bricks: 1,
+            shuffle: i == 0,
+        };
+        seeds.push((
+            format!("seed-fine-density-{i}.nelf"),
             encode_asset(&asset, &options).unwrap().0,
         ));
     }

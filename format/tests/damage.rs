@@ -1,6 +1,6 @@
 //! Damaged and hostile `.nelf` files: truncations at every boundary and at random
 //! offsets, bit flips in every section, hand-made hostile headers and sections (the
-//! view-dependent parts of formats 1.2 and 1.3 included), and a
+//! view-dependent parts of formats 1.2 and 1.3 and the fine density of 1.4 included), and a
 //! seeded mini-fuzzer (all made by `common::damage`, which `c_reader.rs` shares). Every
 //! case must give a typed error naming the problem (never a panic); the allocation
 //! bound is checked in `alloc.rs`.
@@ -107,6 +107,28 @@ fn hostile_reflection_sections_give_named_errors() {
     for asset in &accepted {
         asset.validate().unwrap();
         assert!(asset.view.is_none());
+    }
+}
+
+#[test]
+fn every_byte_of_the_fine_density_is_checked() {
+    check(damage::fine_density_byte_flips());
+}
+
+#[test]
+fn hostile_fine_density_sections_give_named_errors() {
+    // Valid, per encoding: DNSF marked required, and a negative fine density with the
+    // signed-density flag.
+    let accepted = check(damage::hostile_fine_density_sections());
+    assert_eq!(accepted.len(), 4);
+    let negative = accepted
+        .iter()
+        .filter(|asset| nelf_format::has_negative_density(&asset.fine_density.as_ref().unwrap().values))
+        .count();
+    assert_eq!(negative, 2);
+    for asset in &accepted {
+        asset.validate().unwrap();
+        assert_eq!(asset.fine_density.as_ref().unwrap().factor, 2);
     }
 }
 

@@ -2,7 +2,7 @@
 //! and the rule of one view-dependent part per file.
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
 
-use nelf_format::spec::{KIND_REFLECTION, KIND_REFLECTION_VALUES, VERSION_MINOR};
+use nelf_format::spec::{KIND_REFLECTION, KIND_REFLECTION_VALUES, VERSION_MINOR_REFLECTION};
 use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};
 use nelf_format::{AssetReader, CoefficientEncoding, WriteOptions, encode_asset, read_asset_bytes};
 
@@ -18,8 +18,11 @@ fn asset_with_reflection() -> nelf_format::Asset {
 fn a_reflection_part_round_trips_as_version_1_3_with_optional_sections() {
     let asset = asset_with_reflection();
     let (bytes, sections) = encode_asset(&asset, &WriteOptions::default()).unwrap();
-    assert_eq!(u16::from_le_bytes([bytes[10], bytes[11]]), VERSION_MINOR);
-    assert_eq!(VERSION_MINOR, 3);
+    assert_eq!(
+        u16::from_le_bytes([bytes[10], bytes[11]]),
+        VERSION_MINOR_REFLECTION
+    );
+    assert_eq!(VERSION_MINOR_REFLECTION, 3);
     for kind in [KIND_REFLECTION, KIND_REFLECTION_VALUES] {
         let entry = sections.iter().find(|s| s.kind == kind).unwrap();
         assert!(!entry.required, "{kind:?} must be optional");

@@ -131,6 +131,7 @@ fn example_asset() -> Asset {
         },
         view: None,
         reflection: None,
+        fine_density: None,
         metadata: serde_json::json!({"example": "SPEC.md section 17"}),
     }
 }
@@ -994,9 +995,19 @@ fn example_reads_back() {
 
 #[test]
 fn reserved_fields_and_unknown_entry_flag_bits_are_ignored() {
-    // §3, §4: writers write 0, readers ignore.
+    // §3, §4: writers write 0, readers ignore. (Bytes 196..200 were reserved before 1.4;
+    // they are now fine_density_factor, which a reader checks.)
     let (mut file, entries) = example_file();
-    file[196] = 0xAB;
+    let mut factor = file.clone();
+    factor[196] = 0xAB;
+    resign(&mut factor);
+    assert!(matches!(
+        read_asset_bytes(&factor),
+        Err(FormatError::InvalidHeader {
+            field: "fine_density_factor",
+            ..
+        })
+    ));
     file[208..248].fill(0xCD);
     for i in 0..entries.len() {
         let e = HEADER_SIZE + i * SECTION_ENTRY_SIZE;

@@ -83,10 +83,7 @@ fn view_dependent_assets_round_trip_bit_for_bit() {
                     let (bytes, sections) = encode_asset(&asset, options).unwrap();
                     assert_eq!(version_minor(&bytes), VERSION_MINOR_VIEW, "{what}");
                     assert_eq!(VERSION_MINOR_VIEW, 2);
-                    assert_eq!(
-                        VERSION_MINOR, 3,
-                        "the newest minor is the reflection part's (1.3)"
-                    );
+                    assert_eq!(VERSION_MINOR, 4, "the newest minor is the fine density's (1.4)");
                     let back = read_asset_bytes(&bytes).unwrap();
                     assert!(back == asset, "{what}");
                     let (a, b) = (asset.view.as_ref().unwrap(), back.view.as_ref().unwrap());

@@ -5,7 +5,9 @@ use std::path::PathBuf;
 
 use nelf_format::io_error::IoResultExt;
 use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};
-use nelf_format::{CoefficientEncoding, FormatError, WriteOptions, encode_asset};
+use nelf_format::{
+    Asset, CoefficientEncoding, FineDensity, FormatError, WriteOptions, encode_asset, encode_density,
+};
 
 fn main() -> Result<(), FormatError> {
     let dir = PathBuf::from(std::env::args().nth(1).unwrap_or_else(|| "corpus/read".into()));
@@ -44,5 +46,34 @@ fn main() -> Result<(), FormatError> {
     let (bytes, _) = encode_asset(&asset, &options)?;
     let path = dir.join("seed-reflection.nelf");
     std::fs::write(&path, bytes).with_path(&path)?;
+    // Format 1.4: a fine density (DNSF) at factor 2 with a negative value (so the
+    // signed-density flag), and at factor 4 beside the reflection part.
+    let mut fine = field.asset(2, CoefficientEncoding::F16)?;
+    fine.fine_density = Some(fine_density(&fine, 2, true)?);
+    asset.fine_density = Some(fine_density(&asset, 4, false)?);
+    for (i, asset) in [fine, asset].iter().enumerate() {
+        let (bytes, _) = encode_asset(asset, &options)?;
+        let path = dir.join(format!("seed-fine-density-{i}.nelf"));
+        std::fs::write(&path, bytes).with_path(&path)?;
+    }
     Ok(())
+}
+
+/// The fine density of `asset` at factor `factor`: every fine voxel takes the density of
+/// the voxel holding it, the first one negated when `negative`.
+fn fine_density(asset: &Asset, factor: u32, negative: bool) -> Result<FineDensity, FormatError> {
+    let f = factor as usize;
+    let edge = 8 * f;
+    let per_brick = edge * edge * edge;
+    let mut values: Vec<_> = (0..asset.bricks.len() * per_brick)
+        .map(|g| {
+            let (b, local) = (g / per_brick, g % per_brick);
+            let (i, j, k) = (local % edge, local / edge % edge, local / (edge * edge));
+            asset.density[b * 512 + i / f + 8 * (j / f + 8 * (k / f))]
+        })
+        .collect();
+    if let (true, Some(first)) = (negative, values.first_mut()) {
+        *first = encode_density(&[-first.to_f32().abs() - 0.5])?[0];
+    }
+    Ok(FineDensity { factor, values })
 }

@@ -17,9 +17,13 @@ fuzz_target!(|data: &[u8]| {
         assert!(asset.validate().is_ok());
     }
     if let Ok(mut reader) = AssetReader::new(Cursor::new(data)) {
+        // A fine density (format 1.4) gives 512·F³ values a brick, F = 2 or 4; none, none.
+        let factor = reader.header().fine_density_factor as usize;
+        assert!([0, 2, 4].contains(&factor));
         for i in 0..reader.bricks().len() {
-            if reader.read_brick(i).is_err() {
-                break;
+            match reader.read_brick(i) {
+                Ok(brick) => assert_eq!(brick.fine_density.len(), 512 * factor.pow(3)),
+                Err(_) => break,
             }
         }
         let _ = reader.verify();

@@ -71,6 +71,20 @@ static void exercise(nelf_reader *r) {
                 g_sink += normal[0] + weight[0] + (float)brick.stored_reflection[i * NELF_REFLECTION_VALUES];
             }
         }
+        if ((brick.fine_density != NULL) != (h->fine_density_factor != 0)) abort();
+        if (brick.fine_density) { /* format 1.4: every fine voxel's density, some fine centres */
+            unsigned edge = NELF_BRICK_SIZE * h->fine_density_factor;
+            size_t count = (size_t)edge * edge * edge;
+            if (h->fine_density_factor > NELF_MAX_FINE_DENSITY_FACTOR) abort();
+            for (i = 0; i < count; i++) g_sink += brick.fine_density[i];
+            for (i = 0; i < count; i += 997) {
+                if (nelf_fine_voxel_center(r, index, (unsigned)(i % edge), (unsigned)(i / edge % edge),
+                                           (unsigned)(i / edge / edge), centre) != NELF_OK)
+                    abort();
+                g_sink += (float)centre[2];
+            }
+            if (nelf_fine_voxel_center(r, index, edge, 0, 0, centre) != NELF_ERR_INVALID_ARGUMENT) abort();
+        }
     }
     if (h->brick_count > 0) (void)nelf_voxel_transport(r, h->brick_count / 2, 511, lt);
     (void)nelf_verify(r);

@@ -23,16 +23,16 @@ use std::path::{Path, PathBuf};
 use half::f16;
 
 use crate::asset::{
-    Asset, BrickData, CoefficientEncoding, Coefficients, PcaModel, Reflection, ViewDependence,
-    json_type_name, validate_bricks, validate_density, validate_quant_params,
+    Asset, BrickData, CoefficientEncoding, Coefficients, FineDensity, PcaModel, Reflection, ViewDependence,
+    json_type_name, validate_bricks, validate_density, validate_density_values, validate_quant_params,
 };
 use crate::conventions::LT_DIM;
 use crate::error::{FormatError, Result};
 use crate::io_error::IoResultExt;
 use crate::spec::{
     BRICK_VOXELS, CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, Header, KIND_BRICKS,
-    KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_REFLECTION,
-    KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, REFLECTION_BYTES_PER_BRICK,
+    KIND_COEFFICIENTS, KIND_DENSITY, KIND_FINE_DENSITY, KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS,
+    KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, REFLECTION_BYTES_PER_BRICK,
     SECTION_ENTRY_SIZE, SectionCodec, SectionEntry, SectionKind, checksum, header_checksum, kind_name,
     u64_at, unshuffle,
 };
@@ -74,10 +74,18 @@ enum Chunked {
     View = 2,
     /// `VRCO`: the reflection part's values (format 1.3, optional).
     Reflection = 3,
+    /// `DNSF`: the fine density (format 1.4, optional).
+    FineDensity = 4,
 }
 
 impl Chunked {
-    const ALL: [Self; 4] = [Self::Density, Self::Coefficients, Self::View, Self::Reflection];
+    const ALL: [Self; 5] = [
+        Self::Density,
+        Self::Coefficients,
+        Self::View,
+        Self::Reflection,
+        Self::FineDensity,
+    ];
 }
 
 /// A chunked section's entry and its parsed chunk table.
@@ -119,8 +127,8 @@ pub struct AssetReader<R> {
     /// The reflection part (`VREF`) without voxels, if the file has one.
     reflection: Option<Reflection>,
     metadata: serde_json::Value,
-    /// `DENS`, `COEF`, then `VCOF` or `VRCO` when there is a view-dependent part (see
-    /// [`Chunked`]).
+    /// `DENS`, `COEF`, then `VCOF` or `VRCO` when there is a view-dependent part, then
+    /// `DNSF` when there is a fine density (see [`Chunked`]).
     chunked: Vec<ChunkedSection>,
     cache: Option<CachedChunk>,
 }
@@ -277,6 +285,10 @@ impl<R: Read + Seek> AssetReader<R> {
                     Some(_) => (KIND_REFLECTION_VALUES, REFLECTION_BYTES_PER_BRICK),
                     None => continue,
                 },
+                Chunked::FineDensity => match header.fine_density_factor {
+                    0 => continue,
+                    _ => (KIND_FINE_DENSITY, header.fine_density_bytes_per_brick()),
+                },
             };
             let entry = find(kind).ok_or_else(|| missing(kind))?;
             chunked.push(reader.chunk_table(&header, which, entry, bytes_per_brick)?);
@@ -388,12 +400,25 @@ impl<R: Read + Seek> AssetReader<R> {
             }
             None => Vec::new(),
         };
+        let fine_density = if slots.contains(&Chunked::FineDensity) {
+            let values = f16s(brick(Chunked::FineDensity));
+            validate_density_values(
+                &values,
+                index * values.len(),
+                self.header.signed_density(),
+                "DNSF",
+            )?;
+            values.iter().map(|d| d.to_f32()).collect()
+        } else {
+            Vec::new()
+        };
         Ok(BrickData {
             coord: self.bricks[index],
             density: density.iter().map(|d| d.to_f32()).collect(),
             coefficients,
             view_coefficients,
             reflection,
+            fine_density,
         })
     }
 
@@ -431,6 +456,15 @@ impl<R: Read + Seek> AssetReader<R> {
                 part.coefficients.extend_from_stored(raw);
             })?;
         }
+        let mut fine_density = None;
+        if let Some(slot) = self.slot(Chunked::FineDensity) {
+            let mut values: Vec<f16> = Vec::new();
+            self.visit_chunks(slot, &mut |raw| values.extend(f16s(raw)))?;
+            fine_density = Some(FineDensity {
+                factor: self.header.fine_density_factor,
+                values,
+            });
+        }
         self.verify_other_sections()?;
         let asset = Asset {
             grid: self.header.grid,
@@ -441,6 +475,7 @@ impl<R: Read + Seek> AssetReader<R> {
             coefficients,
             view,
             reflection,
+            fine_density,
             metadata: self.metadata,
         };
         asset.validate()?;
@@ -511,6 +546,15 @@ impl<R: Read + Seek> AssetReader<R> {
                     if let Some(part) = &self.reflection {
                         part.coefficients.check_stored(&raw, first_voxel, "VRCO")?;
                     }
+                }
+                Chunked::FineDensity => {
+                    let per_brick = self.header.fine_density_bytes_per_brick() as usize / 2;
+                    validate_density_values(
+                        &f16s(&raw),
+                        first_voxel / BRICK_VOXELS * per_brick,
+                        self.header.signed_density(),
+                        "DNSF",
+                    )?;
                 }
             }
             f(&raw);

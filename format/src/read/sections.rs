@@ -16,11 +16,11 @@ use crate::conventions::{LT_DIM, VIEW_HARMONICS};
 use crate::error::{FormatError, Result};
 use crate::io_error::FileIoError;
 use crate::spec::{
-    BRICK_VOXELS, Header, KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_PCA, KIND_QUANT_PARAMS,
-    KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS, MAX_CHUNK_RAW_BYTES,
-    MAX_METADATA_BYTES, MAX_VIEW_PARAMS_BYTES, MAX_ZSTD_EXPANSION, REFLECTION_BYTES_PER_BRICK, SectionCodec,
-    SectionEntry, SectionKind, VIEW_HEADER_SIZE, ViewHeader, is_known_kind, kind_name,
-    reflection_params_bytes,
+    BRICK_VOXELS, Header, KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_FINE_DENSITY, KIND_PCA,
+    KIND_QUANT_PARAMS, KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS,
+    MAX_CHUNK_RAW_BYTES, MAX_METADATA_BYTES, MAX_VIEW_PARAMS_BYTES, MAX_ZSTD_EXPANSION,
+    REFLECTION_BYTES_PER_BRICK, SectionCodec, SectionEntry, SectionKind, VIEW_HEADER_SIZE, ViewHeader,
+    is_known_kind, kind_name, reflection_params_bytes,
 };
 
 /// Whether a stored checksum disagrees with the computed one. Builds for fuzzing
@@ -187,6 +187,22 @@ pub(super) fn validate_table(header: &Header, sections: &[SectionEntry]) -> Resu
             });
         }
     }
+    let has = |kind: SectionKind| sections.iter().any(|s| s.kind == kind);
+    // The fine density (1.4) is there exactly when the header declares its factor.
+    match (header.fine_density_factor, has(KIND_FINE_DENSITY)) {
+        (0, true) => {
+            return Err(FormatError::InvalidHeader {
+                field: "fine_density_factor",
+                reason: "0, but section DNSF is present".into(),
+            });
+        }
+        (f, false) if f != 0 => {
+            return Err(FormatError::MissingSection {
+                section: "DNSF".into(),
+            });
+        }
+        _ => {}
+    }
     for s in sections {
         if !is_known_kind(s.kind) {
             if s.required {
@@ -196,7 +212,6 @@ pub(super) fn validate_table(header: &Header, sections: &[SectionEntry]) -> Resu
         }
         validate_known_entry(header, s)?;
     }
-    let has = |kind: SectionKind| sections.iter().any(|s| s.kind == kind);
     for kind in [KIND_BRICKS, KIND_DENSITY, KIND_PCA, KIND_COEFFICIENTS] {
         if !has(kind) {
             return Err(FormatError::MissingSection {
@@ -234,6 +249,7 @@ pub(super) fn validate_table(header: &Header, sections: &[SectionEntry]) -> Resu
 pub(super) fn validate_known_entry(header: &Header, s: &SectionEntry) -> Result<()> {
     let chunked = [
         KIND_DENSITY,
+        KIND_FINE_DENSITY,
         KIND_COEFFICIENTS,
         KIND_VIEW_COEFFICIENTS,
         KIND_REFLECTION_VALUES,
@@ -253,6 +269,8 @@ pub(super) fn validate_known_entry(header: &Header, s: &SectionEntry) -> Result<
     let rank = u64::from(header.pca_rank);
     let expected = match s.kind {
         KIND_DENSITY => return validate_chunked_entry(header, s, DENSITY_BYTES_PER_BRICK),
+        // validate_table checked the factor is not 0 when DNSF is present.
+        KIND_FINE_DENSITY => return validate_chunked_entry(header, s, header.fine_density_bytes_per_brick()),
         KIND_COEFFICIENTS => return validate_chunked_entry(header, s, header.coefficient_bytes_per_brick()),
         KIND_VIEW_COEFFICIENTS => return Ok(()),
         KIND_REFLECTION_VALUES => return validate_chunked_entry(header, s, REFLECTION_BYTES_PER_BRICK),
@@ -323,7 +341,7 @@ pub(super) fn validate_known_entry(header: &Header, s: &SectionEntry) -> Result<
     Ok(())
 }
 
-/// Checks a chunked section's entry (`DENS`, `COEF`, `VCOF`) whose bricks decode to
+/// Checks a chunked section's entry (`DENS`, `DNSF`, `COEF`, `VCOF`, `VRCO`) whose bricks decode to
 /// `bytes_per_brick` bytes: its decoded length (`brick_count × bytes_per_brick`), its
 /// shuffle width (dividing a brick) and the decoded size of a chunk (≤ 4 MiB).
 pub(super) fn validate_chunked_entry(header: &Header, s: &SectionEntry, bytes_per_brick: u64) -> Result<()> {

@@ -11,7 +11,9 @@
  *       relit radiance under LIGHT both ways, with a view part the view coefficients and
  *       T toward the eye at EYE, with a reflection part its three values, the decoded
  *       normal and the scale; hashed: one line per brick with XXH3 hashes of the same
- *       numbers). Floats are printed as their bit patterns in hex
+ *       numbers); with a fine density (1.4) one more line per brick: every fine density
+ *       value (full) or their hash, and the hash of every fine voxel's centre. Floats are
+ *       printed as their bit patterns in hex
  *       so that the Rust side compares them exactly. Exit 1 with "error NAME detail"
  *       if the file is refused.
  *   nelf_dump check BUNDLE SCRATCH
@@ -58,7 +60,7 @@ static void die(const char *what) {
 static unsigned char *read_file(const char *path, size_t *size) {
     FILE *f = fopen(path, "rb");
     unsigned char *data;
-    long n;
+    long n = 0;
     if (!f) die("cannot open input");
     if (fseek(f, 0, SEEK_END) != 0 || (n = ftell(f)) < 0 || fseek(f, 0, SEEK_SET) != 0) die("cannot size input");
     data = (unsigned char *)malloc((size_t)n + 1);
@@ -197,9 +199,9 @@ static int dump(int argc, char **argv) {
            (unsigned long)h->grid_bricks[1], (unsigned long)h->grid_bricks[2], (unsigned long)h->brick_count,
            (unsigned long)h->chunk_bricks);
     for (i = 0; i < 9; i++) printf(" %016llx", (unsigned long long)dbits(h->world_from_light[i]));
-    printf(" %u %u %lu %lu %llu %016llx\n", h->env_height, h->env_width, (unsigned long)rank,
-           (unsigned long)h->coefficient_encoding, (unsigned long long)h->file_size,
-           (unsigned long long)h->header_checksum);
+    printf(" %u %u %lu %lu %lu %llu %016llx\n", h->env_height, h->env_width, (unsigned long)rank,
+           (unsigned long)h->coefficient_encoding, (unsigned long)h->fine_density_factor,
+           (unsigned long long)h->file_size, (unsigned long long)h->header_checksum);
     for (i = 0; i < nelf_section_count(r); i++) {
         const nelf_section *s = nelf_get_section(r, (uint32_t)i);
         printf("section %lu %02x%02x%02x%02x %u %u %lu %llu %llu %llu %016llx\n", (unsigned long)i,
@@ -299,6 +301,7 @@ static int dump(int argc, char **argv) {
         if ((brick.view_coefficients != NULL) != (view != NULL)) die("view coefficients without a view part");
         if ((brick.reflection != NULL) != (reflection != NULL)) die("reflection values without a reflection part");
         if ((brick.stored_reflection != NULL) != (reflection != NULL)) die("stored reflection codes without a reflection part");
+        if ((brick.fine_density != NULL) != (h->fine_density_factor != 0)) die("fine density without a factor");
         if (nelf_find_brick(r, brick.coord[0], brick.coord[1], brick.coord[2]) != (int64_t)b) die("find_brick disagrees");
         for (v = 0; v < NELF_BRICK_VOXELS; v++) {
             const float *c = brick.coefficients + (size_t)v * rank;
@@ -375,6 +378,31 @@ static int dump(int argc, char **argv) {
                 printf("reflection_brick %lu %016llx %016llx\n", (unsigned long)b,
                        (unsigned long long)hash_floats(brick.reflection, (size_t)NELF_REFLECTION_VALUES * NELF_BRICK_VOXELS),
                        (unsigned long long)hash_floats(shape, 4 * (size_t)NELF_BRICK_VOXELS));
+        }
+        if (brick.fine_density) { /* format 1.4: the fine density and the centres of its fine voxels */
+            uint32_t edge = NELF_BRICK_SIZE * h->fine_density_factor, n = edge * edge * edge;
+            double *fine_centre = (double *)malloc(sizeof(double) * 3 * n), c[3];
+            if (!fine_centre) die("out of memory");
+            for (v = 0; v < n; v++)
+                if (nelf_fine_voxel_center(r, b, v % edge, (v / edge) % edge, v / (edge * edge), fine_centre + 3 * v) !=
+                    NELF_OK)
+                    die("fine_voxel_center failed");
+            if (nelf_fine_voxel_center(r, b, 0, edge, 0, c) != NELF_ERR_INVALID_ARGUMENT)
+                die("fine_voxel_center accepted a fine voxel outside the brick");
+            if (full) {
+                printf("fine %lu", (unsigned long)b);
+                for (v = 0; v < n; v++) printf(" %08lx", (unsigned long)fbits(brick.fine_density[v]));
+                printf(" | %016llx\n", (unsigned long long)hash_doubles(fine_centre, 3 * (size_t)n));
+            } else {
+                printf("fine_brick %lu %016llx %016llx\n", (unsigned long)b,
+                       (unsigned long long)hash_floats(brick.fine_density, n),
+                       (unsigned long long)hash_doubles(fine_centre, 3 * (size_t)n));
+            }
+            free(fine_centre);
+        } else {
+            double c[3];
+            if (nelf_fine_voxel_center(r, b, 0, 0, 0, c) != NELF_ERR_INVALID_ARGUMENT)
+                die("fine_voxel_center without a fine density");
         }
         free(shape);
         free(toward);

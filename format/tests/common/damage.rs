@@ -5,16 +5,17 @@
 //!
 //! Cases: truncations at every boundary and at random offsets, bit flips in every
 //! section and in the header and table, hand-made hostile headers and sections (the
-//! view-dependent parts of format 1.2, `VDEP`/`VCOF`, and 1.3, `VREF`/`VRCO`, included),
-//! and a seeded mini-fuzzer (truncations, bit flips, extreme header values, insertions
+//! view-dependent parts of format 1.2, `VDEP`/`VCOF`, and 1.3, `VREF`/`VRCO`, and the fine
+//! density of 1.4, `DNSF` and the header's `fine_density_factor`, included), and a seeded
+//! mini-fuzzer (truncations, bit flips, extreme header values, insertions
 //! and deletions). Every generator is deterministic (fixed seeds).
 
-use super::{FileParts, boundaries, chunked_payload, resign, small_asset};
+use super::{FileParts, boundaries, chunked_payload, resign, small_asset, with_fine_density};
 use nelf_format::conventions::{LT_DIM, VIEW_HARMONICS};
 use nelf_format::spec::{
-    BRICK_VOXELS, HEADER_SIZE, KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_METADATA, KIND_PCA,
-    KIND_QUANT_PARAMS, KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW, KIND_VIEW_COEFFICIENTS,
-    REFLECTION_BYTES_PER_BRICK, SECTION_ENTRY_SIZE, SectionCodec,
+    BRICK_VOXELS, HEADER_SIZE, KIND_BRICKS, KIND_COEFFICIENTS, KIND_DENSITY, KIND_FINE_DENSITY,
+    KIND_METADATA, KIND_PCA, KIND_QUANT_PARAMS, KIND_REFLECTION, KIND_REFLECTION_VALUES, KIND_VIEW,
+    KIND_VIEW_COEFFICIENTS, REFLECTION_BYTES_PER_BRICK, SECTION_ENTRY_SIZE, SectionCodec,
 };
 use nelf_format::synthetic::{SyntheticField, synthetic_reflection, synthetic_view};
 use nelf_format::{
@@ -110,8 +111,18 @@ pub fn encoded_reflection(encoding: CoefficientEncoding) -> (Asset, Vec<u8>) {
     (asset, bytes)
 }
 
+/// The intact fine-density (format 1.4) asset and file: the PCA part with `encoding`
+/// (rank 4, about 8 bricks) and a fine density at factor `factor` (2 or 4) without
+/// negative values (some −0).
+pub fn encoded_fine(encoding: CoefficientEncoding, factor: u32) -> (Asset, Vec<u8>) {
+    let asset = with_fine_density(small_asset(encoding, 4, 21), factor, false);
+    let bytes = encode_asset(&asset, &options()).unwrap().0;
+    (asset, bytes)
+}
+
 /// Every intact file the generators damage, named: both encodings, without a
-/// view-dependent part, with a harmonic one and with a reflection part.
+/// view-dependent part, with a harmonic one, with a reflection part and with a fine
+/// density (factor 2).
 fn intact_files() -> Vec<(String, Vec<u8>)> {
     ENCODINGS
         .into_iter()
@@ -120,6 +131,7 @@ fn intact_files() -> Vec<(String, Vec<u8>)> {
                 (format!("{e:?}"), encoded(e).1),
                 (format!("{e:?} view"), encoded_view(e).1),
                 (format!("{e:?} reflection"), encoded_reflection(e).1),
+                (format!("{e:?} fine density"), encoded_fine(e, 2).1),
             ]
         })
         .collect()
@@ -150,7 +162,9 @@ pub fn truncations() -> Vec<Damaged> {
 
 /// Single bit flips: 40 in every section (the error must name the section), every
 /// bit position of the header and table (some bit per byte), and 300 anywhere; in the
-/// view-dependent and reflection files, 40 in every section.
+/// view-dependent and reflection files, 40 in every section. (In the files without a
+/// fine density, a flip in header bytes 196..200 makes `fine_density_factor` 2 or 4 or
+/// invalid; in the fine-density file, invalid.)
 pub fn bit_flips() -> Vec<Damaged> {
     let mut rng = Pcg64::seed_from_u64(2);
     let mut out = Vec::new();
@@ -1465,6 +1479,338 @@ fn replace_chunk(section: &[u8], index: usize, stored: &[u8]) -> Vec<u8> {
     table
 }
 
+/// One bit flipped in every byte of `DNSF` (chunk table and chunk) of a one-brick file
+/// with a fine density at factor 2, per encoding of the PCA part, and at factor 4 for the
+/// 8-bit one: each must be refused naming the section.
+pub fn fine_density_byte_flips() -> Vec<Damaged> {
+    let mut out = Vec::new();
+    for (encoding, factor) in [
+        (CoefficientEncoding::U8Affine, 2),
+        (CoefficientEncoding::F16, 2),
+        (CoefficientEncoding::U8Affine, 4),
+    ] {
+        let field = SyntheticField::new(1, 3);
+        let asset = with_fine_density(field.asset(2, encoding).unwrap(), factor, false);
+        let bytes = encode_asset(&asset, &options()).unwrap().0;
+        let parts = FileParts::parse(&bytes);
+        let (entry, _) = parts
+            .sections
+            .iter()
+            .find(|(e, _)| e.kind == KIND_FINE_DENSITY)
+            .unwrap();
+        for i in 0..entry.stored_length as usize {
+            let at = entry.offset as usize + i;
+            let mut damaged = bytes.clone();
+            damaged[at] ^= 1 << (i % 8);
+            out.push(Damaged::new(
+                format!("{encoding:?} fine density F {factor} flip at {at} in DNSF"),
+                damaged,
+                Expect::error(|e| e.to_string().contains("DNSF")),
+            ));
+        }
+    }
+    out
+}
+
+/// Hand-made hostile fine densities (format 1.4) with valid checksums: header factors
+/// other than 0, 2 and 4, a factor without `DNSF` and `DNSF` without a factor, a factor
+/// that disagrees with `DNSF`'s length, `DNSF` of the wrong length, codec or shuffle, twice,
+/// non-finite values and a negative one without the signed-density flag (named by their
+/// fine voxel), bad chunk tables and zstd, chunks over 4 MiB; each with the error it must
+/// give. `DNSF` with the required bit, and a negative value with the flag, are valid.
+pub fn hostile_fine_density_sections() -> Vec<Damaged> {
+    let mut out = Vec::new();
+    let mut push = |parts: FileParts, what: &str, expect: Expect| {
+        out.push(Damaged::new(
+            format!("hostile fine density: {what}"),
+            parts.build(),
+            expect,
+        ));
+    };
+    let bad_factor = |needle: &'static str| {
+        Expect::error(move |e| {
+            matches!(
+                e,
+                FormatError::InvalidHeader { field: "fine_density_factor", reason } if reason.contains(needle)
+            )
+        })
+    };
+    let named = |pick: fn(&FormatError) -> Option<&str>| {
+        Expect::error(move |e| pick(e).is_some_and(|section| section == "DNSF"))
+    };
+    for encoding in ENCODINGS {
+        let (asset, bytes) = encoded_fine(encoding, 2);
+        let fine = asset.fine_density.as_ref().unwrap();
+        let per_brick = fine.voxels_per_brick();
+        let with_factor = |bytes: &[u8], factor: u32| {
+            let mut p = FileParts::parse(bytes);
+            p.header[196..200].copy_from_slice(&factor.to_le_bytes());
+            p
+        };
+
+        // The header's factor: 0, 2 or 4, and DNSF present exactly when it is not 0.
+        for factor in [1, 3, 8, u32::MAX] {
+            push(
+                with_factor(&bytes, factor),
+                &format!("factor {factor}"),
+                bad_factor("must be 0 (none), 2 or 4"),
+            );
+        }
+        push(
+            with_factor(&bytes, 0),
+            "DNSF without a factor",
+            bad_factor("section DNSF is present"),
+        );
+        let mut p = FileParts::parse(&bytes);
+        p.sections.retain(|(e, _)| e.kind != KIND_FINE_DENSITY);
+        push(
+            p,
+            "factor 2 without DNSF",
+            Expect::error(|e| matches!(e, FormatError::MissingSection { section } if section == "DNSF")),
+        );
+        push(
+            with_factor(&encoded(encoding).1, 4),
+            "factor 4 in a file without DNSF",
+            Expect::error(|e| matches!(e, FormatError::MissingSection { section } if section == "DNSF")),
+        );
+        push(
+            with_factor(&bytes, 4),
+            "factor 4 for a DNSF of factor 2",
+            named(|e| match e {
+                FormatError::SectionLength { section, .. } => Some(section.as_str()),
+                _ => None,
+            }),
+        );
+
+        // DNSF's entry.
+        let mut p = FileParts::parse(&bytes);
+        p.section_mut(KIND_FINE_DENSITY).0.raw_length += 2 * per_brick as u64;
+        push(
+            p,
+            "DNSF raw length one brick more",
+            named(|e| match e {
+                FormatError::SectionLength { section, .. } => Some(section.as_str()),
+                _ => None,
+            }),
+        );
+        for (codec, shuffle, name) in [
+            (SectionCodec::Zstd, 2, "DNSF codec 1"),
+            (SectionCodec::Raw, 2, "DNSF codec 0"),
+            (SectionCodec::Unknown(9), 2, "DNSF codec 9"),
+            (SectionCodec::ChunkedZstd, 3, "DNSF shuffle 3"),
+            (SectionCodec::ChunkedZstd, 3 << 12, "DNSF shuffle 3 × 4096"),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            let (e, _) = p.section_mut(KIND_FINE_DENSITY);
+            e.codec = codec;
+            e.shuffle = shuffle;
+            push(
+                p,
+                name,
+                named(|e| match e {
+                    FormatError::BadCodec { section, .. } => Some(section.as_str()),
+                    _ => None,
+                }),
+            );
+        }
+        let mut p = FileParts::parse(&bytes);
+        let dnsf = p.section_mut(KIND_FINE_DENSITY).clone();
+        p.sections.push(dnsf);
+        push(
+            p,
+            "DNSF twice",
+            named(|e| match e {
+                FormatError::DuplicateSection { section } => Some(section.as_str()),
+                _ => None,
+            }),
+        );
+        // The required bit: a known kind is read whatever it says.
+        let mut p = FileParts::parse(&bytes);
+        p.section_mut(KIND_FINE_DENSITY).0.required = true;
+        push(p, "DNSF marked required (accepted)", Expect::Anything);
+
+        // Values, in validly compressed chunks: named by their fine voxel (brick 4, in
+        // chunk 1).
+        let at = 4 * per_brick + 123;
+        let raw_with = |bits: u16| -> Vec<u8> {
+            let mut raw: Vec<u8> = fine
+                .values
+                .iter()
+                .flat_map(|v| v.to_bits().to_le_bytes())
+                .collect();
+            raw[2 * at..2 * at + 2].copy_from_slice(&bits.to_le_bytes());
+            raw
+        };
+        let (entry, _) = FileParts::parse(&bytes).section_mut(KIND_FINE_DENSITY).clone();
+        let with_values = |raw: &[u8]| {
+            let mut p = FileParts::parse(&bytes);
+            p.replace(
+                KIND_FINE_DENSITY,
+                SectionCodec::ChunkedZstd,
+                2,
+                chunked_payload(raw, 2 * per_brick, CHUNK_BRICKS, 2),
+                entry.raw_length,
+            );
+            p
+        };
+        for (bits, name) in [(0x7E00u16, "NaN"), (0xFC00, "-inf")] {
+            let needle = format!("section DNSF voxel {at}");
+            push(
+                with_values(&raw_with(bits)),
+                &format!("{name} fine density"),
+                Expect::error(move |e| matches!(e, FormatError::NonFinite { what } if *what == needle)),
+            );
+        }
+        let needle = format!("section DNSF voxel {at}");
+        push(
+            with_values(&raw_with(0xB800)),
+            "negative fine density without the signed-density flag",
+            Expect::error(move |e| matches!(e, FormatError::InvalidValue { what, .. } if *what == needle)),
+        );
+        let mut p = with_values(&raw_with(0xB800));
+        p.header[24] |= 1;
+        push(
+            p,
+            "negative fine density with the signed-density flag (accepted)",
+            Expect::Anything,
+        );
+
+        // Chunk tables and zstd.
+        let mut lying = entry_data(&bytes, KIND_FINE_DENSITY);
+        lying[8..16].copy_from_slice(&u64::MAX.to_le_bytes());
+        let mut p = FileParts::parse(&bytes);
+        p.replace(
+            KIND_FINE_DENSITY,
+            SectionCodec::ChunkedZstd,
+            entry.shuffle,
+            lying,
+            entry.raw_length,
+        );
+        push(
+            p,
+            "DNSF chunk length",
+            named(|e| match e {
+                FormatError::BadChunkTable { section, .. } => Some(section.as_str()),
+                _ => None,
+            }),
+        );
+        let chunks = asset.bricks.len().div_ceil(CHUNK_BRICKS);
+        let mut empty = Vec::new();
+        for _ in 0..chunks {
+            empty.extend_from_slice(&((24 * chunks) as u64).to_le_bytes());
+            empty.extend_from_slice(&0u64.to_le_bytes());
+            empty.extend_from_slice(&nelf_format::spec::checksum(&[]).to_le_bytes());
+        }
+        let mut p = FileParts::parse(&bytes);
+        p.replace(
+            KIND_FINE_DENSITY,
+            SectionCodec::ChunkedZstd,
+            entry.shuffle,
+            empty,
+            entry.raw_length,
+        );
+        push(
+            p,
+            "DNSF empty chunks",
+            Expect::error(
+                |e| matches!(e, FormatError::ImplausibleLength { what, .. } if what.contains("DNSF")),
+            ),
+        );
+        let mut p = FileParts::parse(&bytes);
+        p.replace(
+            KIND_FINE_DENSITY,
+            SectionCodec::ChunkedZstd,
+            entry.shuffle,
+            vec![0; 40],
+            entry.raw_length,
+        );
+        push(
+            p,
+            "DNSF shorter than its chunk table",
+            Expect::error(
+                |e| matches!(e, FormatError::CountTooLarge { what, .. } if what.contains("chunks in section DNSF")),
+            ),
+        );
+        let raw: Vec<u8> = fine
+            .values
+            .iter()
+            .flat_map(|v| v.to_bits().to_le_bytes())
+            .collect();
+        let intact = chunked_payload(&raw, 2 * per_brick, CHUNK_BRICKS, 2);
+        for (chunk, stored, name, needle) in [
+            (
+                0,
+                zstd::bulk::compress(
+                    &nelf_format::spec::shuffle(&raw[..CHUNK_BRICKS * 2 * per_brick - 2], 2),
+                    3,
+                )
+                .unwrap(),
+                "DNSF chunk 0 decodes short",
+                "section DNSF chunk 0",
+            ),
+            (
+                1,
+                vec![0x28, 0xb5, 0x2f, 0xfd, 1, 2, 3, 4, 5],
+                "DNSF chunk 1 zstd garbage",
+                "section DNSF chunk 1",
+            ),
+        ] {
+            let mut p = FileParts::parse(&bytes);
+            p.replace(
+                KIND_FINE_DENSITY,
+                SectionCodec::ChunkedZstd,
+                2,
+                replace_chunk(&intact, chunk, &stored),
+                entry.raw_length,
+            );
+            push(
+                p,
+                name,
+                Expect::error(move |e| matches!(e, FormatError::Zstd { what, .. } if what == needle)),
+            );
+        }
+
+        // Chunks over 4 MiB: 513 bricks a chunk at factor 2 (8 KiB a brick), 65 at factor 4
+        // (64 KiB), which the other sections would allow.
+        for (factor, most) in [(2, 512u32), (4, 64)] {
+            let (_, fine_bytes) = encoded_fine(encoding, factor);
+            for (chunk_bricks, expect) in [(most + 1, true), (most, false)] {
+                let mut p = FileParts::parse(&fine_bytes);
+                p.header[108..112].copy_from_slice(&chunk_bricks.to_le_bytes());
+                let what = format!("F {factor} with {chunk_bricks} bricks a chunk");
+                if expect {
+                    push(
+                        p,
+                        &what,
+                        Expect::error(
+                            |e| matches!(e, FormatError::CountTooLarge { what, .. } if what.starts_with("chunk_bricks")),
+                        ),
+                    );
+                } else {
+                    // Within the limit: the header passes; the chunk table (written for 3
+                    // bricks a chunk) does not.
+                    push(
+                        p,
+                        &what,
+                        Expect::error(|e| {
+                            matches!(
+                                e,
+                                FormatError::BadChunkTable { .. } | FormatError::ImplausibleLength { .. }
+                            )
+                        }),
+                    );
+                }
+            }
+        }
+    }
+    out
+}
+
+/// The stored bytes of section `kind` of `bytes`.
+fn entry_data(bytes: &[u8], kind: [u8; 4]) -> Vec<u8> {
+    FileParts::parse(bytes).section_mut(kind).1.clone()
+}
+
 /// [`options`] with `chunk_bricks` bricks per chunk.
 fn options_with(chunk_bricks: u32) -> WriteOptions {
     WriteOptions {
@@ -1483,6 +1829,8 @@ pub fn all() -> Vec<Damaged> {
     out.extend(hostile_view_sections());
     out.extend(reflection_byte_flips());
     out.extend(hostile_reflection_sections());
+    out.extend(fine_density_byte_flips());
+    out.extend(hostile_fine_density_sections());
     out.extend(mutations());
     out
 }

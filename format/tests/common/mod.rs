@@ -6,17 +6,50 @@
 
 pub mod damage;
 
+use half::f16;
 use nelf_format::spec::{
     CHUNK_ENTRY_SIZE, HEADER_CHECKSUM_OFFSET, HEADER_SIZE, SECTION_ENTRY_SIZE, SectionCodec, SectionEntry,
     SectionKind, checksum, header_checksum, shuffle,
 };
 use nelf_format::synthetic::SyntheticField;
-use nelf_format::{Asset, CoefficientEncoding};
+use nelf_format::{Asset, CoefficientEncoding, FineDensity};
 
 /// A small synthetic asset (about 8 bricks) of rank `rank`.
 pub fn small_asset(encoding: CoefficientEncoding, rank: usize, seed: u64) -> Asset {
     let field = SyntheticField::new(3000, seed);
     field.asset(rank, encoding).unwrap()
+}
+
+/// The fine density (format 1.4) of `asset` at factor `factor`: each fine voxel takes the
+/// density of the voxel holding it times `1 + (i mod F + j mod F + k mod F) / 8`, so that
+/// values vary inside a voxel; with `negatives`, every 37th fine voxel is negative (the
+/// writer then sets the signed-density flag); every 41st is −0.
+pub fn fine_density_of(asset: &Asset, factor: u32, negatives: bool) -> FineDensity {
+    let f = factor as usize;
+    let edge = 8 * f;
+    let per_brick = edge * edge * edge;
+    let values = (0..asset.bricks.len() * per_brick)
+        .map(|g| {
+            let (b, local) = (g / per_brick, g % per_brick);
+            let (i, j, k) = (local % edge, local / edge % edge, local / (edge * edge));
+            let coarse = b * 512 + i / f + 8 * (j / f + 8 * (k / f));
+            let sub = (i % f + j % f + k % f) as f32 / 8.0;
+            let sigma = asset.density[coarse].to_f32().abs() * (1.0 + sub);
+            let sigma = match (g % 37, g % 41) {
+                (0, _) if negatives => -sigma - 0.25,
+                (_, 0) => -0.0,
+                _ => sigma,
+            };
+            f16::from_f32(sigma)
+        })
+        .collect();
+    FineDensity { factor, values }
+}
+
+/// `asset` with [`fine_density_of`] itself.
+pub fn with_fine_density(mut asset: Asset, factor: u32, negatives: bool) -> Asset {
+    asset.fine_density = Some(fine_density_of(&asset, factor, negatives));
+    asset
 }
 
 /// An encoded file split into its header and sections.
