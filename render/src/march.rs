@@ -54,6 +54,7 @@ use nelf_format::conventions::{LatLong, PinholeCamera};
 use rayon::prelude::*;
 
 use crate::error::RenderError;
+use crate::fine::FineGrid;
 use crate::grid::{BrickGrid, Lookup};
 use crate::light::{project_light, voxel_radiance};
 use crate::reflection::{FilteredEnvironment, ReflectionLobe, reflection_seen_from};
@@ -440,6 +441,68 @@ fn render_volume_with(
         .map(|(&s, c)| [s, c[0], c[1], c[2]])
         .collect();
     let marcher = Marcher::new(grid, voxels.as_slice(), *settings, skipping);
+    Ok(composite(&marcher, camera, settings, |corners, p| {
+        let mut c = [0.0f32; 3];
+        for &(v, cw) in corners {
+            let r = voxels[v];
+            for ch in 0..3 {
+                c[ch] += cw * r[ch + 1];
+            }
+        }
+        if let Some(factor) = factor {
+            let f = factor(p);
+            for ch in 0..3 {
+                c[ch] *= f[ch];
+            }
+        }
+        c
+    }))
+}
+
+/// Ray-marches an asset's fine density (format 1.4, [`FineGrid`]) with the radiance
+/// (per voxel of `grid`, the asset's own grid) interpolated at each sample from the
+/// voxels: σ from the fine lattice, everything else as [`render_volume`] (SPEC §8,
+/// "Fine density"). The step is `settings.step_voxels` fine voxels.
+pub fn render_volume_fine(
+    grid: &BrickGrid,
+    radiance: &[[f32; 3]],
+    fine: &FineGrid,
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+) -> Result<Image, RenderError> {
+    check_inputs(&fine.grid, &fine.density, camera, settings)?;
+    if radiance.len() != grid.voxel_count() {
+        return Err(RenderError::LengthMismatch {
+            what: "radiance",
+            expected: grid.voxel_count(),
+            found: radiance.len(),
+        });
+    }
+    let marcher = Marcher::new(&fine.grid, fine.density.as_slice(), *settings, Skipping::On);
+    let (image, _) = composite(&marcher, camera, settings, |_, p| {
+        let mut corners = [(0usize, 0.0f32); 8];
+        let n = grid.trilinear(p, &mut corners);
+        let mut c = [0.0f32; 3];
+        for &(v, cw) in &corners[..n] {
+            let r = radiance[v];
+            for ch in 0..3 {
+                c[ch] += cw * r[ch];
+            }
+        }
+        c
+    });
+    Ok(image)
+}
+
+/// Front-to-back compositing of every pixel's rays through `marcher`, the colour of a
+/// sample given by `shade(corners, p)` (its trilinear corners in the marched grid and
+/// its world position); rows in parallel, deterministic.
+fn composite<D: DensityAt + ?Sized>(
+    marcher: &Marcher<'_, D>,
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+    shade: impl Fn(&[(usize, f32)], DVec3) -> [f32; 3] + Sync,
+) -> (Image, MarchStats) {
     let mut image = Image::new(camera.width, camera.height);
     let width = camera.width as usize;
     let stats = image
@@ -456,19 +519,7 @@ fn render_volume_with(
                 for (origin, dir) in pixel_rays(camera, col, row, n) {
                     let mut sum = [0.0f32; 3];
                     let t_end = marcher.march(origin, dir, &mut stats, |w, corners, p| {
-                        let mut c = [0.0f32; 3];
-                        for &(v, cw) in corners {
-                            let r = voxels[v];
-                            for ch in 0..3 {
-                                c[ch] += cw * r[ch + 1];
-                            }
-                        }
-                        if let Some(factor) = factor {
-                            let f = factor(p);
-                            for ch in 0..3 {
-                                c[ch] *= f[ch];
-                            }
-                        }
+                        let c = shade(corners, p);
                         for ch in 0..3 {
                             sum[ch] += w * c[ch];
                         }
@@ -485,7 +536,7 @@ fn render_volume_with(
             stats
         })
         .reduce(MarchStats::default, |a, b| a + b);
-    Ok((image, stats))
+    (image, stats)
 }
 
 /// Renders an arbitrary per-voxel feature vector (`dim` floats per voxel, voxel-major)
@@ -615,7 +666,8 @@ pub fn filtered_environment(
 /// Everything for one asset, camera and lighting: checks the asset, projects `env`
 /// (turned by `world_from_env`) onto its basis, computes per-voxel radiance with the
 /// first `rank` components (default all), adds a view-dependent asset's lobes toward the
-/// camera centre ([`crate::view`], [`crate::reflection`]) and ray-marches.
+/// camera centre ([`crate::view`], [`crate::reflection`]) and ray-marches (through the
+/// fine density where the asset has one, [`render_volume_fine`]).
 pub fn render_asset(
     asset: &Asset,
     camera: &PinholeCamera,
@@ -637,5 +689,8 @@ pub fn render_asset(
         let filtered = filtered_environment(asset, reflection, env, world_from_env)?;
         radiance = reflection_seen_from(asset, reflection, &radiance, &filtered, camera.centre());
     }
-    render_volume(&grid, &asset_density(asset), &radiance, camera, settings)
+    match FineGrid::from_asset(asset)? {
+        Some(fine) => render_volume_fine(&grid, &radiance, &fine, camera, settings),
+        None => render_volume(&grid, &asset_density(asset), &radiance, camera, settings),
+    }
 }
