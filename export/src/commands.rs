@@ -102,7 +102,12 @@ impl VdbExported {
                 write_seconds,
                 record_path,
             } => {
-                let voxels = report.grids.first().map_or(0, |g| g.active_voxels);
+                // The voxels of the colour grid: a fine density has `F³` times as many.
+                let voxels = report
+                    .grids
+                    .iter()
+                    .find(|g| g.name == config.color_name)
+                    .map_or(0, |g| g.active_voxels);
                 let coefficient_grids = config.pca_grids.names(report.rank);
                 let _ = writeln!(
                     text,
@@ -119,15 +124,35 @@ impl VdbExported {
                     report.file_size,
                     asset_file_size,
                 );
+                if let (Some(factor), Some(density)) = (report.density_factor, report.grids.first()) {
+                    let _ = writeln!(
+                        text,
+                        "  density: the asset's fine density, {factor} times finer per axis ({} fine voxels of {} scene units)",
+                        density.active_voxels,
+                        report.voxel_size / f64::from(factor),
+                    );
+                }
                 let _ = writeln!(text, "  colour lit by: {}", report.lighting);
                 let _ = writeln!(text, "  settings and report: {}", record_path.display());
             }
             Self::Unreal { report, seconds } => {
                 let files: Vec<&str> = report.files.iter().map(|f| f.file.as_str()).collect();
+                let density = match (&report.density_file, report.density_factor) {
+                    (Some(file), Some(factor)) => format!(
+                        "; the fine density ({factor} times finer per axis) in its own SVT, {}",
+                        file.file
+                    ),
+                    _ => String::new(),
+                };
                 let _ = writeln!(
                     text,
-                    "exported {} for Unreal (density + {} PCA channels in {} SVT files: {}) in {:.2} s; channel map, HLSL and projected light beside them ({}, {}, {})",
+                    "exported {} for Unreal ({}{} PCA channels in {} SVT files: {}{density}) in {:.2} s; channel map, HLSL and projected light beside them ({}, {}, {})",
                     config.asset.display(),
+                    if report.density_file.is_some() {
+                        ""
+                    } else {
+                        "density + "
+                    },
                     report.rank,
                     files.len(),
                     files.join(", "),

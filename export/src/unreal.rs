@@ -9,6 +9,13 @@
 //! * file 0: `density` → A.r, `pca_00` … `pca_06` → A.g … B.a;
 //! * file n ≥ 1: the next eight `pca_NN` grids → A.r … B.a.
 //!
+//! An asset with a fine density (format 1.4) has its `density` grid on a lattice `F`
+//! times finer than the coefficients, with its own transform. One SVT has one
+//! resolution, so then the density is an SVT of its own, `<stem>_density.vdb` (`density`
+//! → A.r, every fine voxel), covering the same box as the others, and the coefficient
+//! files hold only `pca_NN` grids, eight each (`pca_00` … `pca_07` in file 0). Without a
+//! fine density every file is exactly as before.
+//!
 //! Beside them: `<stem>.unreal.json` (every file, grid, attribute texture and channel,
 //! each channel's value range for choosing 8-bit unorm vs 16/32-bit float), and
 //! `<stem>.relight.hlsl`, a function for a Custom material node that rebuilds radiance
@@ -88,6 +95,13 @@ pub struct UnrealReport {
     pub density_unit: String,
     /// Attribute texture format the HLSL and the ranges assume.
     pub attribute_format: String,
+    /// With a fine density: the density's own SVT file (A.r), `F` times finer per axis
+    /// than `files`; `None` (and not in the JSON) when the density is A.r of file 0.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub density_file: Option<UnrealFile>,
+    /// With a fine density: its factor `F` (voxel edge `voxel_size / F`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub density_factor: Option<u32>,
 }
 
 fn range(grid: &AnyGrid) -> [f32; 2] {
@@ -109,8 +123,33 @@ fn sibling(out: &Path, suffix: &str) -> PathBuf {
     out.with_file_name(format!("{stem}{suffix}"))
 }
 
-/// The HLSL function of a Custom material node for `files` SVTs and rank `rank`.
+/// The HLSL function of a Custom material node for `files` SVTs and rank `rank`, the
+/// density in A.r of file 0 and `pca_k` in channel `k + 1`.
 pub fn relight_hlsl(files: usize, rank: usize) -> String {
+    hlsl(
+        files,
+        rank,
+        1,
+        "Density is A0.r (1/scene unit, signed as stored: use max(0, A0.r)).",
+    )
+}
+
+/// The HLSL function for an asset with a fine density: `files` SVTs holding only the
+/// coefficients (`pca_k` in channel `k`), the density in A.r of the SVT `density_file`.
+pub fn relight_hlsl_fine_density(files: usize, rank: usize, density_file: &str) -> String {
+    hlsl(
+        files,
+        rank,
+        0,
+        &format!(
+            "Density is A.r of the SVT {density_file} (the fine density, its own resolution, the same box:\n\
+             // sample it at the same UVW; 1/scene unit, signed as stored: use max(0, A.r))."
+        ),
+    )
+}
+
+/// `pca_k` is read from channel `first_slot + k` of the files' channels.
+fn hlsl(files: usize, rank: usize, first_slot: usize, density: &str) -> String {
     let mut inputs = Vec::new();
     for f in 0..files {
         inputs.push(format!("float4 A{f}"));
@@ -119,7 +158,7 @@ pub fn relight_hlsl(files: usize, rank: usize) -> String {
     let mut body = String::new();
     body.push_str("    float3 radiance = ProjectedLight.Load(int3(0, 0, 0)).rgb; // P_mean\n");
     for k in 0..rank {
-        let slot = k + 1; // channel 0 of file 0 is the density
+        let slot = k + first_slot;
         let (file, (attr, channel)) = (slot / SVT_CHANNELS, CHANNELS[slot % SVT_CHANNELS]);
         let _ = writeln!(
             body,
@@ -133,7 +172,7 @@ pub fn relight_hlsl(files: usize, rank: usize) -> String {
          // Radiance of a voxel: P_mean + sum_k pca_k * P_k (SPEC.md section 8), from the\n\
          // attribute textures A<n>, B<n> of SVT file n sampled at the same position, and\n\
          // ProjectedLight, a ({k1} x 1) RGB float texture: texel 0 = P_mean, texel k+1 = P_k.\n\
-         // Density is A0.r (1/scene unit, signed as stored: use max(0, A0.r)).\n\
+         // {density}\n\
          // As a Custom node: inputs {inputs_list}, ProjectedLight; output float3.\n\
          float3 NelfRelight({params}, Texture2D ProjectedLight)\n{{\n{body}    return radiance;\n}}\n",
         k1 = rank + 1,
@@ -159,43 +198,40 @@ pub fn write_unreal(
             .find(|g| g.name() == name)
             .ok_or_else(|| ExportError::Metadata(format!("grid {name} missing from the export")))
     };
-    scalar.push(find(DENSITY_GRID)?);
+    let density = find(DENSITY_GRID)?;
+    // A fine density has its own resolution: an SVT of its own.
+    let fine = vdb_report.density_factor;
+    if fine.is_none() {
+        scalar.push(density);
+    }
     for k in 0..rank {
         scalar.push(find(&pca_grid_name(k))?);
     }
+    let count = scalar.len().div_ceil(SVT_CHANNELS);
     let mut files = Vec::new();
     for (n, group) in scalar.chunks(SVT_CHANNELS).enumerate() {
-        let mut file = VdbFile::new();
-        for (key, value) in full.metadata() {
-            file.insert_meta(key, value.clone());
-        }
+        let mut file = svt_file(&full);
         file.insert_meta("nelf_unreal_svt", n as i32);
-        file.insert_meta(
-            "nelf_unreal_svt_count",
-            scalar.len().div_ceil(SVT_CHANNELS) as i32,
-        );
-        let mut channels = Vec::new();
-        for (grid, (attr, channel)) in group.iter().zip(CHANNELS) {
-            file.push_grid((*grid).clone())?;
-            channels.push(ChannelMap {
-                grid: grid.name().to_string(),
-                attributes: attr.into(),
-                channel: channel.into(),
-                range: range(grid),
-            });
-        }
+        file.insert_meta("nelf_unreal_svt_count", count as i32);
         let path = sibling(out, &format!("_svt{n}.vdb"));
-        let bytes = file.encode(options.compression)?;
-        crate::write_atomic(&path, &bytes)?;
-        files.push(UnrealFile {
-            file: file_name(&path),
-            channels,
-            file_size: bytes.len() as u64,
-        });
+        files.push(write_svt(file, group, &path, options)?);
     }
+    let density_file = if fine.is_some() {
+        let mut file = svt_file(&full);
+        file.insert_meta("nelf_unreal_density_svt", true);
+        file.insert_meta("nelf_unreal_svt_count", count as i32);
+        let path = sibling(out, "_density.vdb");
+        Some(write_svt(file, &[density], &path, options)?)
+    } else {
+        None
+    };
 
     let hlsl_path = sibling(out, ".relight.hlsl");
-    crate::write_atomic(&hlsl_path, relight_hlsl(files.len(), rank).as_bytes())?;
+    let hlsl = match &density_file {
+        None => relight_hlsl(files.len(), rank),
+        Some(d) => relight_hlsl_fine_density(files.len(), rank, &d.file),
+    };
+    crate::write_atomic(&hlsl_path, hlsl.as_bytes())?;
     let light = lighting.project(asset)?;
     let texels: Vec<[f32; 3]> = std::iter::once(light.mean_rgb)
         .chain(light.component_rgb.iter().take(rank).copied())
@@ -215,11 +251,48 @@ pub fn write_unreal(
         voxel_size: vdb_report.voxel_size,
         density_unit: vdb_report.density_unit,
         attribute_format: "16-bit float (Unreal SVT attributes A and B)".into(),
+        density_file,
+        density_factor: fine,
     };
     let text =
         serde_json::to_string_pretty(&report).map_err(|e| ExportError::Metadata(e.to_string()))? + "\n";
     crate::write_atomic(&manifest, text.as_bytes())?;
     Ok(report)
+}
+
+/// An SVT file with the export's file metadata.
+fn svt_file(full: &VdbFile) -> VdbFile {
+    let mut file = VdbFile::new();
+    for (key, value) in full.metadata() {
+        file.insert_meta(key, value.clone());
+    }
+    file
+}
+
+/// Adds `grids` to `file` as channels A.r, A.g, … and writes it to `path` atomically.
+fn write_svt(
+    mut file: VdbFile,
+    grids: &[&AnyGrid],
+    path: &Path,
+    options: &VdbOptions,
+) -> Result<UnrealFile, ExportError> {
+    let mut channels = Vec::new();
+    for (grid, (attr, channel)) in grids.iter().zip(CHANNELS) {
+        file.push_grid((*grid).clone())?;
+        channels.push(ChannelMap {
+            grid: grid.name().to_string(),
+            attributes: attr.into(),
+            channel: channel.into(),
+            range: range(grid),
+        });
+    }
+    let bytes = file.encode(options.compression)?;
+    crate::write_atomic(path, &bytes)?;
+    Ok(UnrealFile {
+        file: file_name(path),
+        channels,
+        file_size: bytes.len() as u64,
+    })
 }
 
 fn file_name(path: &Path) -> String {

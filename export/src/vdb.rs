@@ -12,9 +12,18 @@
 //! (Houdini, OpenVDB's tools); Blender's Cycles samples voxel `i` at index `i + ½`, so
 //! there the volume object is moved by −½ voxel on each axis (README).
 //!
-//! **Values.** Every voxel of every brick is active; the background is 0.
-//! - `density`: the stored signed σ in 1/m divided by `s` (1/scene unit): a renderer
-//!   uses `max(0, trilinear σ)`.
+//! **Fine density** (format 1.4, [`FineDensity`]). When the asset has one, the
+//! `density` grid holds it instead of the voxels' σ, on its own transform: fine voxel
+//! `(i, j, k)` (each in `0..8F`) of brick `b` has index `8F·b + (i, j, k)` (a brick is
+//! `F³` leaves), centred, as SPEC.md §6 places it, at
+//! `world = s·(bbox_min + ½·Δ/F) + s·(Δ/F)·index`. Every other grid stays on the
+//! voxels; OpenVDB gives each grid its own transform, so a reader combines them in
+//! world space. Without a fine density the file is exactly what it was before 1.4.
+//!
+//! **Values.** Every voxel of every brick (every fine voxel, for a fine density) is
+//! active; the background is 0.
+//! - `density`: the stored signed σ in 1/m (the fine σ when present) divided by `s`
+//!   (1/scene unit): a renderer uses `max(0, trilinear σ)`.
 //! - colour (`color`, or e.g. `Cd`): `nelf_render::voxel_radiance` under the lighting
 //!   projected by `nelf_render::project_light` (or `project_light_texels` for light
 //!   already in the asset's light frame), with the exported rank: the values
@@ -26,9 +35,9 @@ use std::path::Path;
 use std::time::Instant;
 
 use glam::DMat3;
-use nelf_format::Asset;
 use nelf_format::conventions::{ENV_H, ENV_TEXELS, ENV_W, LatLong, rotation_y};
 use nelf_format::spec::BRICK_VOXELS;
+use nelf_format::{Asset, FineDensity};
 use nelf_render::{ProjectedLight, project_light, project_light_texels, voxel_radiance};
 use serde::{Deserialize, Serialize};
 
@@ -295,6 +304,10 @@ pub struct VdbReport {
     pub lighting: String,
     /// Voxel edge length in scene units.
     pub voxel_size: f64,
+    /// The asset's fine-density factor `F` when the density grid holds its fine density
+    /// (voxel edge `voxel_size / F`); `None` (and not in the JSON) when it holds the voxels'.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub density_factor: Option<u32>,
     /// Unit of the density grid.
     pub density_unit: String,
     /// File size in bytes.
@@ -325,13 +338,15 @@ pub fn build_vdb(
         voxel_size: s * voxel,
         translation: asset.grid.bbox_min_m.map(|m| s * (m + 0.5 * voxel)),
     };
+    let fine = asset.fine_density.as_ref();
+    let density_transform = fine.map_or(transform, |f| fine_transform(asset, f, s));
     // Our voxel order inside a brick is x fastest; OpenVDB's leaves run z fastest.
     let slots: Vec<usize> = (0..BRICK_VOXELS)
         .map(|l| leaf_offset(l % 8, (l / 8) % 8, l / 64))
         .collect();
     let origins: Vec<[i32; 3]> = asset.bricks.iter().map(|b| b.map(|c| 8 * i32::from(c))).collect();
 
-    let mut density = Grid::<f32>::new(DENSITY_GRID, GridClass::FogVolume, transform)?;
+    let mut density = Grid::<f32>::new(DENSITY_GRID, GridClass::FogVolume, density_transform)?;
     let mut color = Grid::<[f32; 3]>::new(&options.color_name, GridClass::Unknown, transform)?;
     let pca_names = options.pca_grids.names(rank);
     let mut pca: Vec<Grid<f32>> = Vec::new();
@@ -350,14 +365,23 @@ pub fn build_vdb(
         let mut coef = vec![vec![0.0f32; LEAF_VOXELS]; rank];
         for (l, &slot) in slots.iter().enumerate() {
             let v = b * BRICK_VOXELS + l;
-            sigma[slot] = (f64::from(asset.density[v].to_f32()) / s) as f32;
+            if fine.is_none() {
+                sigma[slot] = (f64::from(asset.density[v].to_f32()) / s) as f32;
+            }
             rgb[slot] = radiance[v];
             asset.coefficients.voxel_f32(v, &mut coefficients);
             for (grid, &c) in coef.iter_mut().zip(&coefficients) {
                 grid[slot] = c;
             }
         }
-        density.insert_leaf(origin, sigma)?;
+        match fine {
+            None => density.insert_leaf(origin, sigma)?,
+            Some(f) => {
+                for (leaf_origin, values) in fine_density_leaves(f, b, asset.bricks[b], s) {
+                    density.insert_leaf(leaf_origin, values)?;
+                }
+            }
+        }
         color.insert_leaf(origin, rgb)?;
         if options.pca_grids == PcaGrids::Vec3 {
             for (g, grid) in pca3.iter_mut().enumerate() {
@@ -375,10 +399,19 @@ pub fn build_vdb(
 
     let unit = options.density_unit();
     density.insert_meta("nelf_unit", unit.clone())?;
-    density.insert_meta(
-        "nelf_quantity",
-        "extinction coefficient sigma, signed as stored: render max(0, trilinear sigma)",
-    )?;
+    match fine {
+        None => density.insert_meta(
+            "nelf_quantity",
+            "extinction coefficient sigma, signed as stored: render max(0, trilinear sigma)",
+        )?,
+        Some(f) => {
+            density.insert_meta("nelf_density_factor", factor_i32(f)?)?;
+            density.insert_meta(
+                "nelf_quantity",
+                "fine extinction coefficient sigma (the asset's fine density, nelf_density_factor times finer per axis than the other grids, on its own transform), signed as stored: render max(0, trilinear sigma)",
+            )?;
+        }
+    }
     color.insert_meta(
         "nelf_quantity",
         "radiance relit under nelf_color_lighting (file metadata), linear RGB, not premultiplied by density",
@@ -415,12 +448,61 @@ pub fn build_vdb(
         stored_rank,
         lighting: lighting.name().to_string(),
         voxel_size: transform.voxel_size,
+        density_factor: fine.map(|f| f.factor),
         density_unit: unit,
         file_size: 0,
         relight_seconds,
         encode_seconds: start.elapsed().as_secs_f64(),
     };
     Ok((file, report))
+}
+
+/// The density grid's transform for a fine density: voxel edge `s·Δ/F`, fine voxel
+/// `(i, j, k)` of brick `b` at index `8F·b + (i, j, k)` centred on
+/// `s·(bbox_min + (index + ½)·Δ/F)` (SPEC.md §6), OpenVDB centring voxels on their index.
+fn fine_transform(asset: &Asset, fine: &FineDensity, s: f64) -> Transform {
+    let fine_voxel = asset.grid.voxel_size_m / f64::from(fine.factor);
+    Transform {
+        voxel_size: s * fine_voxel,
+        translation: asset.grid.bbox_min_m.map(|m| s * (m + 0.5 * fine_voxel)),
+    }
+}
+
+/// The `F³` OpenVDB leaves of brick `b` (at `brick`) of a fine density, σ divided by `s`:
+/// leaf `(lx, ly, lz)` (each in `0..F`) has origin `8F·brick + 8·(lx, ly, lz)` and holds
+/// fine voxels `8·(lx, ly, lz) + (x, y, z)` of the brick at OpenVDB's offsets.
+fn fine_density_leaves(fine: &FineDensity, b: usize, brick: [u16; 3], s: f64) -> Vec<([i32; 3], Vec<f32>)> {
+    let f = fine.factor as usize;
+    let edge = fine.brick_edge();
+    let per_brick = fine.voxels_per_brick();
+    let values = &fine.values[b * per_brick..(b + 1) * per_brick];
+    let base = brick.map(|c| edge as i32 * i32::from(c));
+    let mut leaves = Vec::with_capacity(f * f * f);
+    for lx in 0..f {
+        for ly in 0..f {
+            for lz in 0..f {
+                let mut leaf = vec![0.0f32; LEAF_VOXELS];
+                for x in 0..8 {
+                    for y in 0..8 {
+                        for z in 0..8 {
+                            let (i, j, k) = (8 * lx + x, 8 * ly + y, 8 * lz + z);
+                            let sigma = values[i + edge * (j + edge * k)].to_f32();
+                            leaf[leaf_offset(x, y, z)] = (f64::from(sigma) / s) as f32;
+                        }
+                    }
+                }
+                let origin = [lx, ly, lz].map(|l| 8 * l as i32);
+                leaves.push((std::array::from_fn(|a| base[a] + origin[a]), leaf));
+            }
+        }
+    }
+    leaves
+}
+
+/// The fine-density factor as the `int32` OpenVDB metadata holds.
+fn factor_i32(fine: &FineDensity) -> Result<i32, ExportError> {
+    i32::try_from(fine.factor)
+        .map_err(|_| ExportError::Metadata(format!("fine density factor {} out of range", fine.factor)))
 }
 
 fn summary(grid: &AnyGrid) -> GridSummary {
@@ -458,6 +540,17 @@ fn file_metadata(
     );
     file.insert_meta("nelf_density_grid", DENSITY_GRID);
     file.insert_meta("nelf_density_unit", options.density_unit());
+    if let Some(fine) = &asset.fine_density {
+        file.insert_meta("nelf_density_factor", factor_i32(fine)?);
+        file.insert_meta(
+            "nelf_density_voxel_size_m",
+            asset.grid.voxel_size_m / f64::from(fine.factor),
+        );
+        file.insert_meta(
+            "nelf_density_index_placement",
+            "the density grid holds the asset's fine density (format 1.4) on its own transform: fine voxel (i,j,k) of brick (bx,by,bz), each of i,j,k in 0..8F with F = nelf_density_factor, has index 8F*(bx,by,bz)+(i,j,k); world = scale*(bbox_min_m + (index + 0.5)*voxel_size_m/F); the other grids follow nelf_index_placement; Cycles samples each grid at index + 0.5 of its own voxels",
+        );
+    }
     file.insert_meta("nelf_color_grid", options.color_name.as_str());
     file.insert_meta("nelf_color_lighting", lighting.name());
     file.insert_meta("nelf_pca_grids", json(&pca_names)?);

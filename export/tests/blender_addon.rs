@@ -342,3 +342,64 @@ json.dump(out, sys.stdout)
         );
     }
 }
+
+/// The add-on reads a fine density's factor (file metadata `nelf_density_factor`), says on
+/// import how far Cycles shows that grid from `nelf render`'s placement (½ − 1/(2F) voxel:
+/// Cycles offsets each grid by half of its own voxel), says nothing for a file without
+/// one, and refuses a factor the format does not have.
+#[test]
+fn addon_reads_the_fine_density_factor() {
+    let dir = tempfile::tempdir().unwrap();
+    let coarse = common::asset();
+    let lighting = common::lighting();
+    let mut paths = Vec::new();
+    for (name, asset) in [
+        ("coarse.vdb", coarse.clone()),
+        ("fine2.vdb", common::with_fine_density(coarse.clone(), 2)),
+        ("fine4.vdb", common::with_fine_density(coarse.clone(), 4)),
+    ] {
+        let path = dir.path().join(name);
+        write_vdb(&path, &asset, &lighting, &VdbOptions::default()).unwrap();
+        paths.push(path);
+    }
+    let (mut file, _) = nelf_export::build_vdb(&coarse, &lighting, &VdbOptions::default()).unwrap();
+    file.insert_meta("nelf_density_factor", 3);
+    let bad = dir.path().join("bad.vdb");
+    std::fs::write(&bad, file.encode(nelf_export::Compression::None).unwrap()).unwrap();
+    paths.push(bad);
+    let args: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
+    let got = python(
+        r#"
+import json, sys
+import vdbmeta
+out = []
+for path in sys.argv[1:]:
+    try:
+        a = vdbmeta.read_nelf_vdb(path)
+        out.append({"factor": a.density_factor, "offset": a.density_offset_voxels,
+                    "warning": a.placement_warning(), "voxel_size": a.voxel_size})
+    except vdbmeta.VdbMetaError as err:
+        out.append({"error": str(err)})
+json.dump(out, sys.stdout)
+"#,
+        &args,
+    );
+    let voxel = coarse.grid.voxel_size_m;
+    assert_eq!(got[0]["factor"], 1);
+    assert_eq!(got[0]["offset"].as_f64(), Some(0.0));
+    assert!(got[0]["warning"].is_null(), "{}", got[0]);
+    for (g, factor, offset) in [(&got[1], 2, 0.25), (&got[2], 4, 0.375)] {
+        assert_eq!(g["factor"], factor);
+        assert_eq!(g["offset"].as_f64(), Some(offset));
+        // The object is still moved by half a voxel of the coefficient grids.
+        assert_eq!(g["voxel_size"].as_f64(), Some(voxel));
+        let warning = g["warning"].as_str().unwrap();
+        assert!(
+            warning.contains(&format!("{factor} times finer"))
+                && warning.contains(&format!("lies {offset} voxel")),
+            "{warning}"
+        );
+    }
+    let error = got[3]["error"].as_str().unwrap();
+    assert!(error.contains("nelf_density_factor 3"), "{error}");
+}

@@ -255,3 +255,111 @@ fn openvdb_reads_a_raw_scaled_cut_houdini_export() {
         &common::white(),
     );
 }
+
+/// Reads the `density` grid of `path` at world points: OpenVDB's `worldToIndex` of each
+/// (density and `pca_00`), the voxel it falls in and the density's value there.
+const PROBE: &str = r#"
+import json, sys
+import pyopenvdb as vdb
+density = vdb.read(sys.argv[1], "density")
+pca = vdb.read(sys.argv[1], "pca_00")
+acc = density.getConstAccessor()
+out = {"voxel_size": list(density.transform.voxelSize()),
+       "pca_voxel_size": list(pca.transform.voxelSize()), "points": []}
+for p in json.load(open(sys.argv[2])):
+    ijk = density.transform.worldToIndexCellCentered(tuple(p))
+    out["points"].append({"index": list(density.transform.worldToIndex(tuple(p))),
+                          "ijk": list(ijk), "value": acc.getValue(ijk),
+                          "pca_index": list(pca.transform.worldToIndex(tuple(p)))})
+json.dump(out, sys.stdout)
+"#;
+
+/// A fine density (format 1.4): OpenVDB reads the `density` grid at voxel size `Δ/F` with
+/// every fine value, the other grids at `Δ` unchanged, and at the world centre of a fine
+/// voxel (SPEC.md §6) finds an integer index holding that voxel's σ / scale, which the
+/// coefficient grids see between their voxels, `(i + ½)/F − ½` along each axis.
+#[test]
+fn openvdb_reads_a_fine_density_at_its_own_voxel_size() {
+    require_pyopenvdb();
+    let factor = 2;
+    let asset = common::with_fine_density(common::asset(), factor);
+    let options = VdbOptions {
+        scale: 100.0,
+        ..VdbOptions::default()
+    };
+    let s = options.scale;
+    let lighting = common::white();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("fine.vdb");
+    write_vdb(&path, &asset, &lighting, &options).unwrap();
+    let got = dump(&path);
+    let grids = got["grids"].as_array().unwrap();
+    let by_name = |name: &str| grids.iter().find(|g| g["name"] == name).unwrap();
+
+    let density = by_name("density");
+    let fine = common::expected_fine_density(&asset, s);
+    check_grid(density, "density", "float", &scalar(&fine));
+    assert_eq!(density["class"], "fog volume");
+    assert_eq!(density["metadata"]["nelf_density_factor"], factor);
+    assert_eq!(got["file_metadata"]["nelf_density_factor"], factor);
+    let want = common::expected(&asset, &lighting, asset.rank(), s);
+    check_grid(by_name("pca_00"), "pca_00", "float", &scalar(&want.pca[0]));
+    let fine_voxel = asset.grid.voxel_size_m / f64::from(factor);
+    for a in 0..3 {
+        let origin = s * (asset.grid.bbox_min_m[a] + 0.5 * fine_voxel);
+        let read = density["index_origin_world"][a].as_f64().unwrap();
+        assert!((read - origin).abs() < 1e-9 * s, "{read} vs {origin}");
+        assert!((density["voxel_size"][a].as_f64().unwrap() - s * fine_voxel).abs() < 1e-12 * s);
+        let pca = by_name("pca_00")["voxel_size"][a].as_f64().unwrap();
+        assert!((pca - s * asset.grid.voxel_size_m).abs() < 1e-12 * s);
+    }
+
+    // Known world points: SPEC's centres of a few fine voxels.
+    let edge = 8 * factor as usize;
+    let mut points = Vec::new();
+    let mut wanted = Vec::new();
+    for (b, brick) in asset.bricks.iter().enumerate().step_by(3) {
+        for ijk in [[0, 0, 0], [edge - 1, 2, 5], [7, edge - 1, 8]] {
+            points.push(common::fine_voxel_centre(&asset, *brick, ijk, s));
+            let index: [i32; 3] = std::array::from_fn(|a| edge as i32 * i32::from(brick[a]) + ijk[a] as i32);
+            let fine = asset.fine_density.as_ref().unwrap();
+            let v = b * fine.voxels_per_brick() + ijk[0] + edge * (ijk[1] + edge * ijk[2]);
+            let sigma = (f64::from(fine.values[v].to_f32()) / s) as f32;
+            let coarse: [f64; 3] = std::array::from_fn(|a| {
+                8.0 * f64::from(brick[a]) + (ijk[a] as f64 + 0.5) / f64::from(factor) - 0.5
+            });
+            wanted.push((index, sigma, coarse));
+        }
+    }
+    let points_path = dir.path().join("points.json");
+    std::fs::write(&points_path, serde_json::to_vec(&points).unwrap()).unwrap();
+    let out = Command::new(PYTHON)
+        .arg("-c")
+        .arg(PROBE)
+        .arg(&path)
+        .arg(&points_path)
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let probe: Value = serde_json::from_slice(&out.stdout).unwrap();
+    for a in 0..3 {
+        let size = probe["voxel_size"][a].as_f64().unwrap();
+        assert!((size - s * fine_voxel).abs() < 1e-12 * s, "voxel size {size}");
+    }
+    let read = probe["points"].as_array().unwrap();
+    assert_eq!(read.len(), wanted.len());
+    for (p, (index, sigma, coarse)) in read.iter().zip(&wanted) {
+        for a in 0..3 {
+            let i = p["index"][a].as_f64().unwrap();
+            assert!((i - f64::from(index[a])).abs() < 1e-6, "{p} vs {index:?}");
+            assert_eq!(p["ijk"][a].as_i64().unwrap(), i64::from(index[a]), "{p}");
+            let c = p["pca_index"][a].as_f64().unwrap();
+            assert!(
+                (c - coarse[a]).abs() < 1e-6,
+                "{p}: coefficient index {c} vs {}",
+                coarse[a]
+            );
+        }
+        assert_eq!(p["value"].as_f64().unwrap() as f32, *sigma, "{p}");
+    }
+}

@@ -303,7 +303,9 @@ def _world_signature(world):
 
 
 def place_object(obj, asset):
-    """Stands the asset up and moves it by -1/2 voxel along each of its own axes."""
+    """Stands the asset up and moves it by -1/2 voxel along each of its own axes (the
+    voxels of the colour and coefficient grids; a fine density grid stays
+    `asset.density_offset_voxels` off, see `NelfVdb.placement_warning`)."""
     rotation = mathutils.Matrix(relight.BLENDER_FROM_NELF.tolist())
     obj.rotation_mode = "XYZ"
     obj.rotation_euler = rotation.to_euler("XYZ")
@@ -384,6 +386,9 @@ class IMPORT_OT_nelf_vdb(bpy.types.Operator, ImportHelper):
         # Cycles treats |values| under `clipping` (default 0.001) as empty space.
         volume.render.clipping = 0.0
         place_object(obj, asset)
+        warning = asset.placement_warning()
+        if warning:
+            self.report({"WARNING"}, warning)
         settings = obj.nelf
         settings.vdb_path = self.filepath
         settings.rank = asset.rank

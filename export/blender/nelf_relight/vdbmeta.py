@@ -109,6 +109,11 @@ class NelfVdb:
         if not (self.scale > 0 and self.voxel_size_m > 0 and math.isfinite(self.scale * self.voxel_size_m)):
             raise VdbMetaError(f"{path}: nelf_scale and nelf_voxel_size_m must be positive")
         self.density_grid = need("nelf_density_grid", str)
+        # A fine density (format 1.4): the density grid is this many times finer per axis
+        # than the other grids, on its own transform; files without the key have none.
+        self.density_factor = meta.get("nelf_density_factor", 1)
+        if not isinstance(self.density_factor, int) or self.density_factor not in (1, 2, 4):
+            raise VdbMetaError(f"{path}: nelf_density_factor {self.density_factor!r} must be 2 or 4")
         self.color_grid = need("nelf_color_grid", str)
         self.color_lighting = need("nelf_color_lighting", str)
         self.pca_grids = floats("nelf_pca_grids")
@@ -151,6 +156,25 @@ class NelfVdb:
     def voxel_size(self):
         """Voxel edge in the file's scene units."""
         return self.voxel_size_m * self.scale
+
+    @property
+    def density_offset_voxels(self):
+        """How far (in voxels, toward -x, -y, -z of the asset) Cycles shows the density grid
+        from where `nelf render` puts it once the object is moved by -1/2 voxel: Cycles
+        samples each grid half of its *own* voxel off, so a fine density (voxel 1/F) keeps
+        1/2 - 1/(2F) of a voxel that one object move cannot undo; 0 without one."""
+        return 0.5 - 0.5 / self.density_factor
+
+    def placement_warning(self):
+        """What to tell the user about the placement on import (None: nothing to tell)."""
+        if self.density_factor == 1:
+            return None
+        return (
+            f"{self.path}: the density grid is the asset's fine density ({self.density_factor} times finer); "
+            "Cycles offsets each grid by half of its own voxel and one object move undoes only one: the "
+            f"colour and coefficient grids are placed exactly, the density lies {self.density_offset_voxels:g} "
+            "voxel toward -x, -y, -z of the asset from where nelf render puts it (export/BLENDER.md)"
+        )
 
 
 def read_nelf_vdb(path):
