@@ -46,6 +46,7 @@ fn main() -> Result<(), Error> {
                 reference: job.reference.clone(),
                 provenance: job.provenance.clone(),
                 held: nelf_bake::eval::HeldAside::default(),
+                fine_field: None,
             };
             let exact = bake_field(&toward, &config, &progress, prior)?;
             let (a, _) = score_view(

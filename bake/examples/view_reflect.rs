@@ -346,6 +346,7 @@ fn main() -> Result<(), Error> {
                     reference: job.reference.clone(),
                     provenance: job.provenance.clone(),
                     held: nelf_bake::eval::HeldAside::default(),
+                    fine_field: None,
                 };
                 let asset = bake_field(&bake, &config, &progress, prior)?.asset;
                 let (score, _) = score_view(&asset, camera, &held.envs[t], &held.images[t], "model")?;

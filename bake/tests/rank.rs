@@ -96,6 +96,7 @@ fn exactly_rank_three_field_bakes_with_k_three() {
         reference: Reference::AssumedSnrDb(40.0),
         provenance: serde_json::json!({ "test": "rank three" }),
         held: nelf_bake::eval::HeldAside::default(),
+        fine_field: None,
     };
     let config = BakeConfig {
         render_size: 48,

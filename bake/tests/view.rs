@@ -159,6 +159,7 @@ fn a_known_lobe_is_reproduced() {
         reference: Reference::AssumedSnrDb(40.0),
         provenance: serde_json::json!({ "test": "known lobe" }),
         held: nelf_bake::eval::HeldAside::default(),
+        fine_field: None,
     };
     let config = BakeConfig {
         render_size: 48,
@@ -269,6 +270,7 @@ fn auto_with_no_views_to_judge_at_fits_nothing() {
         reference: Reference::AssumedSnrDb(40.0),
         provenance: serde_json::json!({ "test": "nothing to judge at" }),
         held: nelf_bake::eval::HeldAside::default(),
+        fine_field: None,
     };
     let config = BakeConfig {
         render_size: 48,
@@ -311,6 +313,7 @@ fn a_known_reflection_lobe_is_reproduced() {
         reference: Reference::AssumedSnrDb(40.0),
         provenance: serde_json::json!({ "test": "known reflection lobe" }),
         held: nelf_bake::eval::HeldAside::default(),
+        fine_field: None,
     };
     let config = BakeConfig {
         render_size: 48,
@@ -435,6 +438,7 @@ fn reflect_needs_a_policy_that_averages_toward_points() {
         reference: Reference::AssumedSnrDb(40.0),
         provenance: serde_json::json!({}),
         held: nelf_bake::eval::HeldAside::default(),
+        fine_field: None,
     };
     let config = BakeConfig {
         render_size: 16,

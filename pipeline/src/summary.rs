@@ -115,7 +115,7 @@ pub fn describe_bake(out: &Path, r: &BakeReport) -> String {
     }
     let _ = writeln!(
         text,
-        "  seconds: hull {:.2}, reference {:.2}, density {:.2}, weights {:.2}, light {:.2}, pca {:.2}, rank {:.2}, view {:.2}, write {:.2}",
+        "  seconds: hull {:.2}, reference {:.2}, density {:.2}, weights {:.2}, light {:.2}, pca {:.2}, rank {:.2}, view {:.2}, fine density {:.2}, write {:.2}",
         t.hull_secs,
         t.reference_secs,
         t.density_secs,
@@ -124,6 +124,7 @@ pub fn describe_bake(out: &Path, r: &BakeReport) -> String {
         t.pca_secs,
         t.rank_secs,
         t.view_secs,
+        t.fine_density_secs,
         t.write_secs
     );
     for note in &r.notes {

@@ -11,12 +11,13 @@
 //!    crate's one rank chooser);
 //! 6. [`quantize`]: the asset at that rank, coefficients quantized, with its metadata;
 //! 7. [`view`]: view dependence, kept where it gains on the judging views;
-//! 8. [`write`]: the file and its `.bake.json` sidecar (called by whoever asked for
+//! 8. [`fine`]: the density again on a finer lattice (`--fine-density`, format 1.4);
+//! 9. [`write`]: the file and its `.bake.json` sidecar (called by whoever asked for
 //!    the bake, after it returns).
 //!
 //! The functions below run them in that order: [`with_truth_job`] (plan, hull) and
 //! [`run_mesh`] set a job up, [`run_job`] bakes it ([`sample`]: occupancy, transport,
-//! PCA; [`finish`]: rank, quantize; then view). The settings are [`crate::config`]'s,
+//! PCA; [`finish`]: rank, quantize; then view and fine density). The settings are [`crate::config`]'s,
 //! checked once by the public entry points ([`crate::jobs`]) before any stage runs.
 //! [`outputs`] holds what the stages hand on.
 //!
@@ -25,6 +26,7 @@
 //! of the file (they go to the `.bake.json` beside it), so baking twice gives
 //! byte-identical files.
 
+pub mod fine;
 pub mod hull;
 pub mod occupancy;
 pub mod outputs;
@@ -68,9 +70,10 @@ pub(crate) fn with_truth_job<R>(
     )?;
     let planned = hull::capture_hull(capture, config, probe.as_ref(), progress)?;
     let field = mesh_field(&mesh, trace, planned.voxel_size_m, config.shell_placement, config)?;
+    let fine = fine::fine_mesh_field(&mesh, trace, planned.voxel_size_m, config)?;
     let view_policy = plan::capture_view_policy(capture, config)?;
     let field_provenance = plan::truth_provenance(truth, &trace, config);
-    let (job, prior) = plan::capture_job(
+    let (mut job, prior) = plan::capture_job(
         capture,
         planned,
         field.as_ref(),
@@ -78,6 +81,7 @@ pub(crate) fn with_truth_job<R>(
         &field_provenance,
         config,
     )?;
+    job.fine_field = fine.as_deref();
     run(&job, prior)
 }
 
@@ -90,7 +94,9 @@ pub(crate) fn run_mesh(
     progress: Progress,
 ) -> Result<BakeOutput> {
     let (field, grid) = hull::mesh_grid(mesh, config)?;
-    let (job, prior) = plan::mesh_job(mesh, description, field.as_ref(), grid, config, progress)?;
+    let fine = fine::fine_mesh_field(mesh, grid.trace, grid.plan.geometry.voxel_size_m, config)?;
+    let (mut job, prior) = plan::mesh_job(mesh, description, field.as_ref(), grid, config, progress)?;
+    job.fine_field = fine.as_deref();
     run_job(&job, config, progress, prior)
 }
 
@@ -105,6 +111,7 @@ pub(crate) fn run_job(
     let sampled = sample(job, config, progress, prior)?;
     let mut output = finish(job, config, progress, &sampled)?;
     view::add_view_dependence(job, config, &progress, &sampled, &mut output)?;
+    fine::add_fine_density(job, config, progress, &mut output)?;
     Ok(output)
 }
 

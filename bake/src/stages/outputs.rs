@@ -32,6 +32,9 @@ pub struct StageTimings {
     /// View dependence: sampling many directions, fitting, judging.
     #[serde(default)]
     pub view_secs: f64,
+    /// The fine density (`--fine-density`): the field's density at every fine voxel.
+    #[serde(default)]
+    pub fine_density_secs: f64,
     /// Encoding and writing the file.
     pub write_secs: f64,
 }

@@ -62,6 +62,10 @@ pub struct FieldBake<'a> {
     /// Held-aside views (the capture's targets) that judge the view-dependence choice;
     /// empty when the capture has none (the reference images judge it then).
     pub held: HeldAside,
+    /// The field that gives the fine density (`--fine-density`) when it is not `field`
+    /// itself: a mesh's field with its ramp and lead scaled to the fine voxel
+    /// ([`crate::source::mesh_field`] at `Δ/F`). `None`: `field`'s own density.
+    pub fine_field: Option<&'a dyn FieldSource>,
 }
 
 impl std::fmt::Debug for FieldBake<'_> {
@@ -157,6 +161,7 @@ pub(crate) fn capture_job<'a>(
         reference,
         provenance,
         held,
+        fine_field: None,
     };
     let prior = StageTimings {
         hull_secs: planned.hull_secs,
@@ -275,6 +280,7 @@ pub(crate) fn mesh_job<'a>(
         },
         provenance,
         held: HeldAside::default(),
+        fine_field: None,
     };
     let prior = StageTimings {
         hull_secs: grid.hull_secs,

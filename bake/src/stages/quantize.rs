@@ -53,6 +53,7 @@ impl SampledField {
             coefficients: Coefficients::quantize_with_min_step(&truncated, rank, encoding, self.min_step)?,
             view: None,
             reflection: None,
+            fine_density: None,
             metadata: serde_json::json!({}),
         };
         Ok(asset)
