@@ -211,6 +211,14 @@ pub fn reconstruction_bake_config(
     nelf_bake::BakeConfig {
         view_dependence: ViewChoice::Off,
         lead_voxels: settings.photo_lead_voxels,
+        // `auto` would add a fine density (the reconstruction is closed), whose lead is
+        // a quarter of a *fine* voxel: the silhouette of a surface that lies inside the
+        // true one shrinks again (CGAL scan photographed, resolution 64: foreground
+        // −0.6 to −1.2 dB per target, docs/measurements/2026-12-07-fine-density.md).
+        fine_density: match bake.fine_density {
+            nelf_bake::config::FineDensityChoice::Auto => nelf_bake::config::FineDensityChoice::Off,
+            chosen => chosen,
+        },
         ..bake.clone()
     }
 }
