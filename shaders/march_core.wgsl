@@ -31,6 +31,14 @@
 //   one) slot holds every trilinear corner of a sample in the box, so there are no
 //   per-corner lookups.
 // The samples taken are the reference's, minus some whose σ is exactly 0.
+//
+// An asset with a fine density (format 1.4, factor F; nelf_render::render_volume_fine)
+// takes σ from the fine density atlas instead of the atlas's alpha (`fine_sigma`: the
+// same trilinear rule on the lattice F times finer, through a slot of the same index),
+// and the radiance from the atlas at the same point; the step Δ (params) is then
+// `step_voxels` fine voxels, and the march grid marks a voxel where any of its fine
+// voxels has σ > 0, which keeps its skipping safe (viewer/src/atlas.rs). `on_sample`
+// gets the value with that σ in alpha.
 
 // Mirrors `MarchParams` in viewer/src/shaders.rs.
 struct MarchParams {
@@ -55,11 +63,18 @@ struct MarchParams {
     view: vec4<u32>,
     // x: density view scale (1 / σ shown as white); yzw: unused.
     scales: vec4<f32>,
+    // A fine density (format 1.4): xyz: 1 / its atlas's size in texels; w: its factor F
+    // (0: none, σ is the atlas's alpha).
+    fine: vec4<f32>,
 }
 
 @group(0) @binding(0) var<uniform> params: MarchParams;
 @group(0) @binding(1) var atlas: texture_3d<f32>;
 @group(0) @binding(2) var atlas_sampler: sampler;
+// The fine density atlas (format 1.4; viewer/src/atlas.rs, `fine_density_atlas`): σ of
+// the fine voxels, one slot of (8F + 2)³ texels per atlas slot, at the atlas's slot index
+// (`fine_sigma`); a 1-texel placeholder where the asset has none (params.fine.w = 0).
+@group(0) @binding(3) var fine_density: texture_3d<f32>;
 // The march grid (common.wgsl) at cubes of f³ voxels, f = grid_bricks.w.
 @group(0) @binding(6) var march_grid: texture_3d<u32>;
 
@@ -97,6 +112,19 @@ fn composite(acc: ptr<function, Accum>, value: vec4<f32>, step: f32, view: u32, 
     return (*acc).transmittance < min_transmittance;
 }
 
+// σ at lattice point `u` from the fine density of factor F = params.fine.w (SPEC.md §8,
+// "Fine density": the trilinear rule on the lattice of voxel size Δ/F), read in the fine
+// slot at slot coordinates `slot` of the brick cell `cell` whose box [8c − ½, 8c + 7½]³
+// holds `u`. Fine lattice coordinates are (u + ½)F − ½ (fine voxel centres at integers);
+// texel m + 1 of the slot holds fine voxel 8F·cell + m (m ∈ [−1, 8F]: the apron), so every
+// trilinear corner of a point in the box lies in the slot, as for the atlas.
+fn fine_sigma(u: vec3<f32>, slot: vec3<i32>, cell: vec3<i32>) -> f32 {
+    let f = params.fine.w;
+    let slot_texels = i32(f) * BRICK + 2;
+    let texel = vec3<f32>(slot * slot_texels) + (u + vec3<f32>(0.5) - vec3<f32>(cell * BRICK)) * f + vec3<f32>(1.0);
+    return textureSampleLevel(fine_density, atlas_sampler, texel * params.fine.xyz, 0.0).r;
+}
+
 // One pixel's march: its colour and what it cost.
 struct MarchResult {
     color: vec4<f32>,
@@ -129,6 +157,7 @@ fn march_pixel(pixel: vec2<u32>) -> MarchResult {
         count = i32(max(ceil((span.y - t_entry) / step - offset), 0.0));
     }
     let view = params.view.x;
+    let fine = params.fine.w > 0.0;
     let min_transmittance = params.atlas_inv_size.w;
     let inv_atlas = params.atlas_inv_size.xyz;
     var acc = Accum(vec3<f32>(0.0), 1.0, 0.0, 0.0);
@@ -165,9 +194,13 @@ fn march_pixel(pixel: vec2<u32>) -> MarchResult {
         // [8b − 0.5, 8b + 7.5]³ holds the sample (up to rounding at the grid box's faces,
         // which the apron covers) and whose slot holds every trilinear corner of it.
         let cell = (cube * factor_i) >> vec3<u32>(3u);
-        let shift = vec3<f32>(slot_coords((texel >> MARCH_GRID_SLOT_SHIFT) - 1u, packing) * SLOT - cell * BRICK)
-            + vec3<f32>(1.5);
-        let value = textureSampleLevel(atlas, atlas_sampler, (u + shift) * inv_atlas, 0.0);
+        let slot = slot_coords((texel >> MARCH_GRID_SLOT_SHIFT) - 1u, packing);
+        let shift = vec3<f32>(slot * SLOT - cell * BRICK) + vec3<f32>(1.5);
+        var value = textureSampleLevel(atlas, atlas_sampler, (u + shift) * inv_atlas, 0.0);
+        if fine {
+            // σ from the fine lattice, the radiance from the atlas at the same point.
+            value.a = fine_sigma(u, slot, cell);
+        }
         samples += 1u;
         let stop = composite(&acc, value, step, view, min_transmittance);
         on_sample(u, value, acc.weight, (cube_max + vec3<i32>(1)) * factor_i);

@@ -3,7 +3,7 @@
 //! compare ratios taken in one run).
 //!
 //! ```text
-//! cargo run --release -p nelf-viewer --example bench -- [ASSET.nelf ...] [--reps N] [--view] [--reflect]
+//! cargo run --release -p nelf-viewer --example bench -- [ASSET.nelf ...] [--reps N] [--view] [--reflect] [--fine F]
 //! ```
 //!
 //! Without assets it builds a synthetic portrait-sized asset (`nelf_format::synthetic`,
@@ -11,8 +11,10 @@
 //! synthetic view-dependent part (format 1.2: J = 3 lobes, `K_v` = 8, 8-bit coefficients;
 //! `nelf_format::synthetic::synthetic_view`); `--reflect` gives every asset with neither
 //! part a synthetic reflection part (format 1.3, λ = 20, five eyes;
-//! `nelf_format::synthetic::synthetic_reflection`); an asset file may bring either part
-//! itself. For each asset it prints, as markdown:
+//! `nelf_format::synthetic::synthetic_reflection`); `--fine F` gives every asset without
+//! one a fine density of factor `F` (format 1.4: its voxels' density interpolated at the
+//! fine voxel centres, a stand-in with the asset's own occupancy); an asset file may
+//! bring any of these parts itself. For each asset it prints, as markdown:
 //! GPU memory, relight-pass ms, frame ms at 512² and 1920×1080 with relighting every
 //! frame and without (the march alone over the precomputed RGBA atlas) and their ratio
 //! (at a held camera: the frame relit per pixel from its cache where it fits the cache,
@@ -33,7 +35,9 @@
 //! own ms. For a reflection asset, at 512², frame ms beside the same asset without its
 //! reflection part: static, moving, relit every frame (camera held; camera moving too)
 //! and with the lighting turned every frame (the CPU's projection and, with the part,
-//! its lobe filter included), and the reflect pass's own ms.
+//! its lobe filter included), and the reflect pass's own ms. For an asset with a fine
+//! density, frame ms at 512² and 1080p beside the same asset without it (the march alone,
+//! a full relight and march, and the march's samples per frame).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -42,8 +46,8 @@ use glam::{DMat3, DVec3};
 use nelf_format::conventions::{LatLong, PinholeCamera, direction, rotation_y};
 use nelf_format::synthetic::SyntheticField;
 use nelf_format::synthetic::{synthetic_reflection, synthetic_view};
-use nelf_format::{Asset, CoefficientEncoding, WriteOptions, read_asset, write_asset};
-use nelf_render::{Image, MarchSettings, render_asset};
+use nelf_format::{Asset, CoefficientEncoding, FineDensity, WriteOptions, read_asset, write_asset};
+use nelf_render::{BrickGrid, Image, MarchSettings, asset_density, render_asset};
 use nelf_viewer::shaders::{DENSE_MARCH_WGSL, DenseParams, preprocess};
 use nelf_viewer::{GpuRenderer, MarchPass, MarchView, ViewSettings};
 use wgpu::util::DeviceExt as _;
@@ -461,9 +465,10 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
     );
     let mib = |b: u64| b as f64 / (1024.0 * 1024.0);
     println!(
-        "GPU memory: {:.2} MiB total = atlas {:.2} + coefficients {:.2} + density {:.2} + view part {:.2} + neighbour blocks {:.3} + march grid {:.3} + other {:.3}\n",
+        "GPU memory: {:.2} MiB total = atlas {:.2} + fine density {:.2} + coefficients {:.2} + density {:.2} + view part {:.2} + neighbour blocks {:.3} + march grid {:.3} + other {:.3}\n",
         mib(m.total()),
         mib(m.atlas_bytes),
+        mib(m.fine_density_bytes),
         mib(m.coefficient_bytes),
         mib(m.density_bytes),
         mib(m.view_bytes),
@@ -655,7 +660,108 @@ fn bench_asset(gpu: &mut GpuRenderer, name: &str, asset: &Asset, reps: usize) ->
         "held camera at 256², lighting turned 3 times ({kind:?}): PSNR vs CPU reference ≥ {worst:.1} dB"
     );
     bench_view_dependence(gpu, asset, reps)?;
-    bench_reflection(asset, reps)
+    bench_reflection(asset, reps)?;
+    bench_fine_density(asset, reps)
+}
+
+/// A fine density of factor `factor` for `asset` (format 1.4): its voxels' density
+/// interpolated trilinearly at the fine voxel centres (the renderers' rule), the same
+/// field with the asset's own occupancy, so that a timing compares like with like.
+fn upsampled_fine_density(asset: &Asset, factor: u32) -> Result<FineDensity, BoxError> {
+    let grid = BrickGrid::from_asset(asset)?;
+    let density = asset_density(asset);
+    let edge = 8 * factor as usize;
+    let fine_voxel = asset.grid.voxel_size_m / f64::from(factor);
+    let origin = DVec3::from_array(asset.grid.bbox_min_m);
+    let mut values = Vec::with_capacity(asset.bricks.len() * edge * edge * edge);
+    let mut corners = [(0usize, 0.0f32); 8];
+    for b in &asset.bricks {
+        for k in 0..edge {
+            for j in 0..edge {
+                for i in 0..edge {
+                    let ijk = [
+                        usize::from(b[0]) * edge + i,
+                        usize::from(b[1]) * edge + j,
+                        usize::from(b[2]) * edge + k,
+                    ];
+                    let p =
+                        origin + (DVec3::new(ijk[0] as f64, ijk[1] as f64, ijk[2] as f64) + 0.5) * fine_voxel;
+                    let n = grid.trilinear(p, &mut corners);
+                    let sigma: f32 = corners[..n].iter().map(|&(v, w)| w * density[v]).sum();
+                    values.push(half::f16::from_f32(sigma));
+                }
+            }
+        }
+    }
+    Ok(FineDensity { factor, values })
+}
+
+/// An asset with a fine density against itself without it: frame ms (fragment march) at
+/// 512² and 1080p with the camera and lighting held (the march alone) and relit every
+/// frame at a moving camera (a full relight and march), interleaved on two renderers, and
+/// the march's samples per frame.
+fn bench_fine_density(asset: &Asset, reps: usize) -> Result<(), BoxError> {
+    let Some(fine) = &asset.fine_density else {
+        return Ok(());
+    };
+    let mut coarse = asset.clone();
+    coarse.fine_density = None;
+    let env = sky()?;
+    let mut coarse_gpu = GpuRenderer::new_headless()?;
+    coarse_gpu.load_asset(&coarse)?;
+    coarse_gpu.set_lighting(&env, DMat3::IDENTITY)?;
+    let mut fine_gpu = GpuRenderer::new_headless()?;
+    let info = fine_gpu.load_asset(asset)?;
+    fine_gpu.set_lighting(&env, DMat3::IDENTITY)?;
+    let settings = ViewSettings {
+        march: MarchSettings::default(),
+        jitter: false,
+        frame_index: 0,
+        view: MarchView::Shaded,
+        pass: MarchPass::Fragment,
+    };
+    println!(
+        "\nFine density (F = {}, {:.1} MiB on the GPU; shown: {:?}): frame ms (fragment march) of the asset \
+         against itself without it, interleaved; moving = a new camera every frame (0.25° steps of orbit, never the static one) with a \
+         full relight; ratio = with / without (fastest runs)\n",
+        fine.factor,
+        info.memory.fine_density_bytes as f64 / f64::from(1u32 << 20),
+        info.fine_density
+    );
+    println!(
+        "| frame | without, static (ms) | with, static (ms) | ratio | without, moving + relit (ms) | with, moving + relit (ms) | ratio | samples/frame without | with |"
+    );
+    println!("| --- | --- | --- | --- | --- | --- | --- | --- | --- |");
+    for (w, h) in [(512u32, 512u32), (1920, 1080)] {
+        let camera = portrait_camera(asset, w, h);
+        let mut frame = 0u32;
+        let times = time_interleaved(reps, 4, |job| {
+            frame += 1;
+            // Never the static camera (a held camera would replay its pixels).
+            let moving = orbit_camera(asset, w, h, 20.0 + 0.25 * f64::from(1 + frame % 40));
+            let gpu = if job % 2 == 0 {
+                &mut coarse_gpu
+            } else {
+                &mut fine_gpu
+            };
+            if job < 2 {
+                gpu.frame_blocking(&camera, &settings)?;
+            } else {
+                gpu.invalidate_lighting();
+                gpu.frame_blocking(&moving, &settings)?;
+            }
+            Ok(())
+        })?;
+        let [without, with, without_moving, with_moving] = [times[0], times[1], times[2], times[3]];
+        let samples_without = coarse_gpu.count_samples(&camera, &settings)?.samples;
+        let samples_with = fine_gpu.count_samples(&camera, &settings)?.samples;
+        println!(
+            "| {w}×{h} | {without} | {with} | {:.2} | {without_moving} | {with_moving} | {:.2} | {samples_without} | {samples_with} |",
+            with.min / without.min,
+            with_moving.min / without_moving.min
+        );
+    }
+    Ok(())
 }
 
 fn main() -> Result<(), BoxError> {
@@ -663,6 +769,7 @@ fn main() -> Result<(), BoxError> {
     let mut reps = 9usize;
     let mut add_view = false;
     let mut add_reflection = false;
+    let mut fine_factor: Option<u32> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         if a == "--reps" {
@@ -671,6 +778,8 @@ fn main() -> Result<(), BoxError> {
             add_view = true;
         } else if a == "--reflect" {
             add_reflection = true;
+        } else if a == "--fine" {
+            fine_factor = Some(args.next().ok_or("--fine needs a factor (2 or 4)")?.parse()?);
         } else {
             paths.push(PathBuf::from(a));
         }
@@ -704,6 +813,11 @@ fn main() -> Result<(), BoxError> {
             asset.reflection = Some(synthetic_reflection(&asset, 20.0, 7)?);
             asset.validate()?;
             name.push_str(" + synthetic reflection part (λ = 20)");
+        }
+        if let Some(factor) = fine_factor.filter(|_| asset.fine_density.is_none()) {
+            asset.fine_density = Some(upsampled_fine_density(&asset, factor)?);
+            asset.validate()?;
+            name = format!("{name} + fine density (F = {factor}, upsampled)");
         }
         bench_asset(&mut gpu, &name, &asset, reps)?;
     }

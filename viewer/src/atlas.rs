@@ -15,13 +15,18 @@
 //!   of a present brick or halo cell; it drives the apron build.
 //! * **March grid** ([`MarchGrid`]): per cube of voxels, the distance to the nearest
 //!   σ > 0 (empty-space skipping) and the slot of its brick cell: one fetch per step.
+//! * **Fine density atlas** (format 1.4, [`fine_density_atlas`]): where an asset has a
+//!   fine density of factor `F`, σ comes from a second atlas, one slot of `(8F + 2)³`
+//!   texels (its `8F` fine voxels a side plus a 1-fine-voxel apron) per atlas slot at the
+//!   same slot index, so the march's one slot lookup serves both; the march grid then
+//!   marks a voxel dense where any of its fine voxels is ([`fine_density_per_voxel`]).
 //! * **Coefficients** stay as stored (8-bit codes or f16 halves), packed into `u32`
 //!   words, `⌈K/4⌉` or `⌈K/2⌉` words per voxel, word-major so SIMD lanes (neighbouring
 //!   voxels) read neighbouring words; the dequantisation is folded into the projected
 //!   lighting ([`fold_light`]).
 
-use nelf_format::Coefficients;
 use nelf_format::spec::{BRICK_SIZE, BRICK_VOXELS};
+use nelf_format::{Coefficients, FineDensity};
 use nelf_render::ProjectedLight;
 
 use crate::error::ViewerError;
@@ -48,10 +53,17 @@ impl AtlasLayout {
     /// A near-cubic layout for `bricks` slots whose texel extent fits `max_texels` per
     /// axis (the device's `max_texture_dimension_3d`).
     pub fn for_bricks(bricks: usize, max_texels: u32) -> Result<Self, ViewerError> {
-        let max_slots = max_texels / SLOT_TEXELS;
+        Self::for_slot_edge(bricks, max_texels, SLOT_TEXELS)
+    }
+
+    /// [`AtlasLayout::for_bricks`] for slots of `slot_texels` texels a side (the atlas's
+    /// [`SLOT_TEXELS`], or a fine density atlas's [`fine_slot_texels`]): the same slot
+    /// placement serves every atlas whose slots are at most that large.
+    pub fn for_slot_edge(bricks: usize, max_texels: u32, slot_texels: u32) -> Result<Self, ViewerError> {
+        let max_slots = max_texels / slot_texels.max(1);
         if max_slots == 0 {
             return Err(ViewerError::TooLarge(format!(
-                "3D textures limited to {max_texels} texels"
+                "3D textures limited to {max_texels} texels, slots of {slot_texels}"
             )));
         }
         let max_pow2_bits = max_slots.ilog2();
@@ -77,10 +89,16 @@ impl AtlasLayout {
 
     /// Atlas size in texels.
     pub fn texels(&self) -> [u32; 3] {
+        self.texels_for_slot_edge(SLOT_TEXELS)
+    }
+
+    /// Size in texels of an atlas with this slot placement and slots of `slot_texels`
+    /// texels a side (a fine density atlas: [`fine_slot_texels`]).
+    pub fn texels_for_slot_edge(&self, slot_texels: u32) -> [u32; 3] {
         [
-            (1 << self.x_bits) * SLOT_TEXELS,
-            (1 << self.y_bits) * SLOT_TEXELS,
-            self.slots_z * SLOT_TEXELS,
+            (1 << self.x_bits) * slot_texels,
+            (1 << self.y_bits) * slot_texels,
+            self.slots_z * slot_texels,
         ]
     }
 
@@ -533,6 +551,129 @@ pub fn fold_light(
     }
 }
 
+/// Texels along a fine density atlas slot's edge for factor `F`: the brick's `8F` fine
+/// voxels plus a 1-fine-voxel apron on each side.
+pub fn fine_slot_texels(factor: u32) -> u32 {
+    BRICK_SIZE as u32 * factor + 2
+}
+
+/// The fine density atlas (format 1.4, [`FineDensity`]): σ of the fine voxels as f16 bits,
+/// one slot of [`fine_slot_texels`]`³` texels per atlas slot, at the atlas's slot
+/// placement `layout` (slot `s` at slot coordinates `layout.slot_coords(s)`, texel
+/// extent `layout.texels_for_slot_edge(fine_slot_texels(F))`, x fastest). Texel
+/// `m + 1` (`m ∈ [−1, 8F]³`) of the slot of brick cell `c` (a present brick or a halo
+/// cell, [`Indirection`]) holds fine voxel `8F·c + m` of the whole grid: its own brick's
+/// inside, the neighbours' border fine voxels in the apron, 0 where that brick is
+/// missing (or outside the grid). Hardware trilinear filtering of a point in the cell's
+/// box then equals the reference's trilinear over the fine lattice
+/// (`nelf_render::FineGrid`), as for the atlas (module docs). Built once at load: no
+/// lighting changes it.
+pub fn fine_density_atlas(
+    layout: &AtlasLayout,
+    indirection: &Indirection,
+    grid_bricks: [u32; 3],
+    bricks: usize,
+    fine: &FineDensity,
+) -> Result<Vec<u16>, ViewerError> {
+    let per_brick = fine.voxels_per_brick();
+    if fine.values.len() != bricks * per_brick {
+        return Err(ViewerError::BadSetting(format!(
+            "{} fine density values for {bricks} bricks of {per_brick} fine voxels",
+            fine.values.len()
+        )));
+    }
+    let cells = grid_bricks.iter().map(|&n| n as usize).product::<usize>();
+    if indirection.entries.len() != cells {
+        return Err(ViewerError::BadSetting(format!(
+            "indirection of {} cells for a grid of {grid_bricks:?} bricks",
+            indirection.entries.len()
+        )));
+    }
+    let slot_texels = fine_slot_texels(fine.factor);
+    let extent = layout.texels_for_slot_edge(slot_texels);
+    let total = extent.iter().map(|&n| u64::from(n)).product::<u64>();
+    let total = usize::try_from(total)
+        .ok()
+        .filter(|&t| t <= isize::MAX as usize / 2)
+        .ok_or_else(|| ViewerError::TooLarge(format!("a fine density atlas of {extent:?} texels")))?;
+    let [ex, ey, _] = extent.map(|n| n as usize);
+    let mut texels = vec![0u16; total];
+    let edge = fine.brick_edge() as i64;
+    let n = grid_bricks.map(i64::from);
+    // Per fine coordinate m ∈ [−1, 8F] of a slot: the neighbouring cell's offset (−1, 0,
+    // +1) and the fine voxel's coordinate inside that cell.
+    let split = |m: i64| -> (usize, usize) {
+        if m < 0 {
+            (0, (m + edge) as usize)
+        } else if m >= edge {
+            (2, (m - edge) as usize)
+        } else {
+            (1, m as usize)
+        }
+    };
+    let axis: Vec<(usize, usize)> = (-1..=edge).map(split).collect();
+    let edge_u = edge as usize;
+    for (slot, cell) in indirection.slot_cells.iter().enumerate() {
+        // The present bricks among the 3³ cells around this one (index dx + 3dy + 9dz,
+        // offsets shifted by 1).
+        let near: [Option<usize>; 27] = std::array::from_fn(|d| {
+            let c = [d % 3, (d / 3) % 3, d / 9].map(|o| o as i64 - 1);
+            let g: [i64; 3] = std::array::from_fn(|a| i64::from(cell[a]) + c[a]);
+            if (0..3).any(|a| g[a] < 0 || g[a] >= n[a]) {
+                return None;
+            }
+            let entry = indirection.entries[(g[0] + n[0] * (g[1] + n[1] * g[2])) as usize];
+            entry.checked_sub(1).map(|s| s as usize).filter(|&s| s < bricks)
+        });
+        if near.iter().all(Option::is_none) {
+            continue;
+        }
+        let origin = layout
+            .slot_coords(slot as u32)
+            .map(|s| (s * slot_texels) as usize);
+        for (tz, &(dz, lz)) in axis.iter().enumerate() {
+            for (ty, &(dy, ly)) in axis.iter().enumerate() {
+                let row = origin[0] + ex * (origin[1] + ty + ey * (origin[2] + tz));
+                for (tx, &(dx, lx)) in axis.iter().enumerate() {
+                    if let Some(brick) = near[dx + 3 * dy + 9 * dz] {
+                        let value = fine.values[brick * per_brick + lx + edge_u * (ly + edge_u * lz)];
+                        texels[row + tx] = value.to_bits();
+                    }
+                }
+            }
+        }
+    }
+    Ok(texels)
+}
+
+/// Per stored voxel (brick-major, file order), the largest σ of its `F³` fine voxels:
+/// what [`march_grid`] reads of a fine density. A trilinear sample of the fine lattice
+/// has σ > 0 only within one fine voxel (`1/F` voxel) of a fine voxel with σ > 0, which
+/// lies within `½ − 1/(2F)` of its voxel's centre: within 1 voxel of a voxel marked
+/// here, so the march grid's distances stay safe for it.
+pub fn fine_density_per_voxel(fine: &FineDensity, bricks: usize) -> Result<Vec<half::f16>, ViewerError> {
+    let per_brick = fine.voxels_per_brick();
+    if fine.values.len() != bricks * per_brick {
+        return Err(ViewerError::BadSetting(format!(
+            "{} fine density values for {bricks} bricks of {per_brick} fine voxels",
+            fine.values.len()
+        )));
+    }
+    let f = fine.factor as usize;
+    let edge = fine.brick_edge();
+    let mut out = vec![half::f16::NEG_INFINITY; bricks * BRICK_VOXELS];
+    for (b, values) in fine.values.chunks_exact(per_brick.max(1)).enumerate() {
+        for (i, value) in values.iter().enumerate() {
+            let (x, y, z) = (i % edge, (i / edge) % edge, i / (edge * edge));
+            let voxel = b * BRICK_VOXELS + x / f + BRICK_SIZE * (y / f + BRICK_SIZE * (z / f));
+            if value.to_f32() > out[voxel].to_f32() {
+                out[voxel] = *value;
+            }
+        }
+    }
+    Ok(out)
+}
+
 /// Marker of an atlas texel that mirrors no stored voxel in [`atlas_sources`].
 pub const NO_SOURCE: u32 = u32::MAX;
 
@@ -696,12 +837,16 @@ pub struct GpuMemory {
     pub view_bytes: u64,
     /// Uniforms and the lighting buffer.
     pub other_bytes: u64,
+    /// The fine density atlas (format 1.4; R16F, with aprons and unused slots); 0 for an
+    /// asset without one.
+    pub fine_density_bytes: u64,
 }
 
 impl GpuMemory {
     /// Sum of all parts.
     pub fn total(&self) -> u64 {
         self.atlas_bytes
+            + self.fine_density_bytes
             + self.coefficient_bytes
             + self.density_bytes
             + self.march_grid_bytes
@@ -787,6 +932,95 @@ mod tests {
         let field = march_grid(grid, &indirection, &bricks, &empty, 2048).unwrap();
         assert!(field.texels.iter().all(|&t| t & 0xff == 255));
         assert!(march_grid(grid, &indirection, &bricks, &empty[1..], 2048).is_err());
+    }
+
+    #[test]
+    fn fine_density_atlas_mirrors_every_fine_voxel_at_its_place() {
+        // Three bricks in a 3×2×2 grid (with halo cells around them), distinct values per
+        // fine voxel; brute force over every texel of every slot, at both factors.
+        let grid = [3u32, 2, 2];
+        let bricks = [[0u16, 0, 0], [2, 1, 0], [1, 1, 1]];
+        let indirection = indirection_grid(grid, &bricks).unwrap();
+        for factor in [2u32, 4] {
+            let edge = 8 * i64::from(factor);
+            let per_brick = (edge * edge * edge) as usize;
+            let values: Vec<f16> = (0..bricks.len() * per_brick)
+                .map(|i| f16::from_f32(1.0 + (i % 1999) as f32))
+                .collect();
+            let fine = FineDensity { factor, values };
+            let slot_texels = fine_slot_texels(factor);
+            assert_eq!(i64::from(slot_texels), edge + 2);
+            let layout = AtlasLayout::for_slot_edge(indirection.slot_cells.len(), 2048, slot_texels).unwrap();
+            let texels = fine_density_atlas(&layout, &indirection, grid, bricks.len(), &fine).unwrap();
+            let extent = layout.texels_for_slot_edge(slot_texels).map(|n| n as usize);
+            assert_eq!(texels.len(), extent.iter().product::<usize>());
+            let mut nonzero = 0;
+            for (slot, cell) in indirection.slot_cells.iter().enumerate() {
+                let origin = layout.slot_coords(slot as u32);
+                for mz in -1..=edge {
+                    for my in -1..=edge {
+                        for mx in -1..=edge {
+                            let g = [mx, my, mz]
+                                .iter()
+                                .zip(cell)
+                                .map(|(&m, &c)| i64::from(c) * edge + m)
+                                .collect::<Vec<_>>();
+                            let brick = bricks
+                                .iter()
+                                .position(|b| (0..3).all(|a| i64::from(b[a]) == g[a].div_euclid(edge)));
+                            let want = brick.map_or(0, |b| {
+                                let l = g.iter().map(|v| v.rem_euclid(edge)).collect::<Vec<_>>();
+                                fine.values[b * per_brick + (l[0] + edge * (l[1] + edge * l[2])) as usize]
+                                    .to_bits()
+                            });
+                            let t: Vec<usize> = [mx, my, mz]
+                                .iter()
+                                .enumerate()
+                                .map(|(a, &m)| (i64::from(origin[a] * slot_texels) + m + 1) as usize)
+                                .collect();
+                            let got = texels[t[0] + extent[0] * (t[1] + extent[1] * t[2])];
+                            assert_eq!(got, want, "F {factor} slot {slot} at {mx},{my},{mz}");
+                            nonzero += usize::from(got != 0);
+                        }
+                    }
+                }
+            }
+            // Every fine voxel is in its own slot, and the aprons repeat some.
+            assert!(nonzero > fine.values.len(), "{nonzero}");
+            // Per voxel, the largest of its fine voxels.
+            let per_voxel = fine_density_per_voxel(&fine, bricks.len()).unwrap();
+            assert_eq!(per_voxel.len(), bricks.len() * BRICK_VOXELS);
+            let f = factor as usize;
+            for (v, got) in per_voxel.iter().enumerate() {
+                let (b, x, y, z) = (v / 512, v % 8, (v / 8) % 8, (v / 64) % 8);
+                let mut want = f32::NEG_INFINITY;
+                for (i, value) in fine.values[b * per_brick..(b + 1) * per_brick].iter().enumerate() {
+                    let e = 8 * f;
+                    if (i % e) / f == x && ((i / e) % e) / f == y && (i / (e * e)) / f == z {
+                        want = want.max(value.to_f32());
+                    }
+                }
+                assert_eq!(got.to_f32(), want, "voxel {v}");
+            }
+            // A count that does not match the bricks is an error.
+            let short = FineDensity {
+                factor,
+                values: fine.values[1..].to_vec(),
+            };
+            assert!(fine_density_atlas(&layout, &indirection, grid, bricks.len(), &short).is_err());
+            assert!(fine_density_per_voxel(&short, bricks.len()).is_err());
+        }
+        // Larger slots fit fewer per axis: the same slot count fails where the atlas's fit.
+        assert!(AtlasLayout::for_bricks(400, 256).is_ok());
+        assert!(AtlasLayout::for_slot_edge(400, 256, fine_slot_texels(4)).is_err());
+        let layout = AtlasLayout::for_slot_edge(100, 256, fine_slot_texels(4)).unwrap();
+        assert!(
+            layout
+                .texels_for_slot_edge(fine_slot_texels(4))
+                .iter()
+                .all(|&t| t <= 256)
+        );
+        assert_eq!(layout.texels(), layout.texels_for_slot_edge(SLOT_TEXELS));
     }
 
     #[test]

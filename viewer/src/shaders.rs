@@ -135,6 +135,9 @@ pub struct MarchParams {
     pub view: [u32; 4],
     /// Density-view scale (1/σ shown as white), unused ×3.
     pub scales: [f32; 4],
+    /// A fine density (format 1.4): `1 /` its atlas's size in texels; `w` = its factor `F`
+    /// (0: none, σ from the atlas).
+    pub fine: [f32; 4],
 }
 
 /// Sample counters written by the march when `COUNT_SAMPLES` is on (`Counters`).
@@ -259,6 +262,7 @@ mod tests {
                 image,
                 view,
                 scales,
+                fine,
             ]
         );
         assert_mirror!(march, Counters, [samples, steps]);

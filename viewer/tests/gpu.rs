@@ -13,6 +13,10 @@
 //!   GPU's error.
 //! * Relighting after an environment rotation equals a fresh relight with the rotated map;
 //!   at a held camera only the voxels it reads are relit, with the same image.
+//! * An asset with a fine density (format 1.4, factors 2 and 4, with missing bricks) too,
+//!   in every pass that marches (fragment and compute, the per-pixel replay, the marked
+//!   relight, the storage-free march of WebGL2); its image differs from the asset's
+//!   without the fine density by far more than the GPU's error.
 //! * A damaged or invalid asset is an error value, and the renderer keeps working.
 
 #![allow(clippy::unwrap_used)] // Test helpers outside #[test] functions unwrap too.
@@ -21,8 +25,8 @@ use glam::{DMat3, DVec3};
 use nelf_format::conventions::{ENV_W, LatLong, PinholeCamera, VIEW_HARMONICS, rotation_y};
 use nelf_format::synthetic::{SyntheticField, synthetic_reflection};
 use nelf_format::{
-    Asset, CoefficientEncoding, Coefficients, Reflection, ViewDependence, WriteOptions, read_asset,
-    write_asset,
+    Asset, CoefficientEncoding, Coefficients, FineDensity, Reflection, ViewDependence, WriteOptions,
+    read_asset, write_asset,
 };
 use nelf_render::{Image, MarchSettings, render_asset};
 use nelf_viewer::{
@@ -477,6 +481,224 @@ fn gpu_matches_cpu_for_reflection_assets() {
         assert!(psnr(&images[1], &got) < 40.0, "the rotation changed nothing");
         assert_eq!(gpu.last_relight(), Some(RelightKind::Full));
     }
+}
+
+/// A sphere's signed ramp for a lattice of voxel size `voxel`, at `p`: 0 a quarter voxel
+/// outside the surface, transmittance ½ a quarter voxel further in, negative outside
+/// (signed density), capped two voxels deep (render/tests/fine.rs, the baker's ramp scaled
+/// to the lattice).
+fn sphere_ramp(centre: DVec3, radius: f64, voxel: f64, p: DVec3) -> half::f16 {
+    let (lead, r) = (0.25 * voxel, 0.25 * voxel);
+    let slope = 2.0 * std::f64::consts::LN_2 / (r * r);
+    let cap = slope * (lead + 2.0 * voxel);
+    let d = (p - centre).length() - radius;
+    half::f16::from_f64((slope * (lead - d)).clamp(-cap, cap))
+}
+
+/// `asset` with a sphere's ramp as its voxels' density and, with `factor`, the same
+/// sphere's ramp at the fine voxels (format 1.4; each lattice's ramp scaled to its own
+/// voxel, as the baker stores it), written to a file and read back.
+fn with_fine_sphere(asset: &Asset, factor: Option<u32>) -> Asset {
+    let centre = DVec3::new(0.0, 0.01, 0.0);
+    let lo = DVec3::from_array(asset.grid.bbox_min_m);
+    let radius = 0.3 * (DVec3::from_array(asset.grid.bbox_max_m()) - lo).min_element();
+    let voxel = asset.grid.voxel_size_m;
+    let mut out = asset.clone();
+    out.density = (0..asset.voxel_count())
+        .map(|v| sphere_ramp(centre, radius, voxel, asset.voxel_position_m(v)))
+        .collect();
+    out.fine_density = factor.map(|factor| {
+        let edge = 8 * factor as usize;
+        let fine_voxel = voxel / f64::from(factor);
+        let mut values = Vec::with_capacity(asset.bricks.len() * edge * edge * edge);
+        for b in &asset.bricks {
+            for k in 0..edge {
+                for j in 0..edge {
+                    for i in 0..edge {
+                        let ijk = [
+                            usize::from(b[0]) * edge + i,
+                            usize::from(b[1]) * edge + j,
+                            usize::from(b[2]) * edge + k,
+                        ];
+                        let p =
+                            lo + (DVec3::new(ijk[0] as f64, ijk[1] as f64, ijk[2] as f64) + 0.5) * fine_voxel;
+                        values.push(sphere_ramp(centre, radius, fine_voxel, p));
+                    }
+                }
+            }
+        }
+        FineDensity { factor, values }
+    });
+    through_file(&out)
+}
+
+#[test]
+fn gpu_matches_cpu_for_fine_density() {
+    // A sphere's ramp at the voxels and, 2× and 4× finer, in the fine density, over a head
+    // with missing bricks (aprons and halo slots of both atlases matter): the GPU takes σ
+    // from the fine lattice with the fine step, as the CPU reference does, in the fragment
+    // and compute march, the per-pixel replay and the marked relight at a held camera, and
+    // the storage-free march of WebGL2; the image without the fine density is far off.
+    let mut gpu = renderer();
+    let mut plain =
+        GpuRenderer::from_device_without_storage(gpu.device().clone(), gpu.queue().clone()).unwrap();
+    let env = sky(64, 32);
+    let cam = camera(96, 80);
+    let head = without_bricks(
+        &asset_through_file(30_000, 6, CoefficientEncoding::U8Affine, 7),
+        |b| (b[0] + 2 * b[1] + b[2]) % 4 == 0,
+    );
+    let coarse = with_fine_sphere(&head, None);
+    let reference = |asset: &Asset, angle: f64, march: &MarchSettings| {
+        render_asset(asset, &cam, &env, rotation_y(angle), None, march).unwrap()
+    };
+    for factor in [2u32, 4] {
+        let asset = with_fine_sphere(&head, Some(factor));
+        let info = gpu.load_asset(&asset).unwrap();
+        assert_eq!(
+            (info.fine_density, info.fine_density_ignored),
+            (Some(factor), None)
+        );
+        assert!(info.memory.fine_density_bytes > 0);
+        gpu.set_lighting(&env, rotation_y(0.7)).unwrap();
+        for step_voxels in [0.5f32, 1.3] {
+            let march = MarchSettings {
+                step_voxels,
+                ..MarchSettings::default()
+            };
+            let settings = ViewSettings { march, ..no_jitter() };
+            let got = gpu.render(&cam, &settings).unwrap();
+            let compute = ViewSettings {
+                pass: MarchPass::Compute,
+                ..settings
+            };
+            assert_eq!(
+                gpu.render(&cam, &compute).unwrap(),
+                got,
+                "F {factor}: compute pass"
+            );
+            let want = reference(&asset, 0.7, &march);
+            let covered = want.alpha.iter().filter(|&&a| a > 0.5).count();
+            assert!(covered > 500, "the sphere covers only {covered} pixels");
+            let db = psnr(&want, &got);
+            // The same asset without its fine density (the voxels' ramp, what a renderer
+            // that ignored the section would draw).
+            let without = psnr(&want, &reference(&coarse, 0.7, &march));
+            eprintln!(
+                "fine density F {factor}, step {step_voxels}: PSNR {db:.1} dB ({covered} pixels covered); \
+                 without it {without:.1} dB"
+            );
+            assert!(db >= 45.0, "F {factor} step {step_voxels}: PSNR {db:.2} dB");
+            assert!(
+                without < 35.0,
+                "F {factor} step {step_voxels}: the fine density changes too little ({without:.1} dB)"
+            );
+        }
+        // Lighting changes at the held camera replay its pixels, then (without the cache)
+        // relight the voxels its march read: both read σ from the fine lattice.
+        for (budget, kind) in [
+            (nelf_viewer::DEFAULT_REPLAY_BUDGET_BYTES, RelightKind::Replay),
+            (0, RelightKind::Marked),
+        ] {
+            gpu.set_replay_budget_bytes(budget);
+            gpu.load_asset(&asset).unwrap();
+            gpu.set_lighting(&env, rotation_y(0.7)).unwrap();
+            gpu.render(&cam, &no_jitter()).unwrap();
+            for angle in [1.4, 2.6] {
+                gpu.set_light_rotation(rotation_y(angle)).unwrap();
+                let got = gpu.render(&cam, &no_jitter()).unwrap();
+                let db = psnr(&reference(&asset, angle, &MarchSettings::default()), &got);
+                eprintln!(
+                    "F {factor}, {:?} at {angle} rad: PSNR {db:.1} dB",
+                    gpu.last_relight()
+                );
+                assert!(db >= 45.0, "F {factor} {kind:?} at {angle} rad: PSNR {db:.2} dB");
+            }
+            assert_eq!(gpu.last_relight(), Some(kind), "F {factor}");
+        }
+        gpu.set_replay_budget_bytes(nelf_viewer::DEFAULT_REPLAY_BUDGET_BYTES);
+        // WebGL2's march (no storage bindings, the relight on the CPU) reads it too.
+        let info = plain.load_asset(&asset).unwrap();
+        assert_eq!(info.fine_density, Some(factor));
+        plain.set_lighting(&env, rotation_y(2.6)).unwrap();
+        let got = plain.render(&cam, &no_jitter()).unwrap();
+        let db = psnr(&reference(&asset, 2.6, &MarchSettings::default()), &got);
+        assert!(db >= 45.0, "F {factor}, storage-free: PSNR {db:.2} dB");
+    }
+    // Without a fine density nothing of it is reported or allocated.
+    let info = gpu.load_asset(&coarse).unwrap();
+    assert_eq!((info.fine_density, info.fine_density_ignored), (None, None));
+    assert_eq!(info.memory.fine_density_bytes, 0);
+}
+
+/// A renderer on a device whose 3D textures are at most `max_3d` texels a side.
+fn renderer_with_3d_textures(max_3d: u32) -> GpuRenderer {
+    pollster::block_on(async {
+        let instance = wgpu::Instance::new(wgpu::InstanceDescriptor::new_without_display_handle_from_env());
+        let adapter = instance
+            .request_adapter(&wgpu::RequestAdapterOptions::default())
+            .await
+            .unwrap();
+        let limits = wgpu::Limits {
+            max_texture_dimension_3d: max_3d,
+            ..wgpu::Limits::default()
+        };
+        let (device, queue) = adapter
+            .request_device(&wgpu::DeviceDescriptor {
+                label: Some("small 3D textures"),
+                required_limits: limits,
+                ..Default::default()
+            })
+            .await
+            .unwrap();
+        GpuRenderer::from_device(device, queue).unwrap()
+    })
+}
+
+#[test]
+fn a_fine_density_whose_atlas_does_not_fit_is_left_out_and_said_so() {
+    // On a device with 3D textures of 128 texels (WebGL2 under eframe allows 256) the fine
+    // density atlas of this head's 64 slots fits at F = 2 (7 slots of 18 texels a side, of
+    // which the layout's powers of two use 4 × 4 × 7) but not at F = 4 (3 slots of 34
+    // texels: 2 × 2 × 3): there the renderer shows the voxels' density, pixel for pixel
+    // the asset without the fine density, and says what it left out.
+    let mut gpu = renderer_with_3d_textures(128);
+    assert_eq!(gpu.device().limits().max_texture_dimension_3d, 128);
+    let env = sky(32, 16);
+    let cam = camera(96, 80);
+    let head = asset_through_file(30_000, 5, CoefficientEncoding::U8Affine, 3);
+    let coarse = with_fine_sphere(&head, None);
+    gpu.load_asset(&coarse).unwrap();
+    gpu.set_lighting(&env, rotation_y(0.3)).unwrap();
+    let coarse_image = gpu.render(&cam, &no_jitter()).unwrap();
+    let fine2 = with_fine_sphere(&head, Some(2));
+    let info = gpu.load_asset(&fine2).unwrap();
+    assert!(
+        info.bricks + info.halo_slots > 2 * 2 * 3,
+        "too few slots to overflow at F = 4"
+    );
+    assert_eq!((info.fine_density, info.fine_density_ignored), (Some(2), None));
+    gpu.set_lighting(&env, rotation_y(0.3)).unwrap();
+    let shown = gpu.render(&cam, &no_jitter()).unwrap();
+    let want = render_asset(
+        &fine2,
+        &cam,
+        &env,
+        rotation_y(0.3),
+        None,
+        &MarchSettings::default(),
+    )
+    .unwrap();
+    let db = psnr(&want, &shown);
+    assert!(db >= 45.0, "F 2 on small textures: PSNR {db:.2} dB");
+    let info = gpu.load_asset(&with_fine_sphere(&head, Some(4))).unwrap();
+    assert_eq!((info.fine_density, info.fine_density_ignored), (None, Some(4)));
+    assert_eq!(info.memory.fine_density_bytes, 0);
+    gpu.set_lighting(&env, rotation_y(0.3)).unwrap();
+    assert!(
+        gpu.render(&cam, &no_jitter()).unwrap() == coarse_image,
+        "F 4 left out: not the coarse image"
+    );
 }
 
 /// Runs `f32_to_half` and `half_to_f32` (common.wgsl; the lobe buffer's conversions) on

@@ -60,6 +60,8 @@ impl ViewerApp {
                     view: info.view,
                     reflection: info.reflection,
                     ignored: info.view_part_ignored,
+                    fine_density: info.fine_density,
+                    fine_density_ignored: info.fine_density_ignored,
                 };
                 self.rank = info.rank;
                 self.component = self.component.min(info.rank.saturating_sub(1));

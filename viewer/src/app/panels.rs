@@ -204,8 +204,9 @@ impl ViewerApp {
     }
 }
 
-/// The stats line of an asset: its PCA rank and whether it is view-dependent (format
-/// 1.2: `J` lobes over a view basis of rank `K_v`).
+/// The stats line of an asset: its PCA rank, whether it is view-dependent (format
+/// 1.2: `J` lobes over a view basis of rank `K_v`) and whether it has a fine density
+/// (format 1.4).
 fn asset_stats(rank: usize, parts: &AssetParts) -> String {
     let shown = match (parts.view, parts.reflection) {
         (Some(v), _) => format!(
@@ -222,6 +223,14 @@ fn asset_stats(rank: usize, parts: &AssetParts) -> String {
             if r.eyes == 1 { "" } else { "s" }
         ),
         (None, None) => format!("K = {rank}; view-independent"),
+    };
+    let shown = match (parts.fine_density, parts.fine_density_ignored) {
+        (Some(f), _) => format!("{shown}; fine density ({f}× finer)"),
+        (None, Some(f)) => format!(
+            "{shown}\nnot shown: its fine density ({f}× finer), whose atlas exceeds this \
+             device's 3D textures; this is the voxels' density"
+        ),
+        (None, None) => shown,
     };
     match parts.ignored {
         Some(part) => format!(
@@ -307,6 +316,24 @@ mod tests {
         let line = asset_stats(12, &parts);
         assert!(
             line.starts_with("K = 12; view-independent\nnot shown: its reflection part"),
+            "{line}"
+        );
+        // A fine density (format 1.4), shown or left out.
+        let parts = AssetParts {
+            fine_density: Some(4),
+            ..AssetParts::default()
+        };
+        assert_eq!(
+            asset_stats(12, &parts),
+            "K = 12; view-independent; fine density (4× finer)"
+        );
+        let parts = AssetParts {
+            fine_density_ignored: Some(2),
+            ..AssetParts::default()
+        };
+        let line = asset_stats(12, &parts);
+        assert!(
+            line.starts_with("K = 12; view-independent\nnot shown: its fine density (2× finer)"),
             "{line}"
         );
     }

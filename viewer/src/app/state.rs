@@ -82,13 +82,18 @@ pub(super) struct ViewerApp {
     pub(super) applied: AppliedLighting,
 }
 
-/// The view-dependent parts of the loaded asset, as the renderer reported them.
+/// The view-dependent parts and the fine density of the loaded asset, as the renderer
+/// reported them.
 #[derive(Debug, Clone, Copy, Default)]
 pub(super) struct AssetParts {
     pub(super) view: Option<ViewInfo>,
     pub(super) reflection: Option<ReflectionInfo>,
     /// The part the renderer left out (no compute shaders: WebGL2).
     pub(super) ignored: Option<&'static str>,
+    /// The factor of the fine density (format 1.4) the march samples.
+    pub(super) fine_density: Option<u32>,
+    /// The factor of a fine density the renderer left out (its atlas does not fit).
+    pub(super) fine_density_ignored: Option<u32>,
 }
 
 /// Rendering options of the UI.

@@ -14,7 +14,9 @@
 //! stopping right after `T < min_transmittance`; the output is `C` (premultiplied, over
 //! black) and alpha `1 − T_end` in an RGBA32F target. Empty space is skipped through the
 //! march grid (`atlas::MarchGrid`: per cube of voxels the distance to σ > 0 and its
-//! slot) without leaving the reference's sample lattice.
+//! slot) without leaving the reference's sample lattice. An asset with a fine density
+//! (format 1.4) takes `σ_i` from its fine density atlas at the same point and steps
+//! `step_voxels` fine voxels, as `nelf_render::render_volume_fine`.
 //!
 //! Two pipelines run the same `march_pixel`: a compute dispatch writing a storage texture
 //! (`march`; a second build with `COUNT_SAMPLES` counts samples into a buffer) and a
@@ -122,7 +124,8 @@ impl MarchPipelines {
     pub(super) fn new(device: &wgpu::Device, storage: bool) -> Result<Self, ViewerError> {
         use wgpu::ShaderStages as S;
         use wgpu::TextureViewDimension as D;
-        // The bindings every march reads: uniform, atlas, sampler, march grid.
+        // The bindings every march reads: uniform, atlas, sampler, fine density atlas,
+        // march grid.
         let read_entries = |stage: S| {
             vec![
                 uniform_entry(0, stage),
@@ -138,6 +141,12 @@ impl MarchPipelines {
                     ty: wgpu::BindingType::Sampler(wgpu::SamplerBindingType::Filtering),
                     count: None,
                 },
+                texture_entry(
+                    3,
+                    wgpu::TextureSampleType::Float { filterable: true },
+                    D::D3,
+                    stage,
+                ),
                 texture_entry(6, wgpu::TextureSampleType::Uint, D::D3, stage),
             ]
         };
@@ -217,7 +226,8 @@ impl MarchPipelines {
     }
 
     /// The bind groups of the compute and the fragment march: uniform `march_params`, the
-    /// relit atlas, the march grid, the voxel marks (`marks.rs`), the output `view`
+    /// relit atlas, the fine density atlas (a placeholder without one), the march grid,
+    /// the voxel marks (`marks.rs`), the output `view`
     /// (compute only) and the sample `counters` (compute only). Without storage bindings
     /// only the fragment march's, without marks.
     pub(super) fn bind_groups(
@@ -228,8 +238,8 @@ impl MarchPipelines {
         view: &wgpu::TextureView,
         counters: &wgpu::Buffer,
     ) -> (Option<wgpu::BindGroup>, wgpu::BindGroup) {
-        // Both read the uniform, atlas, sampler, march grid and marks; the compute march
-        // also writes the output view and the counters.
+        // Both read the uniform, atlas, sampler, fine density atlas, march grid and marks;
+        // the compute march also writes the output view and the counters.
         let mut shared = vec![
             wgpu::BindGroupEntry {
                 binding: 0,
@@ -242,6 +252,10 @@ impl MarchPipelines {
             wgpu::BindGroupEntry {
                 binding: 2,
                 resource: wgpu::BindingResource::Sampler(&self.sampler),
+            },
+            wgpu::BindGroupEntry {
+                binding: 3,
+                resource: wgpu::BindingResource::TextureView(&asset.fine.view),
             },
             wgpu::BindGroupEntry {
                 binding: 6,
@@ -348,6 +362,13 @@ impl GpuRenderer {
         let asset = self.asset.as_ref().ok_or(ViewerError::NoAsset)?;
         let grid = &asset.grid;
         let voxel = grid.voxel_size_m;
+        // With a fine density the step is `step_voxels` fine voxels (voxel / F), as the
+        // reference's `render_volume_fine`.
+        let step_voxel = match asset.fine.factor {
+            0 => voxel,
+            f => voxel / f64::from(f),
+        };
+        let fine_texels = asset.fine.texels;
         let centre = camera.centre();
         let origin: [f32; 3] =
             std::array::from_fn(|a| ((centre[a] - grid.bbox_min_m[a]) / voxel - 0.5) as f32);
@@ -380,7 +401,7 @@ impl GpuRenderer {
                 n[0],
                 n[1],
                 n[2],
-                (f64::from(settings.march.step_voxels) * voxel) as f32,
+                (f64::from(settings.march.step_voxels) * step_voxel) as f32,
             ],
             atlas_inv_size: [
                 1.0 / texels[0] as f32,
@@ -402,6 +423,12 @@ impl GpuRenderer {
             ],
             view: [view, asset.layout.x_bits, asset.layout.y_bits, 0],
             scales: [scale, 0.0, 0.0, 0.0],
+            fine: [
+                1.0 / fine_texels[0] as f32,
+                1.0 / fine_texels[1] as f32,
+                1.0 / fine_texels[2] as f32,
+                asset.fine.factor as f32,
+            ],
         })
     }
 }

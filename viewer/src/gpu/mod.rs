@@ -22,6 +22,12 @@
 //! of a glossy lobe about the mirror direction, looked up in the lighting filtered by the
 //! lobe). A view-independent asset takes exactly the path above.
 //!
+//! An asset with a fine density (format 1.4) adds a second, σ-only atlas at the fine
+//! resolution, built once at load (`atlas::fine_density_atlas`): the march takes σ from
+//! it and the radiance from the relit atlas at the same point, with a step of
+//! `step_voxels` fine voxels (`nelf_render::render_volume_fine`); every other pass is
+//! unchanged.
+//!
 //! One module per pass, as the shaders are (`shaders/*.wgsl`): `relight` (relight.wgsl),
 //! `marks` (the marked relight: relight.wgsl's `relight_marked`, march.wgsl's marking),
 //! `replay` (replay.wgsl: a held camera's frame relit per pixel),
@@ -92,6 +98,14 @@ pub struct AssetInfo {
     /// view-averaged light transport every reader can show. `None` where nothing was
     /// left out.
     pub view_part_ignored: Option<&'static str>,
+    /// The factor `F` of the asset's fine density (format 1.4) where the march takes σ
+    /// from it; `None` where the asset has none or it was left out.
+    pub fine_density: Option<u32>,
+    /// The factor of the asset's fine density where this renderer left it out because
+    /// its atlas does not fit the device's 3D textures (WebGL2 promises only 256 texels a
+    /// side): it then shows the voxels' density, the coarse asset every reader can show.
+    /// `None` where nothing was left out.
+    pub fine_density_ignored: Option<u32>,
 }
 
 /// What a view-dependent asset's view part holds ([`nelf_format::ViewDependence`]).
@@ -143,6 +157,8 @@ struct GpuAsset {
     coefficient_encoding: i32,
     atlas: wgpu::Texture,
     atlas_view: wgpu::TextureView,
+    /// The fine density atlas (format 1.4), or a placeholder.
+    fine: GpuFineDensity,
     /// The march grid (`atlas::MarchGrid`): distances for empty-space skipping and slots.
     march_grid_view: wgpu::TextureView,
     /// Voxels per march-grid texel edge.
@@ -163,6 +179,17 @@ struct GpuAsset {
     reflection: Option<GpuReflection>,
     voxel_count: usize,
     info: AssetInfo,
+}
+
+/// An asset's fine density on the GPU (format 1.4; `atlas::fine_density_atlas`): the
+/// march reads σ from it where `factor > 0`. An asset without one (or whose fine density
+/// was left out) binds a 1-texel placeholder with `factor = 0`.
+struct GpuFineDensity {
+    /// `F`, or 0 for none.
+    factor: u32,
+    /// Its atlas's size in texels.
+    texels: [u32; 3],
+    view: wgpu::TextureView,
 }
 
 /// Which passes a device runs.

@@ -1,20 +1,24 @@
 //! Asset upload: a validated asset becomes GPU resources (coefficients, densities,
-//! neighbour blocks, the march grid and the atlas the relight pass fills; a
+//! neighbour blocks, the march grid and the atlas the relight pass fills; a fine
+//! density's atlas (format 1.4); a
 //! view-dependent asset's view part, a reflection asset's reflection part, the marks and
 //! the replay's inputs), checked against the device's limits first; and what is known of
 //! the loaded asset.
 
-use nelf_format::Asset;
 use nelf_format::conventions::LT_DIM;
+use nelf_format::{Asset, FineDensity};
 use wgpu::util::DeviceExt as _;
 
 use super::marks::GpuMarks;
 use super::reflect::{GpuReflection, REFLECT_LOBE_WORDS, ReflectPipeline};
 use super::replay::ReplayInputs;
 use super::view::{GpuView, LobesPipeline, ViewBindings, ViewPipeline, lobe_buffer_words};
-use super::{AssetInfo, AtlasState, CpuRelight, GpuAsset, GpuRenderer, ReflectionInfo, ViewInfo};
+use super::{
+    AssetInfo, AtlasState, CpuRelight, GpuAsset, GpuFineDensity, GpuRenderer, ReflectionInfo, ViewInfo,
+};
 use crate::atlas::{
-    AtlasLayout, Dequantization, GpuMemory, atlas_sources, indirection_grid, march_grid, neighbour_blocks,
+    AtlasLayout, Dequantization, GpuMemory, Indirection, atlas_sources, fine_density_atlas,
+    fine_density_per_voxel, fine_slot_texels, indirection_grid, march_grid, neighbour_blocks,
     pack_brick_cells, pack_coefficients, pack_density,
 };
 use crate::error::ViewerError;
@@ -37,7 +41,9 @@ impl GpuRenderer {
     /// previous asset in place): coefficients, densities, brick list, indirection grid,
     /// and an atlas the relight pass fills; for a view-dependent asset also its view
     /// coefficients and a per-voxel lobe buffer (`gpu/view.rs`), for a reflection asset its
-    /// tabulated lobe, codes and lobe buffer (`gpu/reflect.rs`). Lighting, if set, is
+    /// tabulated lobe, codes and lobe buffer (`gpu/reflect.rs`), for an asset with a fine
+    /// density (format 1.4) its atlas, from which the march takes σ
+    /// ([`AssetInfo::fine_density_ignored`] says where it did not fit). Lighting, if set, is
     /// re-projected onto the new basis. A device without compute shaders (WebGL2) leaves
     /// the view-dependent part out and shows the view-averaged asset
     /// ([`AssetInfo::view_part_ignored`] names what it left out).
@@ -64,14 +70,31 @@ impl GpuRenderer {
             )));
         }
         let indirection = indirection_grid(grid_bricks, &asset.bricks)?;
+        // A fine density (format 1.4) gets an atlas of its own at the same slot placement,
+        // its slots larger: where that does not fit the device's 3D textures, the renderer
+        // shows the voxels' density (what a reader without the section shows) and says so.
+        let slots = indirection.slot_cells.len();
+        let max_3d = limits.max_texture_dimension_3d;
+        let (layout, fine_part, fine_density_ignored) = match &asset.fine_density {
+            Some(fine) => match AtlasLayout::for_slot_edge(slots, max_3d, fine_slot_texels(fine.factor)) {
+                Ok(layout) => (layout, Some(fine), None),
+                Err(_) => (AtlasLayout::for_bricks(slots, max_3d)?, None, Some(fine.factor)),
+            },
+            None => (AtlasLayout::for_bricks(slots, max_3d)?, None, None),
+        };
+        // With a fine density the march grid skips what is empty of it.
+        let fine_per_voxel = fine_part
+            .map(|fine| fine_density_per_voxel(fine, asset.bricks.len()))
+            .transpose()?;
         let march_grid = march_grid(
             grid_bricks,
             &indirection,
             &asset.bricks,
-            &asset.density,
-            limits.max_texture_dimension_3d,
+            fine_per_voxel.as_deref().unwrap_or(&asset.density),
+            max_3d,
         )?;
-        let layout = AtlasLayout::for_bricks(indirection.slot_cells.len(), limits.max_texture_dimension_3d)?;
+        let fine =
+            self.upload_fine_density(&layout, &indirection, grid_bricks, asset.bricks.len(), fine_part)?;
         let coefficients = pack_coefficients(&asset.coefficients);
         let density = pack_density(&asset.density);
         let neighbours = neighbour_blocks(&indirection, grid_bricks, &asset.bricks);
@@ -250,6 +273,11 @@ impl GpuRenderer {
             });
         let memory = GpuMemory {
             atlas_bytes: u64::from(texels[0]) * u64::from(texels[1]) * u64::from(texels[2]) * 8,
+            fine_density_bytes: if fine.factor > 0 {
+                fine.texels.iter().map(|&n| u64::from(n)).product::<u64>() * 2
+            } else {
+                0
+            },
             coefficient_bytes: coefficient_buffer.size(),
             density_bytes: density_buffer.size(),
             march_grid_bytes: march_grid.texels.len() as u64 * 4,
@@ -261,7 +289,11 @@ impl GpuRenderer {
                 + brick_cells.size()
                 + marks.as_ref().map_or(0, GpuMarks::bytes),
         };
-        let max_density_per_m = asset.density.iter().map(|d| d.to_f32()).fold(0.0f32, f32::max);
+        let max_density_per_m = fine_part
+            .map_or(&asset.density, |f| &f.values)
+            .iter()
+            .map(|d| d.to_f32())
+            .fold(0.0f32, f32::max);
         let info = AssetInfo {
             bricks: asset.bricks.len(),
             halo_slots: indirection.halo_count(asset.bricks.len()),
@@ -279,6 +311,8 @@ impl GpuRenderer {
                 eyes: r.eyes_m.len(),
             }),
             view_part_ignored,
+            fine_density: fine_part.map(|f| f.factor),
+            fine_density_ignored,
         };
         let dequantization = Dequantization::of(&asset.coefficients);
         let replay = self.pipelines.replay.is_some().then(|| ReplayInputs {
@@ -298,6 +332,7 @@ impl GpuRenderer {
             coefficient_encoding: coefficients.encoding,
             atlas,
             atlas_view,
+            fine,
             march_grid_view,
             march_grid_factor: march_grid.factor,
             relight_params,
@@ -328,6 +363,50 @@ impl GpuRenderer {
             self.set_lighting(&lighting.env, lighting.world_from_env)?;
         }
         Ok(info)
+    }
+
+    /// The fine density atlas of `fine` (`atlas::fine_density_atlas`, at the slot placement
+    /// `layout`) as an R16F 3D texture, or a 1-texel placeholder where there is none.
+    fn upload_fine_density(
+        &self,
+        layout: &AtlasLayout,
+        indirection: &Indirection,
+        grid_bricks: [u32; 3],
+        bricks: usize,
+        fine: Option<&FineDensity>,
+    ) -> Result<GpuFineDensity, ViewerError> {
+        let (factor, texels, data) = match fine {
+            Some(fine) => (
+                fine.factor,
+                layout.texels_for_slot_edge(fine_slot_texels(fine.factor)),
+                fine_density_atlas(layout, indirection, grid_bricks, bricks, fine)?,
+            ),
+            None => (0, [1, 1, 1], vec![0u16]),
+        };
+        let texture = self.device.create_texture_with_data(
+            &self.queue,
+            &wgpu::TextureDescriptor {
+                label: Some("fine density"),
+                size: wgpu::Extent3d {
+                    width: texels[0],
+                    height: texels[1],
+                    depth_or_array_layers: texels[2],
+                },
+                mip_level_count: 1,
+                sample_count: 1,
+                dimension: wgpu::TextureDimension::D3,
+                format: wgpu::TextureFormat::R16Float,
+                usage: wgpu::TextureUsages::TEXTURE_BINDING | wgpu::TextureUsages::COPY_DST,
+                view_formats: &[],
+            },
+            wgpu::util::TextureDataOrder::LayerMajor,
+            bytemuck::cast_slice(&data),
+        );
+        Ok(GpuFineDensity {
+            factor,
+            texels,
+            view: texture.create_view(&wgpu::TextureViewDescriptor::default()),
+        })
     }
 
     /// Edge length of one voxel of the loaded asset, metres.
