@@ -15,7 +15,7 @@ use half::f16;
 
 use crate::conventions::{LT_DIM, VIEW_HARMONICS, is_rotation, view_harmonics};
 use crate::error::{FormatError, Result};
-use crate::grid::BRICK_VOXELS;
+use crate::grid::{BRICK_SIZE, BRICK_VOXELS, FINE_DENSITY_FACTORS};
 pub use crate::grid::{GridGeometry, brick_order_key, local_voxel_coords, local_voxel_index};
 
 /// The PCA model of light-transport vectors: `T ≈ mean + Σ_k c_k · basis[k]`.
@@ -779,7 +779,7 @@ pub struct BrickData {
 /// from the voxels as before; one that does not renders `DENS`, the coarse asset.
 #[derive(Debug, Clone, PartialEq)]
 pub struct FineDensity {
-    /// `F`, one of [`crate::spec::FINE_DENSITY_FACTORS`] (2 or 4).
+    /// `F`, one of [`FINE_DENSITY_FACTORS`] (2 or 4).
     pub factor: u32,
     /// σ (1/m) per fine voxel, `bricks × 512·F³`, brick order, x fastest inside a brick.
     pub values: Vec<f16>,
@@ -793,12 +793,12 @@ impl FineDensity {
 
     /// Fine voxels along a brick's edge, `8F`.
     pub fn brick_edge(&self) -> usize {
-        crate::spec::BRICK_SIZE * self.factor as usize
+        BRICK_SIZE * self.factor as usize
     }
 
     /// Checks the factor, the count for `bricks` bricks and the values (finite).
     pub fn validate(&self, bricks: usize) -> Result<()> {
-        if !crate::spec::FINE_DENSITY_FACTORS.contains(&self.factor) {
+        if !FINE_DENSITY_FACTORS.contains(&self.factor) {
             return Err(FormatError::InvalidAsset(format!(
                 "fine density factor {} must be 2 or 4",
                 self.factor

@@ -8,6 +8,9 @@ use glam::DVec3;
 pub const BRICK_SIZE: usize = 8;
 /// Voxels in one brick (`8³`).
 pub const BRICK_VOXELS: usize = BRICK_SIZE * BRICK_SIZE * BRICK_SIZE;
+/// Fine-density factors `F` a file may declare (format 1.4, header `fine_density_factor`,
+/// section `DNSF`).
+pub const FINE_DENSITY_FACTORS: [u32; 2] = [2, 4];
 /// Largest grid extent, in bricks, along any axis (brick coordinates are `u16`).
 pub const MAX_GRID_BRICKS: u32 = 65_536;
 

@@ -11,7 +11,7 @@ use crate::asset::CoefficientEncoding;
 use crate::conventions::{ENV_H, ENV_W, LT_DIM, VIEW_HARMONICS, is_rotation};
 use crate::error::{FormatError, Result};
 use crate::grid::GridGeometry;
-pub use crate::grid::{BRICK_SIZE, BRICK_VOXELS, MAX_GRID_BRICKS};
+pub use crate::grid::{BRICK_SIZE, BRICK_VOXELS, FINE_DENSITY_FACTORS, MAX_GRID_BRICKS};
 
 /// File magic: `\x89 N E L F \r \n \x1a` (a high byte and line endings catch text-mode damage).
 pub const MAGIC: [u8; 8] = [0x89, b'N', b'E', b'L', b'F', 0x0D, 0x0A, 0x1A];
@@ -89,8 +89,6 @@ pub const KIND_REFLECTION_VALUES: SectionKind = *b"VRCO";
 /// The fine density (1.4, optional): σ (1/m) as `f16` on a lattice `F` times finer per
 /// axis than the voxels, `512·F³` values per brick, chunked (SPEC.md §6 `DNSF`).
 pub const KIND_FINE_DENSITY: SectionKind = *b"DNSF";
-/// Fine-density factors `F` a file may declare (header `fine_density_factor`).
-pub const FINE_DENSITY_FACTORS: [u32; 2] = [2, 4];
 /// Decoded bytes of one brick of `DNSF` at factor `factor` (`2 · 512 · F³`).
 pub const fn fine_density_bytes_per_brick(factor: u32) -> u64 {
     2 * BRICK_VOXELS as u64 * (factor as u64).pow(3)
