@@ -62,9 +62,9 @@ pub fn fine_mesh_field(
 }
 
 /// Whether every edge of `mesh` is shared by an even number of triangles (two; four
-/// where a surface touches itself, as surface nets can make) once vertices at the
-/// the same position (to 1 µm) are welded (a closed surface; UV seams do not open it). `auto` gives a
-/// fine density only to such meshes: on a one-sided sheet folded in two
+/// where a surface touches itself, as surface nets can make) once vertices at the same
+/// position (to 1 µm) are welded: a closed surface, which UV seams do not open. `auto`
+/// gives a fine density only to such meshes: on a one-sided sheet folded in two
 /// (`tests/defects.rs`) the fine lattice opened a dark spot at the fold on the back
 /// (interior 21.5 dB against ≥ 27 with the voxels alone; cause not yet found), and on
 /// the head-and-shoulders figure, whose open collar is a sheet, it gains only 0.3 dB.
