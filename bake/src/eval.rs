@@ -273,6 +273,49 @@ pub fn held_aside_psnr(asset: &Asset, views: &HeldAside, step_voxels: f32, pixel
     Ok(sum / views.len().max(1) as f64)
 }
 
+/// [`held_aside_psnr`] of each of `variants`, assets that share one density (bricks,
+/// `DENS`, `DNSF` and grid: versions of one bake that differ only in their shading
+/// parts, e.g. the view-dependence candidates): every view is marched once for all of
+/// them ([`nelf_render::render_asset_radiances`]), so judging `n` candidates costs about
+/// one render per view instead of `n`, with the same figures.
+pub fn held_aside_psnrs(
+    variants: &[&Asset],
+    views: &HeldAside,
+    step_voxels: f32,
+    pixel_grid: u32,
+) -> Result<Vec<f64>> {
+    let Some(first) = variants.first() else {
+        return Ok(Vec::new());
+    };
+    if let Some(other) = variants.iter().position(|a| {
+        a.grid != first.grid
+            || a.bricks != first.bricks
+            || a.density != first.density
+            || a.fine_density != first.fine_density
+    }) {
+        return Err(BakeError::Settings(format!(
+            "judging variants of one asset: variant {other} has another density than variant 0"
+        )));
+    }
+    let settings = MarchSettings {
+        step_voxels,
+        pixel_grid,
+        ..MarchSettings::default()
+    };
+    let mut sums = vec![0.0; variants.len()];
+    for ((camera, truth), env) in views.cameras.iter().zip(&views.images).zip(&views.envs) {
+        let radiances = variants
+            .iter()
+            .map(|a| nelf_render::asset_radiance(a, camera, env, DMat3::IDENTITY, None))
+            .collect::<std::result::Result<Vec<_>, _>>()?;
+        let images = nelf_render::render_asset_radiances(first, &radiances, camera, &settings)?;
+        for (sum, image) in sums.iter_mut().zip(&images) {
+            *sum += psnr(&image.rgb, truth, f64::from(data_range(truth)))?;
+        }
+    }
+    Ok(sums.into_iter().map(|s| s / views.len().max(1) as f64).collect())
+}
+
 /// Bytes of `asset` as written with the default options.
 pub fn encoded_bytes(asset: &Asset) -> Result<u64> {
     encoded_bytes_with(asset, &nelf_format::WriteOptions::default())

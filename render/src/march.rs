@@ -503,40 +503,81 @@ fn composite<D: DensityAt + ?Sized>(
     settings: &MarchSettings,
     shade: impl Fn(&[(usize, f32)], DVec3) -> [f32; 3] + Sync,
 ) -> (Image, MarchStats) {
-    let mut image = Image::new(camera.width, camera.height);
+    let (mut images, stats) = composite_many(marcher, camera, settings, 1, |corners, p, out| {
+        out[0] = shade(corners, p);
+    });
+    let image = images
+        .pop()
+        .unwrap_or_else(|| Image::new(camera.width, camera.height));
+    (image, stats)
+}
+
+/// One row of each of [`composite_many`]'s images, its coverage and its counters.
+type RowOfImages = (Vec<Vec<[f32; 3]>>, Vec<f32>, MarchStats);
+
+/// [`composite`] of `count` colours per sample (`shade(corners, p, out)` writes them to
+/// `out`, `count` long) with the same samples and weights: `count` images.
+fn composite_many<D: DensityAt + ?Sized>(
+    marcher: &Marcher<'_, D>,
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+    count: usize,
+    shade: impl Fn(&[(usize, f32)], DVec3, &mut [[f32; 3]]) + Sync,
+) -> (Vec<Image>, MarchStats) {
     let width = camera.width as usize;
-    let stats = image
-        .rgb
-        .par_chunks_mut(width)
-        .zip(image.alpha.par_chunks_mut(width))
-        .enumerate()
-        .map(|(row, (rgb_row, alpha_row))| {
+    let rows: Vec<RowOfImages> = (0..camera.height as usize)
+        .into_par_iter()
+        .map(|row| {
             let mut stats = MarchStats::default();
             let n = settings.pixel_grid;
             let share = 1.0 / (n * n) as f32;
-            for (col, (rgb, alpha)) in rgb_row.iter_mut().zip(alpha_row.iter_mut()).enumerate() {
-                let (mut pixel_rgb, mut pixel_alpha) = ([0.0f32; 3], 0.0f32);
+            let mut rgb_rows = vec![vec![[0.0f32; 3]; width]; count];
+            let mut alpha_row = vec![0.0f32; width];
+            let mut colours = vec![[0.0f32; 3]; count];
+            let mut sums = vec![[0.0f32; 3]; count];
+            let mut pixel_rgb = vec![[0.0f32; 3]; count];
+            for (col, alpha) in alpha_row.iter_mut().enumerate() {
+                pixel_rgb.fill([0.0; 3]);
+                let mut pixel_alpha = 0.0f32;
                 for (origin, dir) in pixel_rays(camera, col, row, n) {
-                    let mut sum = [0.0f32; 3];
+                    sums.fill([0.0; 3]);
                     let t_end = marcher.march(origin, dir, &mut stats, |w, corners, p| {
-                        let c = shade(corners, p);
-                        for ch in 0..3 {
-                            sum[ch] += w * c[ch];
+                        shade(corners, p, &mut colours);
+                        for (sum, c) in sums.iter_mut().zip(&colours) {
+                            for ch in 0..3 {
+                                sum[ch] += w * c[ch];
+                            }
                         }
                     });
                     // For n = 1, share = 1 and 0 + 1·x = x: the plain render, bit for bit.
-                    for ch in 0..3 {
-                        pixel_rgb[ch] += share * sum[ch];
+                    for (pixel, sum) in pixel_rgb.iter_mut().zip(&sums) {
+                        for ch in 0..3 {
+                            pixel[ch] += share * sum[ch];
+                        }
                     }
                     pixel_alpha += share * (1.0 - t_end);
                 }
-                *rgb = pixel_rgb;
+                for (rgb_row, pixel) in rgb_rows.iter_mut().zip(&pixel_rgb) {
+                    rgb_row[col] = *pixel;
+                }
                 *alpha = pixel_alpha;
             }
-            stats
+            (rgb_rows, alpha_row, stats)
         })
-        .reduce(MarchStats::default, |a, b| a + b);
-    (image, stats)
+        .collect();
+    let mut images: Vec<Image> = (0..count)
+        .map(|_| Image::new(camera.width, camera.height))
+        .collect();
+    let mut stats = MarchStats::default();
+    for (row, (rgb_rows, alpha_row, row_stats)) in rows.into_iter().enumerate() {
+        let span = row * width..(row + 1) * width;
+        for (image, rgb_row) in images.iter_mut().zip(rgb_rows) {
+            image.rgb[span.clone()].copy_from_slice(&rgb_row);
+            image.alpha[span.clone()].copy_from_slice(&alpha_row);
+        }
+        stats = stats + row_stats;
+    }
+    (images, stats)
 }
 
 /// Renders an arbitrary per-voxel feature vector (`dim` floats per voxel, voxel-major)
@@ -676,8 +717,26 @@ pub fn render_asset(
     rank: Option<usize>,
     settings: &MarchSettings,
 ) -> Result<Image, RenderError> {
-    asset.validate()?;
+    let radiance = asset_radiance(asset, camera, env, world_from_env, rank)?;
     let grid = BrickGrid::from_asset(asset)?;
+    match FineGrid::from_asset(asset)? {
+        Some(fine) => render_volume_fine(&grid, &radiance, &fine, camera, settings),
+        None => render_volume(&grid, &asset_density(asset), &radiance, camera, settings),
+    }
+}
+
+/// The radiance of every voxel of `asset` as [`render_asset`] marches it: checks the
+/// asset, projects `env` (turned by `world_from_env`), shades with the first `rank`
+/// components (default all) and adds the view and reflection parts seen from the
+/// camera's centre.
+pub fn asset_radiance(
+    asset: &Asset,
+    camera: &PinholeCamera,
+    env: &LatLong,
+    world_from_env: glam::DMat3,
+    rank: Option<usize>,
+) -> Result<Vec<[f32; 3]>, RenderError> {
+    asset.validate()?;
     let light = project_light(&asset.pca, asset.world_from_light, env, world_from_env)?;
     let mut radiance = voxel_radiance(asset, &light, rank);
     if let Some(view) = &asset.view {
@@ -689,8 +748,57 @@ pub fn render_asset(
         let filtered = filtered_environment(asset, reflection, env, world_from_env)?;
         radiance = reflection_seen_from(asset, reflection, &radiance, &filtered, camera.centre());
     }
-    match FineGrid::from_asset(asset)? {
-        Some(fine) => render_volume_fine(&grid, &radiance, &fine, camera, settings),
-        None => render_volume(&grid, &asset_density(asset), &radiance, camera, settings),
+    Ok(radiance)
+}
+
+/// Marches `asset`'s density (its fine density where it has one) once and composites
+/// each of `radiances` (per voxel of the asset, e.g. [`asset_radiance`] of variants of
+/// it that differ only in their view or reflection parts) with the same samples and
+/// weights: image `k` equals [`render_asset`]'s for the radiance `radiances[k]`, bit for
+/// bit, at about the cost of one render (the march, not the shading, is what costs).
+pub fn render_asset_radiances(
+    asset: &Asset,
+    radiances: &[Vec<[f32; 3]>],
+    camera: &PinholeCamera,
+    settings: &MarchSettings,
+) -> Result<Vec<Image>, RenderError> {
+    asset.validate()?;
+    let grid = BrickGrid::from_asset(asset)?;
+    for radiance in radiances {
+        if radiance.len() != grid.voxel_count() {
+            return Err(RenderError::LengthMismatch {
+                what: "radiance",
+                expected: grid.voxel_count(),
+                found: radiance.len(),
+            });
+        }
     }
+    let shade = |corners: &[(usize, f32)], out: &mut [[f32; 3]]| {
+        for (c, radiance) in out.iter_mut().zip(radiances) {
+            *c = [0.0; 3];
+            for &(v, cw) in corners {
+                let r = radiance[v];
+                for ch in 0..3 {
+                    c[ch] += cw * r[ch];
+                }
+            }
+        }
+    };
+    if let Some(fine) = FineGrid::from_asset(asset)? {
+        check_inputs(&fine.grid, &fine.density, camera, settings)?;
+        let marcher = Marcher::new(&fine.grid, fine.density.as_slice(), *settings, Skipping::On);
+        let (images, _) = composite_many(&marcher, camera, settings, radiances.len(), |_, p, out| {
+            let mut corners = [(0usize, 0.0f32); 8];
+            let n = grid.trilinear(p, &mut corners);
+            shade(&corners[..n], out);
+        });
+        return Ok(images);
+    }
+    let density = asset_density(asset);
+    check_inputs(&grid, &density, camera, settings)?;
+    let marcher = Marcher::new(&grid, density.as_slice(), *settings, Skipping::On);
+    let (images, _) = composite_many(&marcher, camera, settings, radiances.len(), |corners, _, out| {
+        shade(corners, out);
+    });
+    Ok(images)
 }

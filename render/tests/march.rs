@@ -451,3 +451,61 @@ fn feature_renders_are_renders_of_linear_radiance() {
     }
     assert!(render_features(&grid, &density, &[0.0; 3], 4, &camera, &MarchSettings::default()).is_err());
 }
+
+/// Variants of one asset that differ only in their shading parts (none, a view part,
+/// reflection parts of two exponents), marched once by `render_asset_radiances`, give
+/// each variant's own `render_asset` image bit for bit, with and without a fine
+/// density, at one and at 2 × 2 rays per pixel; radiances of the wrong length are refused.
+#[test]
+fn variants_marched_once_are_their_own_renders() {
+    use nelf_format::synthetic::{synthetic_reflection, synthetic_view};
+    use nelf_render::{asset_radiance, render_asset, render_asset_radiances};
+    let base = synthetic(6000, 4, CoefficientEncoding::U8Affine, 11);
+    let mut fine = base.clone();
+    let factor = 2u32;
+    let per_brick = 512 * (factor as usize).pow(3);
+    fine.fine_density = Some(nelf_format::FineDensity {
+        factor,
+        values: (0..base.bricks.len() * per_brick)
+            .map(|i| half::f16::from_f32(40.0 * ((i % 7) as f32)))
+            .collect(),
+    });
+    let env = random_map(16, 8, 5, 1.0);
+    let camera = orbit_camera(25.0, 10.0, 0.6, 40, 32);
+    for asset in [&base, &fine] {
+        let mut variants = vec![asset.clone()];
+        let mut viewed = asset.clone();
+        viewed.view = Some(synthetic_view(asset, 3, 4, CoefficientEncoding::U8Affine, 2).unwrap());
+        variants.push(viewed);
+        for exponent in [10.0, 40.0] {
+            let mut reflected = asset.clone();
+            reflected.reflection = Some(synthetic_reflection(asset, exponent, 3).unwrap());
+            variants.push(reflected);
+        }
+        for pixel_grid in [1, 2] {
+            let settings = MarchSettings {
+                pixel_grid,
+                ..MarchSettings::default()
+            };
+            let radiances: Vec<Vec<[f32; 3]>> = variants
+                .iter()
+                .map(|v| asset_radiance(v, &camera, &env, DMat3::IDENTITY, None).unwrap())
+                .collect();
+            let images = render_asset_radiances(asset, &radiances, &camera, &settings).unwrap();
+            assert_eq!(images.len(), variants.len());
+            for (variant, image) in variants.iter().zip(&images) {
+                let own = render_asset(variant, &camera, &env, DMat3::IDENTITY, None, &settings).unwrap();
+                assert_eq!(own.rgb, image.rgb);
+                assert_eq!(own.alpha, image.alpha);
+                assert!(own.alpha.iter().any(|&a| a > 0.1), "the camera sees the asset");
+            }
+            // The variants' images differ: the shading parts are there.
+            assert_ne!(images[0].rgb, images[2].rgb);
+        }
+    }
+    let short = vec![vec![[0.0f32; 3]; base.voxel_count() - 1]];
+    assert!(matches!(
+        render_asset_radiances(&base, &short, &camera, &MarchSettings::default()),
+        Err(RenderError::LengthMismatch { .. })
+    ));
+}

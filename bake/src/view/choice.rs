@@ -184,7 +184,9 @@ struct JudgeList<'a> {
 
 /// Builds and judges the view part of each of `list.choices` and, with `reflect`, the
 /// reflection part of each of `list.exponents`, from `fit` (whose [`ViewFit::entries`] index
-/// `lt_voxels`) on top of `asset`; `base_psnr_db` is the view-independent asset's.
+/// `lt_voxels`) on top of `asset`, the view-independent asset, judged in the same march
+/// ([`crate::eval::held_aside_psnrs`]): its PSNR (`None` without judging views) and the
+/// candidates.
 #[allow(clippy::too_many_arguments)] // the asset, the fit and its band, what to judge and where
 fn judge_candidates(
     asset: &nelf_format::Asset,
@@ -193,20 +195,12 @@ fn judge_candidates(
     list: &JudgeList,
     reflect: Option<&ReflectionTarget>,
     views: &crate::eval::HeldAside,
-    base_psnr_db: Option<f64>,
     bytes: &crate::eval::ExtraBytes,
     step_voxels: f32,
-) -> Result<Vec<JudgedPart>> {
+) -> Result<(Option<f64>, Vec<JudgedPart>)> {
     let encoding = asset.coefficients.encoding();
     let voxels = asset.voxel_count();
-    let judge = |with: &nelf_format::Asset| -> Result<Option<f64>> {
-        if views.is_empty() {
-            Ok(None)
-        } else {
-            Ok(Some(judge_psnr(with, views, step_voxels, list.pixel_grid)?))
-        }
-    };
-    let mut out = Vec::new();
+    let mut built: Vec<(ViewCandidate, nelf_format::Asset)> = Vec::new();
     for &(choice, rank) in list.choices {
         let lobes = fit.lobes(choice);
         let part = if fit.skipped {
@@ -225,17 +219,16 @@ fn judge_candidates(
         };
         let mut with = asset.clone();
         with.view = Some(part);
-        let psnr_db = judge(&with)?;
         let candidate = ViewCandidate {
             choice,
             lobes: with.view.as_ref().map_or(0, ViewDependence::lobe_count),
             rank: with.view.as_ref().map_or(0, ViewDependence::rank),
             exponent: None,
-            psnr_db,
-            gain_db: psnr_db.zip(base_psnr_db).map(|(a, b)| a - b),
+            psnr_db: None,
+            gain_db: None,
             bytes: bytes.of(&with)?,
         };
-        out.push((candidate, (with.view, None)));
+        built.push((candidate, with));
     }
     // The reflection part, one candidate per exponent.
     if let Some(target) = reflect {
@@ -253,20 +246,35 @@ fn judge_candidates(
             let mut with = asset.clone();
             with.view = None;
             with.reflection = Some(part);
-            let psnr_db = judge(&with)?;
             let candidate = ViewCandidate {
                 choice: ViewChoice::Reflect,
                 lobes: 1,
                 rank: 0,
                 exponent: Some(REFLECT_EXPONENTS[k]),
-                psnr_db,
-                gain_db: psnr_db.zip(base_psnr_db).map(|(a, b)| a - b),
+                psnr_db: None,
+                gain_db: None,
                 bytes: bytes.of(&with)?,
             };
-            out.push((candidate, (None, with.reflection)));
+            built.push((candidate, with));
         }
     }
-    Ok(out)
+    let mut base_psnr_db = None;
+    if !views.is_empty() {
+        let variants: Vec<&nelf_format::Asset> = std::iter::once(asset)
+            .chain(built.iter().map(|(_, a)| a))
+            .collect();
+        let psnrs = crate::eval::held_aside_psnrs(&variants, views, step_voxels, list.pixel_grid)?;
+        base_psnr_db = psnrs.first().copied();
+        for ((candidate, _), &psnr) in built.iter_mut().zip(psnrs.iter().skip(1)) {
+            candidate.psnr_db = Some(psnr);
+            candidate.gain_db = base_psnr_db.map(|b| psnr - b);
+        }
+    }
+    let parts = built
+        .into_iter()
+        .map(|(candidate, with)| (candidate, (with.view, with.reflection)))
+        .collect();
+    Ok((base_psnr_db, parts))
 }
 
 /// A kind of view part is fitted on the band only when its extrapolated gain is at least
@@ -444,14 +452,7 @@ pub fn choose_view(
         list.dedup();
         list
     };
-    let base_at = |pixel_grid: u32| -> Result<Option<f64>> {
-        if views.is_empty() {
-            Ok(None)
-        } else {
-            Ok(Some(judge_psnr(asset, views, settings.step_voxels, pixel_grid)?))
-        }
-    };
-    let judge_fit = |fit: &ViewFit, base_psnr_db: Option<f64>, list: &JudgeList| {
+    let judge_fit = |fit: &ViewFit, list: &JudgeList| {
         judge_candidates(
             asset,
             fit,
@@ -459,7 +460,6 @@ pub fn choose_view(
             list,
             reflect.filter(|_| !list.exponents.is_empty()),
             views,
-            base_psnr_db,
             &bytes,
             settings.step_voxels,
         )
@@ -469,10 +469,8 @@ pub fn choose_view(
     let middle_exponent = [REFLECT_EXPONENTS.len() / 2];
     let every_exponent: Vec<usize> = (0..REFLECT_EXPONENTS.len()).collect();
     if probing {
-        let probe_base = base_at(PROBE_PIXEL_GRID)?;
-        let probed = judge_fit(
+        let (probe_base, probed) = judge_fit(
             &fit,
-            probe_base,
             &JudgeList {
                 choices: &probe_choices(&choices),
                 exponents: &middle_exponent,
@@ -511,11 +509,9 @@ pub fn choose_view(
         let reflect = reflect.filter(|_| fitted_kinds.contains(&ViewChoice::Reflect));
         fit = fit_in(FitScope::Band, reflect, !choices.is_empty())?;
     }
-    report.base_psnr_db = base_at(JUDGE_PIXEL_GRID)?;
     let reflection_fitted = !fit.reflection.is_empty() || fit.skipped;
-    let (candidates, mut parts): (Vec<ViewCandidate>, Vec<_>) = judge_fit(
+    let (base_psnr_db, judged) = judge_fit(
         &fit,
-        report.base_psnr_db,
         &JudgeList {
             choices: &choices,
             exponents: if !reflection_fitted {
@@ -527,9 +523,9 @@ pub fn choose_view(
             },
             pixel_grid: JUDGE_PIXEL_GRID,
         },
-    )?
-    .into_iter()
-    .unzip();
+    )?;
+    report.base_psnr_db = base_psnr_db;
+    let (candidates, mut parts): (Vec<ViewCandidate>, Vec<_>) = judged.into_iter().unzip();
     report.candidates = candidates;
     let best_psnr = |list: &[ViewCandidate]| {
         (0..list.len()).max_by(|&a, &b| {

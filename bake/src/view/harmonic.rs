@@ -209,6 +209,130 @@ pub struct ViewFit {
     pub reflection: Vec<([f32; 3], Vec<f32>)>,
 }
 
+/// Stride of the lattice the reflection part is sampled and fitted on over the band
+/// ([`reflection_lattice`]): every other voxel per axis. A voxel's lobe normal and
+/// scales change little between neighbours (the surface's normal turns about 1° per
+/// 1.9 mm voxel on a head), while each fitted voxel costs its transport toward
+/// [`VIEW_DIRECTIONS`] directions and a normal search: on the CGAL head this takes the
+/// band's fit from 115 k voxels to 21 k (`docs/measurements/2026-12-07-view-cost.md`).
+pub const REFLECT_LATTICE_STRIDE: i64 = 2;
+
+/// Bands smaller than this (voxels) fit the reflection part at every voxel: seconds at
+/// most, and exact for a scale that changes from voxel to voxel (`bake/tests/view.rs`'s
+/// glossy sphere, whose scale is white noise in space, 1,040 surface voxels: normals
+/// 1.1° median off at every voxel against 1.9° from the lattice).
+pub const REFLECT_LATTICE_MIN_BAND: usize = 32_768;
+
+/// Which band voxels the reflection part is fitted at, and how the others take theirs.
+#[derive(Debug, Clone)]
+struct ReflectionLattice {
+    /// Band entries fitted: those on the lattice of [`REFLECT_LATTICE_STRIDE`], and those
+    /// with no lattice voxel of the band among their 26 neighbours. Ascending.
+    fitted: Vec<usize>,
+    /// Per band entry: `None` when fitted, else the indices into `fitted` of its fitted
+    /// neighbours (26-neighbourhood).
+    from: Vec<Option<Vec<usize>>>,
+}
+
+/// The lattice of the band voxels `lt_voxels` (of the grid of `bricks`) that the
+/// reflection part is fitted at ([`ReflectionLattice`]).
+fn reflection_lattice(bricks: &[[u16; 3]], lt_voxels: &[usize]) -> ReflectionLattice {
+    let coords: Vec<[i64; 3]> = lt_voxels
+        .iter()
+        .map(|&v| crate::grid::voxel_coords(bricks, v))
+        .collect();
+    let on_lattice = |c: &[i64; 3]| c.iter().all(|&x| x.rem_euclid(REFLECT_LATTICE_STRIDE) == 0);
+    let index: std::collections::HashMap<[i64; 3], usize> =
+        coords.iter().enumerate().map(|(e, &c)| (c, e)).collect();
+    let neighbours = |c: &[i64; 3]| -> Vec<usize> {
+        let mut out = Vec::new();
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let q = [c[0] + dx, c[1] + dy, c[2] + dz];
+                    if (dx, dy, dz) != (0, 0, 0) && on_lattice(&q) {
+                        if let Some(&e) = index.get(&q) {
+                            out.push(e);
+                        }
+                    }
+                }
+            }
+        }
+        out
+    };
+    let lattice_neighbours: Vec<Option<Vec<usize>>> = coords
+        .iter()
+        .map(|c| {
+            if on_lattice(c) {
+                return None;
+            }
+            let list = neighbours(c);
+            (!list.is_empty()).then_some(list)
+        })
+        .collect();
+    let fitted: Vec<usize> = (0..coords.len())
+        .filter(|&e| lattice_neighbours[e].is_none())
+        .collect();
+    let position_in_fitted: std::collections::HashMap<usize, usize> =
+        fitted.iter().enumerate().map(|(i, &e)| (e, i)).collect();
+    let from = lattice_neighbours
+        .into_iter()
+        .map(|list| {
+            list.map(|l| {
+                l.iter()
+                    .filter_map(|e| position_in_fitted.get(e).copied())
+                    .collect()
+            })
+        })
+        .collect();
+    ReflectionLattice { fitted, from }
+}
+
+impl ReflectionLattice {
+    /// Every band entry's reflection fit from those of [`Self::fitted`] (`fits`, in its
+    /// order): a filled voxel takes the mean of the scales of its fitted neighbours that
+    /// have a lobe (some scale > 0) and their normals' normalised sum (`fallback(entry)`,
+    /// the density's normal, where they cancel or none has a lobe: then all scales 0).
+    fn fill(
+        &self,
+        fits: &[([f32; 3], Vec<f32>)],
+        fallback: impl Fn(usize) -> Vec3,
+    ) -> Vec<([f32; 3], Vec<f32>)> {
+        let mut next = 0;
+        self.from
+            .iter()
+            .enumerate()
+            .map(|(e, from)| match from {
+                None => {
+                    let fit = fits.get(next).cloned().unwrap_or(([0.0, 0.0, 1.0], Vec::new()));
+                    next += 1;
+                    fit
+                }
+                Some(list) => {
+                    // Neighbours without a lobe (no density gradient, deep in a solid, or
+                    // nothing to explain) say nothing about this voxel's.
+                    let neighbours: Vec<&([f32; 3], Vec<f32>)> = list
+                        .iter()
+                        .filter_map(|&i| fits.get(i))
+                        .filter(|f| f.1.iter().any(|&s| s > 0.0))
+                        .collect();
+                    let lobes = fits.first().map_or(0, |f| f.1.len());
+                    let mut normal = Vec3::ZERO;
+                    let mut scales = vec![0.0f32; lobes];
+                    for (n, fitted_scales) in &neighbours {
+                        normal += Vec3::from_array(*n);
+                        for (s, t) in scales.iter_mut().zip(fitted_scales) {
+                            *s += t / neighbours.len() as f32;
+                        }
+                    }
+                    let normal = normal.try_normalize().unwrap_or_else(|| fallback(e)).to_array();
+                    (normal, scales)
+                }
+            })
+            .collect()
+    }
+}
+
 /// One band voxel's fit in the view stage's second pass: its harmonic normal equations
 /// `(G, h)` and, when asked for, its reflection normal and scales.
 type PerVoxel = ((Vec<f64>, Vec<f64>), Option<([f32; 3], Vec<f32>)>);
@@ -413,9 +537,15 @@ pub fn fit_view(
     }
 
     // 2. Every band voxel in scope: project the residual on V, keep the normal equations.
-    let entries: Vec<usize> = match scope {
-        FitScope::Band => (0..n).collect(),
-        FitScope::Sample => sample,
+    // The reflection part alone over the band: sampled and fitted on a lattice of every
+    // other voxel, the rest filled from it (`reflection_lattice`).
+    let lattice =
+        (scope == FitScope::Band && !harmonic && reflect.is_some() && n >= REFLECT_LATTICE_MIN_BAND)
+            .then(|| reflection_lattice(grid.bricks(), lt_voxels));
+    let entries: Vec<usize> = match (&lattice, scope) {
+        (Some(lattice), _) => lattice.fitted.clone(),
+        (None, FitScope::Band) => (0..n).collect(),
+        (None, FitScope::Sample) => sample,
     };
     let m = entries.len();
     let bar = progress.bar("view", m as u64, "voxels");
@@ -486,6 +616,15 @@ pub fn fit_view(
         bar.inc(chunk.len() as u64);
     }
     bar.finish_and_clear();
+    let (entries, reflection) = match lattice {
+        Some(lattice) => (
+            (0..n).collect::<Vec<usize>>(),
+            lattice.fill(&reflection, |e| {
+                density_normal(grid, density, position(lt_voxels[e])).as_vec3()
+            }),
+        ),
+        None => (entries, reflection),
+    };
     Ok(ViewFit {
         basis,
         eigenvalues,
@@ -600,6 +739,74 @@ impl ViewFit {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_reflection_lattice_fits_every_other_voxel_and_fills_the_rest() {
+        use nelf_format::asset::local_voxel_index;
+        // One brick at the origin; the band: a 3-voxel-thick slab z = 2..5 over x, y < 6,
+        // plus one voxel (7, 7, 7) with no lattice voxel of the band beside it.
+        let bricks = [[0u16, 0, 0]];
+        let mut band: Vec<usize> = Vec::new();
+        for z in 2..5 {
+            for y in 0..6 {
+                for x in 0..6 {
+                    band.push(local_voxel_index(x, y, z));
+                }
+            }
+        }
+        band.push(local_voxel_index(7, 7, 7));
+        let lattice = reflection_lattice(&bricks, &band);
+        let coords: Vec<[i64; 3]> = band
+            .iter()
+            .map(|&v| crate::grid::voxel_coords(&bricks, v))
+            .collect();
+        let even = |c: &[i64; 3]| c.iter().all(|x| x % 2 == 0);
+        // Fitted: the lattice voxels (x, y even, z = 2 or 4: 3 × 3 × 2) and the lone voxel.
+        let fitted: Vec<[i64; 3]> = lattice.fitted.iter().map(|&e| coords[e]).collect();
+        assert_eq!(fitted.len(), 3 * 3 * 2 + 1);
+        assert!(fitted.iter().all(|c| even(c) || *c == [7, 7, 7]));
+        // Every other voxel takes its fit from fitted lattice neighbours (≤ 8 of them).
+        for (e, from) in lattice.from.iter().enumerate() {
+            match from {
+                None => assert!(lattice.fitted.contains(&e)),
+                Some(list) => {
+                    assert!(!list.is_empty() && list.len() <= 8);
+                    for &i in list {
+                        let (a, b) = (coords[e], coords[lattice.fitted[i]]);
+                        assert!(even(&b) && (0..3).all(|k| (a[k] - b[k]).abs() <= 1));
+                    }
+                }
+            }
+        }
+        // Fill: the neighbours' mean scales and normalised normal sum; fitted voxels keep theirs.
+        let fits: Vec<([f32; 3], Vec<f32>)> = lattice
+            .fitted
+            .iter()
+            .map(|&e| {
+                let c = coords[e];
+                let tilt = if c[0] == 0 { 0.2 } else { -0.2 };
+                (
+                    Vec3::new(tilt, 0.0, 1.0).normalize().to_array(),
+                    vec![c[0] as f32, 1.0],
+                )
+            })
+            .collect();
+        let filled = lattice.fill(&fits, |_| Vec3::Z);
+        assert_eq!(filled.len(), band.len());
+        for (e, (normal, scales)) in filled.iter().enumerate() {
+            let c = coords[e];
+            if let Some(i) = lattice.fitted.iter().position(|&f| f == e) {
+                assert_eq!((normal, scales), (&fits[i].0, &fits[i].1));
+            } else if c[0] == 1 {
+                // Between x = 0 and x = 2: tilts cancel, scales average to 1.
+                assert!(
+                    (Vec3::from_array(*normal) - Vec3::Z).length() < 1e-6,
+                    "{normal:?}"
+                );
+                assert!((scales[0] - 1.0).abs() < 1e-6 && (scales[1] - 1.0).abs() < 1e-6);
+            }
+        }
+    }
 
     #[test]
     fn choices_parse_and_print() {

@@ -48,7 +48,10 @@ pub use choice::{
     ViewProbe, ViewReport, ViewSettings, choose_view, extrapolated_gain_db, judge_psnr,
 };
 pub use directions::{VIEW_DIRECTIONS, sample_directions, seen_weights};
-pub use harmonic::{BASIS_SAMPLE, FitScope, NO_VIEW_DEPENDENCE, PROBE_SAMPLE, ViewChoice, ViewFit, fit_view};
+pub use harmonic::{
+    BASIS_SAMPLE, FitScope, NO_VIEW_DEPENDENCE, PROBE_SAMPLE, REFLECT_LATTICE_MIN_BAND,
+    REFLECT_LATTICE_STRIDE, ViewChoice, ViewFit, fit_view,
+};
 pub use reflection::{
     REFLECT_EXPONENTS, REFLECT_NORMAL_SEARCH_DEG, ReflectionFit, ReflectionTarget, fit_reflection,
     normal_candidates,
