@@ -302,11 +302,23 @@ pub fn held_aside_psnrs(
         pixel_grid,
         ..MarchSettings::default()
     };
+    // Each reflection part's lobe table once, not once per view.
+    let lobes: Vec<Option<nelf_render::ReflectionLobe>> = variants
+        .iter()
+        .map(|a| {
+            a.reflection
+                .as_ref()
+                .map(|r| nelf_render::ReflectionLobe::new(r.exponent, a.world_from_light))
+        })
+        .collect();
     let mut sums = vec![0.0; variants.len()];
     for ((camera, truth), env) in views.cameras.iter().zip(&views.images).zip(&views.envs) {
         let radiances = variants
             .iter()
-            .map(|a| nelf_render::asset_radiance(a, camera, env, DMat3::IDENTITY, None))
+            .zip(&lobes)
+            .map(|(a, lobe)| {
+                nelf_render::asset_radiance_with(a, camera, env, DMat3::IDENTITY, None, lobe.as_ref())
+            })
             .collect::<std::result::Result<Vec<_>, _>>()?;
         let images = nelf_render::render_asset_radiances(first, &radiances, camera, &settings)?;
         for (sum, image) in sums.iter_mut().zip(&images) {

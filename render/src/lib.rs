@@ -36,9 +36,9 @@ pub use fine::FineGrid;
 pub use grid::BrickGrid;
 pub use light::{ProjectedLight, project_light, project_light_texels, radiance_from_lt, voxel_radiance};
 pub use march::{
-    Image, MAX_PIXEL_GRID, MarchSettings, MarchStats, asset_density, asset_radiance, filtered_environment,
-    render_asset, render_asset_radiances, render_features, render_volume, render_volume_fine,
-    render_volume_stats, render_volume_unskipped, visibility_weights,
+    Image, MAX_PIXEL_GRID, MarchSettings, MarchStats, asset_density, asset_radiance, asset_radiance_with,
+    filtered_environment, filtered_environment_with, render_asset, render_asset_radiances, render_features,
+    render_volume, render_volume_fine, render_volume_stats, render_volume_unskipped, visibility_weights,
 };
 pub use reflection::{FilteredEnvironment, ReflectionLobe, mirror, reflection_seen_from};
 pub use view::{project_view_light, project_view_light_texels, radiance_seen_from, voxel_lobe_radiance};

@@ -699,9 +699,31 @@ pub fn filtered_environment(
             matrix: world_from_env.to_cols_array(),
         });
     }
+    filtered_environment_with(
+        &ReflectionLobe::new(reflection.exponent, asset.world_from_light),
+        asset,
+        env,
+        world_from_env,
+    )
+}
+
+/// [`filtered_environment`] with the lobe already built (`lobe`, of the reflection
+/// part's exponent in the asset's light frame): for many lightings or views of one part.
+pub fn filtered_environment_with(
+    lobe: &ReflectionLobe,
+    asset: &Asset,
+    env: &LatLong,
+    world_from_env: glam::DMat3,
+) -> Result<FilteredEnvironment, RenderError> {
+    if !nelf_format::conventions::is_rotation(world_from_env, 1e-5) {
+        return Err(RenderError::NotARotation {
+            what: "world_from_env",
+            matrix: world_from_env.to_cols_array(),
+        });
+    }
     let light =
         nelf_format::conventions::project_envmap(env, world_from_env.transpose() * asset.world_from_light)?;
-    Ok(ReflectionLobe::new(reflection.exponent, asset.world_from_light).filter(&light))
+    Ok(lobe.filter(&light))
 }
 
 /// Everything for one asset, camera and lighting: checks the asset, projects `env`
@@ -736,6 +758,20 @@ pub fn asset_radiance(
     world_from_env: glam::DMat3,
     rank: Option<usize>,
 ) -> Result<Vec<[f32; 3]>, RenderError> {
+    asset_radiance_with(asset, camera, env, world_from_env, rank, None)
+}
+
+/// [`asset_radiance`] with the reflection part's lobe table already built (`lobe`, used
+/// where it is the part's: [`ReflectionLobe::is_for`]; built otherwise), so that many
+/// views of one asset build it once.
+pub fn asset_radiance_with(
+    asset: &Asset,
+    camera: &PinholeCamera,
+    env: &LatLong,
+    world_from_env: glam::DMat3,
+    rank: Option<usize>,
+    lobe: Option<&ReflectionLobe>,
+) -> Result<Vec<[f32; 3]>, RenderError> {
     asset.validate()?;
     let light = project_light(&asset.pca, asset.world_from_light, env, world_from_env)?;
     let mut radiance = voxel_radiance(asset, &light, rank);
@@ -745,7 +781,10 @@ pub fn asset_radiance(
         radiance = radiance_seen_from(asset, &radiance, &lobes, camera.centre());
     }
     if let Some(reflection) = &asset.reflection {
-        let filtered = filtered_environment(asset, reflection, env, world_from_env)?;
+        let filtered = match lobe.filter(|l| l.is_for(reflection.exponent, asset.world_from_light)) {
+            Some(lobe) => filtered_environment_with(lobe, asset, env, world_from_env)?,
+            None => filtered_environment(asset, reflection, env, world_from_env)?,
+        };
         radiance = reflection_seen_from(asset, reflection, &radiance, &filtered, camera.centre());
     }
     Ok(radiance)

@@ -123,6 +123,12 @@ impl ReflectionLobe {
         out
     }
 
+    /// Whether this is the lobe of exponent `exponent` over the frame `world_from_light`
+    /// (as [`Self::new`] would build it).
+    pub fn is_for(&self, exponent: f32, world_from_light: DMat3) -> bool {
+        self.exponent == exponent && self.light_from_world == world_from_light.transpose().as_mat3()
+    }
+
     /// `h_i(ω) = max(0, n·ω) g_i(r)` toward the world direction `toward_eye` (unit) at a
     /// surface of unit normal `n`.
     pub fn transport(&self, toward_eye: Vec3, n: Vec3) -> [f32; ENV_TEXELS] {

@@ -501,6 +501,23 @@ fn variants_marched_once_are_their_own_renders() {
             }
             // The variants' images differ: the shading parts are there.
             assert_ne!(images[0].rgb, images[2].rgb);
+            // A lobe table built once gives the same radiance; one of another exponent
+            // is not used.
+            for (variant, radiance) in variants.iter().zip(&radiances) {
+                for exponent in [10.0, 40.0] {
+                    let lobe = nelf_render::ReflectionLobe::new(exponent, variant.world_from_light);
+                    let with = nelf_render::asset_radiance_with(
+                        variant,
+                        &camera,
+                        &env,
+                        DMat3::IDENTITY,
+                        None,
+                        Some(&lobe),
+                    )
+                    .unwrap();
+                    assert_eq!(&with, radiance);
+                }
+            }
         }
     }
     let short = vec![vec![[0.0f32; 3]; base.voxel_count() - 1]];
