@@ -260,17 +260,11 @@ pub fn load_held_aside(capture: &nelf_format::capture::Capture, dir: &Path) -> R
 /// rays per pixel and march step `step_voxels` (the one measure `--target-psnr`,
 /// `--max-bytes` and `--view-dependence auto` judge candidates by).
 pub fn held_aside_psnr(asset: &Asset, views: &HeldAside, step_voxels: f32, pixel_grid: u32) -> Result<f64> {
-    let settings = MarchSettings {
-        step_voxels,
-        pixel_grid,
-        ..MarchSettings::default()
-    };
-    let mut sum = 0.0;
-    for ((camera, truth), env) in views.cameras.iter().zip(&views.images).zip(&views.envs) {
-        let image = render_asset(asset, camera, env, DMat3::IDENTITY, None, &settings)?;
-        sum += psnr(&image.rgb, truth, f64::from(data_range(truth)))?;
-    }
-    Ok(sum / views.len().max(1) as f64)
+    // One variant: the same images as `render_asset`'s, bit for bit (render/tests/march.rs).
+    Ok(held_aside_psnrs(&[asset], views, step_voxels, pixel_grid)?
+        .first()
+        .copied()
+        .unwrap_or(0.0))
 }
 
 /// [`held_aside_psnr`] of each of `variants`, assets that share one density (bricks,

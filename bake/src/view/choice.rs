@@ -136,17 +136,6 @@ pub fn extrapolated_gain_db(base_psnr_db: f64, probe_gain_db: f64, fraction: f64
 /// [`JUDGE_PIXEL_GRID`]'s cost; its gains are differences of renders with the same rays.
 pub const PROBE_PIXEL_GRID: u32 = 1;
 
-/// Mean PSNR of `asset` over `views` with `pixel_grid`² rays per pixel
-/// ([`JUDGE_PIXEL_GRID`] for the band's candidates, [`PROBE_PIXEL_GRID`] for the probe's).
-pub fn judge_psnr(
-    asset: &nelf_format::Asset,
-    views: &crate::eval::HeldAside,
-    step_voxels: f32,
-    pixel_grid: u32,
-) -> Result<f64> {
-    crate::eval::held_aside_psnr(asset, views, step_voxels, pixel_grid)
-}
-
 /// View-basis rank of an explicit `--view-dependence` without `--view-rank`, and the
 /// middle rank `auto` tries (it tries half and the largest too).
 pub const DEFAULT_VIEW_RANK: usize = 8;

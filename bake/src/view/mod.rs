@@ -45,7 +45,7 @@ pub mod reflection;
 
 pub use choice::{
     AUTO_GAIN_SLACK_DB, DEFAULT_VIEW_RANK, JUDGE_PIXEL_GRID, PROBE_OVERSELL, PROBE_PIXEL_GRID, ViewCandidate,
-    ViewProbe, ViewReport, ViewSettings, choose_view, extrapolated_gain_db, judge_psnr,
+    ViewProbe, ViewReport, ViewSettings, choose_view, extrapolated_gain_db,
 };
 pub use directions::{VIEW_DIRECTIONS, sample_directions, seen_weights};
 pub use harmonic::{
